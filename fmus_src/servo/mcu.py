@@ -1,0 +1,141 @@
+"""Motion control unit (MCU) component: cascade servo loops of the X, Y, Z axes.
+
+A thin adapter around :mod:`fmus_src.servo.control`. ``do_step(t, h)`` runs
+``round(h / velocity_loop_period)`` velocity-loop ticks (``h`` must be an
+integer multiple of the period within 1e-9 relative). The position loop runs
+on the ticks whose absolute index ``k = round((t - t0) / Tv)`` is a multiple
+of ``Tp / Tv``, so stepping at 250 us or at 1 ms gives identical results when
+the inputs are the same.
+
+Timing convention: all ticks inside one ``do_step`` use the inputs set before
+the call (values at ``t``). The outputs after the call are those of the last
+tick, i.e. the command a drive applies during the *next* communication
+interval. Stepped at ``Tv`` by a Jacobi master this is a one-tick
+computation delay, as in a digital servo amplifier.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..component import Component, Variable
+from .control import CascadeGains, CascadeState, position_loop, velocity_loop
+from .errors import ServoError
+
+AXES = ("x", "y", "z")
+
+#: Relative tolerance on ``h / Tv``, ``Tp / Tv`` and ``(t - t0) / Tv`` being integers.
+TICK_RTOL = 1e-9
+
+# default per-axis parameters: (suffix, unit, {axis: value}, description); values from default.toml
+_AXIS_PARAMETERS: tuple[tuple[str, str, dict[str, float], str], ...] = (
+    ("position_gain", "1/s", {"x": 50.0, "y": 50.0, "z": 50.0}, "position loop gain Pp"),
+    ("velocity_p_gain", "A/(m/s)", {"x": 720.0, "y": 960.0, "z": 600.0}, "velocity loop proportional gain Vp"),
+    ("velocity_i_gain", "A/m", {"x": 90000.0, "y": 120000.0, "z": 75000.0}, "velocity loop integral gain Vi"),
+    ("position_scale", "1", {"x": 1.0, "y": 1.0, "z": 1.0}, "scale factor Spp on Pp"),
+    ("velocity_p_scale", "1", {"x": 1.0, "y": 1.0, "z": 1.0}, "scale factor Svp on Vp"),
+    ("velocity_i_scale", "1", {"x": 1.0, "y": 1.0, "z": 1.0}, "scale factor Svi on Vi"),
+    ("velocity_feedforward", "1", {"x": 0.0, "y": 0.0, "z": 0.0}, "velocity feed-forward gain (0 = off)"),
+    ("acceleration_feedforward", "1", {"x": 0.0, "y": 0.0, "z": 0.0}, "acceleration feed-forward gain (0 = off)"),
+    ("peak_current", "A", {"x": 40.0, "y": 40.0, "z": 40.0}, "amplifier peak current (saturation)"),
+    ("mass", "kg", {"x": 600.0, "y": 800.0, "z": 500.0}, "moving mass Ms (acceleration feed-forward)"),
+    ("torque_constant", "N.m/A", {"x": 1.0, "y": 1.0, "z": 1.0}, "motor torque constant kt (acceleration feed-forward)"),
+    ("screw_lead", "m", {"x": 0.012, "y": 0.012, "z": 0.012}, "ball-screw lead Lb (acceleration feed-forward)"),
+)
+
+
+def _declare() -> tuple[Variable, ...]:
+    out: list[Variable] = []
+    for a in AXES:
+        for suffix, unit, defaults, text in _AXIS_PARAMETERS:
+            out.append(Variable(f"{a}_{suffix}", "parameter", unit, defaults[a], f"{a.upper()}: {text}"))
+    out.append(Variable("position_loop_period", "parameter", "s", 1e-3, "position loop period Tp"))
+    out.append(Variable("velocity_loop_period", "parameter", "s", 250e-6, "velocity loop period Tv"))
+    for a in AXES:
+        out.append(Variable(f"{a}_ref", "input", "m", 0.0, f"{a.upper()}: reference position from the NC kernel"))
+        out.append(Variable(f"{a}_position", "input", "m", 0.0, f"{a.upper()}: actual position (drive feedback)"))
+        out.append(Variable(f"{a}_velocity", "input", "m/s", 0.0, f"{a.upper()}: actual velocity (drive feedback)"))
+    for a in AXES:
+        out.append(Variable(f"{a}_current_cmd", "output", "A", 0.0, f"{a.upper()}: current (torque) command Atc"))
+        out.append(Variable(f"{a}_velocity_cmd", "output", "m/s", 0.0, f"{a.upper()}: velocity command of the position loop"))
+    return tuple(out)
+
+
+def _integer_ratio(num: float, den: float, what: str, owner: str) -> int:
+    n = round(num / den)
+    if n < 0 or abs(n * den - num) > TICK_RTOL * max(abs(num), den):
+        raise ServoError(f"{owner}: {what} = {num!r} s is not an integer multiple of the velocity loop period {den!r} s")
+    return int(n)
+
+
+class MCU(Component):
+    """Cascade P (position) / PI (velocity) servo controller of three axes with current saturation.
+
+    Variables are listed in the module docstring of :mod:`fmus_src.servo`;
+    defaults are the values of ``default.toml``.
+    """
+
+    variables = _declare()
+
+    def _stack(self, suffix: str) -> np.ndarray:
+        return np.stack([np.asarray(self.values[f"{a}_{suffix}"], dtype=float) for a in AXES])
+
+    def _shared_period(self, name: str) -> float:
+        arr = self.values[name]
+        if not np.all(np.isfinite(arr) & (arr > 0.0)):
+            raise ServoError(f"{self.name}.{name} must be finite and > 0, got {arr!r}")
+        if not np.all(arr == arr[0]):
+            raise ServoError(f"{self.name}.{name} must be the same for all batch members, got {arr!r}")
+        return float(arr[0])
+
+    def _setup(self, t0: float) -> None:
+        self._tv = self._shared_period("velocity_loop_period")
+        self._tp = self._shared_period("position_loop_period")
+        self._ratio = _integer_ratio(self._tp, self._tv, "position_loop_period", self.name)
+        if self._ratio < 1:
+            raise ServoError(f"{self.name}: position_loop_period must be >= velocity_loop_period")
+        for name in ("peak_current", "mass", "torque_constant", "screw_lead"):
+            arr = self._stack(name)
+            if not np.all(np.isfinite(arr) & (arr > 0.0)):
+                raise ServoError(f"{self.name}: {{x,y,z}}_{name} must be finite and > 0, got {arr!r}")
+        force_per_amp = self._stack("torque_constant") * 2.0 * math.pi / self._stack("screw_lead")
+        self._gains = CascadeGains(
+            position=self._stack("position_gain") * self._stack("position_scale"),
+            velocity_p=self._stack("velocity_p_gain") * self._stack("velocity_p_scale"),
+            velocity_i=self._stack("velocity_i_gain") * self._stack("velocity_i_scale"),
+            velocity_ff=self._stack("velocity_feedforward"),
+            accel_ff_current=self._stack("acceleration_feedforward") * self._stack("mass") / force_per_amp,
+            peak_current=self._stack("peak_current"),
+        )
+        self._state = CascadeState.initial(self._stack("ref"))
+        self._next_tick = 0
+        self._publish()
+
+    def _publish(self) -> None:
+        for i, a in enumerate(AXES):
+            self.values[f"{a}_current_cmd"] = self._state.current_cmd[i].copy()
+            self.values[f"{a}_velocity_cmd"] = self._state.velocity_cmd[i].copy()
+
+    def _do_step(self, t: float, h: float) -> None:
+        n = _integer_ratio(h, self._tv, "step size h", self.name)
+        if n < 1:
+            raise ServoError(f"{self.name}: step size h = {h!r} s is shorter than the velocity loop period {self._tv!r} s")
+        k0 = _integer_ratio(t - self.t0, self._tv, "t - t0", self.name)
+        if k0 != self._next_tick:
+            raise ServoError(
+                f"{self.name}: do_step at t = {t!r} s (tick {k0}) but the controller is at tick {self._next_tick} "
+                f"(t = {self.t0 + self._next_tick * self._tv!r} s); steps must be contiguous"
+            )
+        ref = self._stack("ref")
+        pos = self._stack("position")
+        vel = self._stack("velocity")
+        for k in range(k0, k0 + n):
+            if k % self._ratio == 0:
+                position_loop(self._state, self._gains, ref, pos, self._tp)
+            velocity_loop(self._state, self._gains, vel, self._tv)
+        self._next_tick = k0 + n
+        self._publish()
+
+    def _reset(self) -> None:
+        self.__dict__.pop("_state", None)

@@ -1,0 +1,200 @@
+"""Case folders: ``case.toml`` + program + recording, per ``shared/spec/recording.md``.
+
+Paths inside ``case.toml`` are relative to the case folder. Errors name the
+file, the line and the field.
+"""
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from .errors import CncTwinError
+from .machine import Machine, _line_of, load_machine
+
+_TOP_KEYS = {"program", "recording", "stock", "tool", "machine", "material"}
+_SECTION_KEYS = {
+    "stock": {"min", "max"},
+    "tool": {"diameter_mm", "flutes"},
+    "machine": {"parameters"},
+}
+
+
+class CaseError(CncTwinError):
+    """A case folder or ``case.toml`` is missing something or is malformed."""
+
+
+@dataclass(frozen=True)
+class Stock:
+    """Workpiece block in work coordinates, mm."""
+
+    min_mm: tuple[float, float, float]
+    max_mm: tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class Tool:
+    """Flat end mill."""
+
+    diameter_mm: float = 6.0
+    flutes: int = 2
+
+
+@dataclass
+class Case:
+    """A loaded case.
+
+    Attributes
+    ----------
+    folder : Path
+        The case folder (or the folder of the program when there is no case file).
+    program : Path
+        G-code program.
+    recording : Path or None
+        Measured or simulated recording, when the case has one.
+    stock : Stock or None
+        Workpiece block; None means an air cut.
+    tool : Tool
+        Cutter (default: 6 mm, 2 flutes as in the paper).
+    machine : Machine
+        Machine parameter set.
+    material : str
+        Material name in the machine file (default: its first material, A6061).
+    """
+
+    folder: Path
+    program: Path
+    recording: Path | None
+    stock: Stock | None
+    tool: Tool
+    machine: Machine
+    material: str
+    source: Path | None = None
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+def _vector(path: Path, text: str, section: str, key: str, value: Any) -> tuple[float, float, float]:
+    line = _line_of(text, section, key)
+    if not isinstance(value, list) or len(value) != 3 or not all(
+        isinstance(v, (int, float)) and not isinstance(v, bool) for v in value
+    ):
+        raise CaseError(f"{path}:{line}: [{section}] {key} must be a list of 3 numbers in mm, got {value!r}")
+    if not all(math.isfinite(v) for v in value):
+        raise CaseError(f"{path}:{line}: [{section}] {key} must be finite, got {value!r}")
+    return (float(value[0]), float(value[1]), float(value[2]))
+
+
+def load_case(path: str | Path, machine_override: str | Path | None = None) -> Case:
+    """Load a case folder or a ``case.toml`` file.
+
+    Parameters
+    ----------
+    path : str or Path
+        A case folder (containing ``case.toml``) or the ``case.toml`` itself.
+    machine_override : str or Path, optional
+        Machine set name or file that replaces the case's ``[machine] parameters``.
+
+    Raises
+    ------
+    CaseError
+        Missing file, invalid TOML, unknown or malformed field.
+    """
+    path = Path(path)
+    toml_path = path / "case.toml" if path.is_dir() else path
+    if not toml_path.is_file():
+        raise CaseError(f"{toml_path}: case file not found (a case folder holds case.toml, program and recording)")
+    text = toml_path.read_text(encoding="utf-8")
+    try:
+        raw = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise CaseError(f"{toml_path}: not valid TOML: {exc}") from None
+    folder = toml_path.parent
+    for key, value in raw.items():
+        if key not in _TOP_KEYS:
+            raise CaseError(
+                f"{toml_path}:{_line_of(text, key, None) or _find_top_key(text, key)}: unknown field {key!r}; "
+                f"expected {sorted(_TOP_KEYS)}"
+            )
+        if key in _SECTION_KEYS:
+            if not isinstance(value, dict):
+                raise CaseError(f"{toml_path}:{_find_top_key(text, key)}: {key!r} must be a table [{key}]")
+            unknown = set(value) - _SECTION_KEYS[key]
+            if unknown:
+                bad = sorted(unknown)[0]
+                raise CaseError(
+                    f"{toml_path}:{_line_of(text, key, bad)}: unknown field {bad!r} in [{key}]; "
+                    f"expected {sorted(_SECTION_KEYS[key])}"
+                )
+
+    program_value = raw.get("program")
+    if not isinstance(program_value, str) or not program_value:
+        raise CaseError(f"{toml_path}:{_find_top_key(text, 'program')}: 'program' must name the G-code file")
+    program = folder / program_value
+    recording = None
+    if "recording" in raw:
+        if not isinstance(raw["recording"], str):
+            raise CaseError(f"{toml_path}:{_find_top_key(text, 'recording')}: 'recording' must be a file name")
+        recording = folder / raw["recording"]
+
+    stock = None
+    if "stock" in raw:
+        for key in ("min", "max"):
+            if key not in raw["stock"]:
+                raise CaseError(f"{toml_path}:{_line_of(text, 'stock', None)}: [stock] needs {key!r} = [x, y, z] in mm")
+        lo = _vector(toml_path, text, "stock", "min", raw["stock"]["min"])
+        hi = _vector(toml_path, text, "stock", "max", raw["stock"]["max"])
+        if not all(a < b for a, b in zip(lo, hi)):
+            raise CaseError(
+                f"{toml_path}:{_line_of(text, 'stock', 'max')}: [stock] max {hi} must exceed min {lo} on every axis"
+            )
+        stock = Stock(lo, hi)
+
+    tool = Tool()
+    if "tool" in raw:
+        t = raw["tool"]
+        diameter = t.get("diameter_mm", tool.diameter_mm)
+        flutes = t.get("flutes", tool.flutes)
+        if isinstance(diameter, bool) or not isinstance(diameter, (int, float)) or not 0 < diameter < 1000:
+            raise CaseError(
+                f"{toml_path}:{_line_of(text, 'tool', 'diameter_mm')}: [tool] diameter_mm must be a number in mm "
+                f"between 0 and 1000, got {diameter!r}"
+            )
+        if isinstance(flutes, bool) or not isinstance(flutes, int) or not 1 <= flutes <= 24:
+            raise CaseError(
+                f"{toml_path}:{_line_of(text, 'tool', 'flutes')}: [tool] flutes must be a whole number 1..24, got {flutes!r}"
+            )
+        tool = Tool(float(diameter), int(flutes))
+
+    machine_ref: str | Path = "default"
+    if "machine" in raw and "parameters" in raw["machine"]:
+        machine_ref = raw["machine"]["parameters"]
+        if not isinstance(machine_ref, str):
+            raise CaseError(f"{toml_path}:{_line_of(text, 'machine', 'parameters')}: [machine] parameters must be a string")
+    machine = load_machine(machine_override or machine_ref, relative_to=folder)
+
+    materials = machine.materials()
+    material = raw.get("material", materials[0] if materials else "")
+    if materials and material not in materials:
+        raise CaseError(
+            f"{toml_path}:{_find_top_key(text, 'material')}: material {material!r} is not in {machine.path}; "
+            f"it defines {materials}"
+        )
+    return Case(folder, program, recording, stock, tool, machine, material, toml_path)
+
+
+def case_for_program(program: str | Path, machine: str | Path = "default") -> Case:
+    """A case for a bare program: air cut (no stock), default tool, given machine."""
+    program = Path(program)
+    m = load_machine(machine)
+    materials = m.materials()
+    return Case(program.parent, program, None, None, Tool(), m, materials[0] if materials else "")
+
+
+def _find_top_key(text: str, key: str) -> int:
+    for i, line in enumerate(text.splitlines(), start=1):
+        stripped = line.strip()
+        if stripped.startswith(key) and stripped[len(key):].lstrip().startswith(("=", ".")):
+            return i
+    return 1

@@ -1,0 +1,93 @@
+"""``cnctwin`` command line: a thin layer over the Python API.
+
+Every sub-command calls one documented function of :mod:`orchestrator`;
+errors the user can cause are printed as one line naming the file, line and
+what was expected, with a non-zero exit status and no traceback.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Sequence
+
+from .errors import CncTwinError
+
+
+class _ProgressBar:
+    """A one-line progress bar on stderr (only when stderr is a terminal)."""
+
+    def __init__(self, label: str) -> None:
+        self.label = label
+        self.enabled = sys.stderr.isatty()
+
+    def __call__(self, t: float, total: float) -> None:
+        if not self.enabled:
+            return
+        frac = min(1.0, t / total) if total > 0 else 0.0
+        bar = "#" * int(30 * frac)
+        sys.stderr.write(f"\r{self.label} [{bar:<30}] t = {t:7.2f} s")
+        sys.stderr.flush()
+
+    def close(self) -> None:
+        if self.enabled:
+            sys.stderr.write("\n")
+
+
+def _cmd_simulate(args: argparse.Namespace) -> int:
+    from .simulate import simulate
+    from .twin import TwinOptions
+
+    bar = _ProgressBar("simulate")
+    options = TwinOptions(step=args.step * 1e-3)
+    result = simulate(
+        program=args.program, case=args.case, machine=args.machine, out=args.out,
+        options=options, time_limit_s=args.time_limit, progress=bar,
+    )
+    bar.close()
+    s = result.summary
+    keys = ["cycle_time_s", "max_cutting_load_N", "cost_KRW", "rms_following_error_um"]
+    print(json.dumps({k: s[k] for k in keys if k in s}, indent=2))
+    for name, path in result.files.items():
+        print(f"wrote {name}: {path}")
+    if not result.success:
+        print(f"cnctwin: error: {result.message}", file=sys.stderr)
+        return 1
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``cnctwin``."""
+    parser = argparse.ArgumentParser(prog="cnctwin", description="Digital twin of a CNC machining center.")
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    p = sub.add_parser("simulate", help="run a G-code program on the twin")
+    p.add_argument("program", nargs="?", help="G-code file (overrides the case's program)")
+    p.add_argument("--case", help="case folder or case.toml (stock, tool, machine)")
+    p.add_argument("--machine", help="machine parameter set name or TOML file (default: the case's, else 'default')")
+    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--step", type=float, default=1.0, help="communication step, ms (default 1)")
+    p.add_argument("--time-limit", type=float, default=3600.0, help="simulated-time limit, s")
+    p.set_defaults(func=_cmd_simulate)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``cnctwin`` console script."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if args.command == "simulate" and args.program is None and args.case is None:
+        parser.error("simulate needs a PROGRAM, a --case, or both")
+    try:
+        return int(args.func(args))
+    except CncTwinError as exc:
+        print(f"cnctwin: error: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:
+        print(f"cnctwin: error: {exc.filename or ''}: {exc.strerror or exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

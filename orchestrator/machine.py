@@ -1,0 +1,300 @@
+"""Machine parameter sets: TOML files with units in the key names and provenance.
+
+A machine file (see ``models/machines/default.toml``) holds values as inline
+tables ``{ value = ..., source = "..." }`` or as bare values. Keys carry their
+unit (``screw_lead_mm``); :meth:`Machine.si` returns a section converted to SI
+with the suffix stripped (``{"screw_lead": 0.012}``), which is what the
+component parameters expect.
+
+Every key is checked against :data:`SCHEMA`; an unknown or missing key is a
+:class:`MachineFileError` naming the file, the line and what was expected.
+"""
+from __future__ import annotations
+
+import copy
+import math
+import re
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from fmus_src.units import UnitError, split_unit_suffix, to_si
+
+from .errors import CncTwinError
+
+MODELS_DIR = Path(__file__).resolve().parent.parent / "models"
+MACHINES_DIR = MODELS_DIR / "machines"
+
+AXES = ("x", "y", "z")
+
+_AXIS_KEYS = {
+    "mass_kg", "torque_constant_Nm_per_A", "screw_lead_mm", "peak_current_A", "rapid_feed_mm_per_min",
+    "position_gain_per_s", "velocity_p_gain_A_per_m_per_s", "velocity_i_gain_A_per_m",
+    "position_scale", "velocity_p_scale", "velocity_i_scale",
+    "velocity_feedforward", "acceleration_feedforward",
+}
+_FRICTION_KEYS = {"coulomb_N", "static_N", "stribeck_velocity_m_per_s", "viscous_Ns_per_m"}
+
+#: Allowed keys per section. Section names are dotted paths; ``*`` matches any name.
+SCHEMA: dict[str, set[str]] = {
+    "machine": {"name", "description"},
+    "nck": {
+        "interpolation_period_ms", "lookahead_blocks", "max_cutting_feed_mm_per_min",
+        "accel_before_interp_mm_per_s2", "accel_change_time_before_interp_ms",
+        "corner_velocity_difference_mm_per_min", "arc_accel_mm_per_s2",
+        "cutting_time_constant_ms", "cutting_filter", "rapid_time_constant_ms", "rapid_filter",
+        "in_position_width_mm",
+    },
+    "spindle": {"max_speed_rpm", "ramp_rpm_per_s", "speed_arrival_tolerance_percent", "power_kW"},
+    "servo": {"position_loop_period_ms", "velocity_loop_period_ms"},
+    **{f"axis.{a}": set(_AXIS_KEYS) for a in AXES},
+    **{f"axis.{a}.friction.{d}": set(_FRICTION_KEYS) for a in AXES for d in ("positive", "negative")},
+    "material.*": {"kt_N_per_m2", "ke"},
+    "cost": {
+        "tool_price_KRW", "tool_change_time_s", "labor_KRW_per_s", "depreciation_KRW_per_s",
+        "taylor_n", "taylor_C",
+    },
+}
+
+#: Keys that may be left out of a machine file (the component default is used).
+OPTIONAL_SECTIONS: set[str] = {"machine", "material.*"}
+
+
+class MachineFileError(CncTwinError):
+    """A machine parameter file is missing, malformed or has unknown keys."""
+
+
+@dataclass
+class Machine:
+    """A loaded machine parameter set.
+
+    Attributes
+    ----------
+    path : Path
+        File it was read from.
+    values : dict
+        Nested tables of plain values in the file's units (provenance removed).
+    provenance : dict[str, str]
+        Dotted key → source text, for every value that had one.
+    """
+
+    path: Path
+    values: dict[str, Any]
+    provenance: dict[str, str] = field(default_factory=dict)
+
+    @property
+    def name(self) -> str:
+        """Name of the parameter set (``[machine] name``, else the file stem)."""
+        return str(self.values.get("machine", {}).get("name", self.path.stem))
+
+    def table(self, section: str) -> dict[str, Any]:
+        """Plain values of a dotted section in file units (sub-tables excluded)."""
+        node: Any = self.values
+        for part in section.split("."):
+            if not isinstance(node, dict) or part not in node:
+                raise MachineFileError(f"{self.path}: no section [{section}]")
+            node = node[part]
+        return {k: v for k, v in node.items() if not isinstance(v, dict)}
+
+    def si(self, section: str) -> dict[str, float | str]:
+        """Values of a dotted section converted to SI, unit suffix stripped from the keys.
+
+        Examples
+        --------
+        >>> load_machine("default").si("axis.x")["screw_lead"]
+        0.012
+        """
+        out: dict[str, float | str] = {}
+        for key, value in self.table(section).items():
+            name, symbol = split_unit_suffix(key)
+            out[name] = value if isinstance(value, str) else to_si(float(value), symbol)
+        return out
+
+    def with_values(self, section: str, **values: float) -> "Machine":
+        """A copy with some values of ``section`` replaced (keys with unit suffix, file units)."""
+        new = Machine(self.path, copy.deepcopy(self.values), dict(self.provenance))
+        node = new.values
+        for part in section.split("."):
+            node = node.setdefault(part, {})
+        allowed = _allowed_keys(section)
+        for key, value in values.items():
+            if allowed is not None and key not in allowed:
+                raise MachineFileError(f"[{section}] has no key {key!r}; expected one of {sorted(allowed)}")
+            node[key] = value
+        return new
+
+    def materials(self) -> list[str]:
+        """Names of the materials defined in the file."""
+        return sorted(self.values.get("material", {}))
+
+
+def _allowed_keys(section: str) -> set[str] | None:
+    if section in SCHEMA:
+        return SCHEMA[section]
+    for pattern, keys in SCHEMA.items():
+        if pattern.endswith(".*") and section.startswith(pattern[:-1]) and section.count(".") == pattern.count("."):
+            return keys
+    return None
+
+
+def _line_of(text: str, section: str, key: str | None) -> int:
+    """Best-effort 1-based line of ``key`` in ``[section]`` (0 when not found)."""
+    lines = text.splitlines()
+    header = re.compile(r"^\s*\[\s*" + re.escape(section) + r"\s*\]\s*(#.*)?$")
+    start = next((i for i, line in enumerate(lines) if header.match(line)), None)
+    if start is None:
+        return 0
+    if key is None:
+        return start + 1
+    pattern = re.compile(r"^\s*" + re.escape(key) + r"\s*=")
+    for i in range(start + 1, len(lines)):
+        if lines[i].lstrip().startswith("["):
+            break
+        if pattern.match(lines[i]):
+            return i + 1
+    return start + 1
+
+
+def _flatten(path: Path, text: str, node: dict[str, Any], section: str, provenance: dict[str, str]) -> dict[str, Any]:
+    """Strip ``{value, source}`` tables, validate keys, recurse into sub-sections."""
+    out: dict[str, Any] = {}
+    allowed = _allowed_keys(section) if section else set()
+    for key, item in node.items():
+        dotted = f"{section}.{key}" if section else key
+        is_leaf_table = isinstance(item, dict) and "value" in item and set(item) <= {"value", "source"}
+        if isinstance(item, dict) and not is_leaf_table:
+            if _allowed_keys(dotted) is None and not any(p.startswith(dotted + ".") for p in SCHEMA):
+                raise MachineFileError(
+                    f"{path}:{_line_of(text, dotted, None)}: unknown section [{dotted}]; "
+                    f"expected sections {sorted(SCHEMA)}"
+                )
+            out[key] = _flatten(path, text, item, dotted, provenance)
+            continue
+        if allowed is None or key not in allowed:
+            expected = sorted(allowed) if allowed else "no plain keys here"
+            raise MachineFileError(
+                f"{path}:{_line_of(text, section, key)}: unknown key {key!r} in [{section or 'top level'}]; "
+                f"expected {expected}"
+            )
+        if is_leaf_table:
+            value = item["value"]
+            if "source" in item:
+                provenance[dotted] = str(item["source"])
+        else:
+            value = item
+        if isinstance(value, bool) or not isinstance(value, (int, float, str)):
+            raise MachineFileError(
+                f"{path}:{_line_of(text, section, key)}: [{section}] {key} must be a number or a string, got {value!r}"
+            )
+        if isinstance(value, (int, float)) and not math.isfinite(value):
+            raise MachineFileError(f"{path}:{_line_of(text, section, key)}: [{section}] {key} is not finite")
+        try:
+            split_unit_suffix(key)
+        except UnitError as exc:  # pragma: no cover - the schema only holds known suffixes
+            raise MachineFileError(f"{path}: {exc}") from None
+        out[key] = value
+    return out
+
+
+def _check_complete(path: Path, text: str, values: dict[str, Any]) -> None:
+    for section, keys in SCHEMA.items():
+        if "*" in section or section in OPTIONAL_SECTIONS:
+            continue
+        node: Any = values
+        for part in section.split("."):
+            node = node.get(part) if isinstance(node, dict) else None
+        if node is None:
+            raise MachineFileError(f"{path}: missing section [{section}] with keys {sorted(keys)}")
+        missing = sorted(keys - set(node))
+        if missing:
+            raise MachineFileError(
+                f"{path}:{_line_of(text, section, None)}: section [{section}] is missing {missing}"
+            )
+
+
+def resolve_machine_path(name_or_path: str | Path, relative_to: Path | None = None) -> Path:
+    """Find a machine file: a name shipped in ``models/machines`` or a path.
+
+    Parameters
+    ----------
+    name_or_path : str or Path
+        ``"default"`` (a shipped set) or a path to a ``.toml`` file.
+    relative_to : Path, optional
+        Folder that relative paths are taken from (e.g. a case folder).
+    """
+    text = str(name_or_path)
+    if "/" not in text and "\\" not in text and not text.endswith(".toml"):
+        candidate = MACHINES_DIR / f"{text}.toml"
+        if candidate.is_file():
+            return candidate
+        shipped = sorted(p.stem for p in MACHINES_DIR.glob("*.toml"))
+        raise MachineFileError(f"no machine parameter set named {text!r}; shipped sets: {shipped}")
+    path = Path(text)
+    if not path.is_absolute() and relative_to is not None:
+        path = relative_to / path
+    if not path.is_file():
+        raise MachineFileError(f"{path}: machine parameter file not found")
+    return path
+
+
+def load_machine(name_or_path: str | Path = "default", relative_to: Path | None = None) -> Machine:
+    """Load and validate a machine parameter set.
+
+    Parameters
+    ----------
+    name_or_path : str or Path
+        Shipped set name (``"default"``) or path to a TOML file.
+    relative_to : Path, optional
+        Folder for relative paths.
+
+    Returns
+    -------
+    Machine
+
+    Raises
+    ------
+    MachineFileError
+        File missing, not TOML, unknown key, missing key, non-numeric value.
+    """
+    path = resolve_machine_path(name_or_path, relative_to)
+    text = path.read_text(encoding="utf-8")
+    try:
+        raw = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise MachineFileError(f"{path}: not valid TOML: {exc}") from None
+    provenance: dict[str, str] = {}
+    values = _flatten(path, text, raw, "", provenance)
+    _check_complete(path, text, values)
+    return Machine(path=path, values=values, provenance=provenance)
+
+
+def _toml_value(value: Any) -> str:
+    if isinstance(value, str):
+        return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    return repr(float(value)) if isinstance(value, float) else str(value)
+
+
+def machine_to_toml(machine: Machine, extra_provenance: dict[str, str] | None = None) -> str:
+    """Render a machine as TOML in the shipped format (values with provenance)."""
+    sources = {**machine.provenance, **(extra_provenance or {})}
+    lines: list[str] = []
+
+    def emit(node: dict[str, Any], section: str) -> None:
+        plain = {k: v for k, v in node.items() if not isinstance(v, dict)}
+        if plain:
+            if section:
+                lines.append(f"[{section}]")
+            for key, value in plain.items():
+                dotted = f"{section}.{key}" if section else key
+                if dotted in sources:
+                    lines.append(f"{key} = {{ value = {_toml_value(value)}, source = {_toml_value(sources[dotted])} }}")
+                else:
+                    lines.append(f"{key} = {_toml_value(value)}")
+            lines.append("")
+        for key, value in node.items():
+            if isinstance(value, dict):
+                emit(value, f"{section}.{key}" if section else key)
+
+    emit(machine.values, "")
+    return "\n".join(lines)

@@ -1,0 +1,383 @@
+"""Fixed-step co-simulation master.
+
+The master advances a :class:`~orchestrator.system.System` on a fixed
+communication step ``h`` (default 1 ms). Time is always computed as
+``t0 + k·h`` from an integer step count, never accumulated.
+
+Each communication step is split into ``N = lcm(rates)`` fine ticks; a
+component of rate ``r`` steps at every ``N/r``-th tick with step ``h/r``.
+Before a component steps, its connected inputs are refreshed:
+
+* ``"gauss-seidel"`` (default): from the sources' *current* outputs, so a
+  component stepped later in the execution order sees the outputs its
+  predecessors produced in the same tick;
+* ``"jacobi"``: from the outputs as they were at the start of the tick.
+
+The run ends when the stop signal (e.g. ``"nck.done"``) is true for every
+batch member, or at the time limit. Numerical divergence (NaN or inf on a
+connection) and component failures end the run with ``success = False``, a
+message naming the component and time, and the recording so far kept.
+"""
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass, field
+from typing import Callable, Literal, Sequence
+
+import numpy as np
+
+from fmus_src.units import conversion_factor
+
+from .errors import CncTwinError, SimulationError, SystemDescriptionError
+from .recording import Recording
+from .system import Connection, System, split_reference
+
+log = logging.getLogger(__name__)
+
+Method = Literal["gauss-seidel", "jacobi"]
+
+
+@dataclass(frozen=True)
+class Probe:
+    """A recorded channel: a variable, a name and a unit for the recording.
+
+    Parameters
+    ----------
+    channel : str
+        Name in the recording (e.g. ``"x_mm"``).
+    reference : str
+        ``"component.variable"`` to sample.
+    unit : str, optional
+        Unit of the channel; the variable's value is converted to it.
+        Defaults to the variable's own unit.
+    """
+
+    channel: str
+    reference: str
+    unit: str | None = None
+
+
+@dataclass
+class MasterSettings:
+    """Settings of a run.
+
+    Attributes
+    ----------
+    step : float
+        Communication step ``h``, s.
+    t0 : float
+        Start time, s.
+    time_limit : float
+        Stop at ``t0 + time_limit`` at the latest, s.
+    stop_when : str or None
+        ``"component.variable"`` (Boolean output); the run ends when it is
+        true for all batch members.
+    method : {"gauss-seidel", "jacobi"}
+        Coupling scheme.
+    decimation : int
+        Record every ``decimation``-th communication step.
+    check_every : int
+        Check connections for NaN/inf every so many communication steps.
+    """
+
+    step: float = 1e-3
+    t0: float = 0.0
+    time_limit: float = 3600.0
+    stop_when: str | None = None
+    method: Method = "gauss-seidel"
+    decimation: int = 1
+    check_every: int = 50
+
+    def __post_init__(self) -> None:
+        if not (self.step > 0 and math.isfinite(self.step)):
+            raise SystemDescriptionError(f"communication step must be positive and finite, got {self.step!r}")
+        if not self.time_limit > 0:
+            raise SystemDescriptionError(f"time limit must be positive, got {self.time_limit!r}")
+        if self.method not in ("gauss-seidel", "jacobi"):
+            raise SystemDescriptionError(f"method must be 'gauss-seidel' or 'jacobi', got {self.method!r}")
+        if int(self.decimation) != self.decimation or self.decimation < 1:
+            raise SystemDescriptionError(f"decimation must be a positive integer, got {self.decimation!r}")
+
+
+@dataclass
+class _Wire:
+    target_values: dict
+    target_name: str
+    source_values: dict
+    source_name: str
+    factor: float
+
+
+class _Recorder:
+    """Samples probes into arrays that grow geometrically (amortised preallocation)."""
+
+    def __init__(self, probes: list[tuple[str, dict, str, float, str]], batch: int, capacity: int) -> None:
+        self.probes = probes
+        self.batch = batch
+        self.n = 0
+        self.t = np.empty(capacity)
+        shape = (capacity,) if batch == 1 else (capacity, batch)
+        self.buffers = [np.empty(shape) for _ in probes]
+
+    def _grow(self) -> None:
+        new = max(16, 2 * self.t.shape[0])
+        self.t = np.resize(self.t, new)
+        self.buffers = [np.resize(b, (new,) + b.shape[1:]) for b in self.buffers]
+
+    def sample(self, t: float) -> None:
+        if self.n == self.t.shape[0]:
+            self._grow()
+        self.t[self.n] = t
+        for buf, (_, values, name, factor, _) in zip(self.buffers, self.probes):
+            v = values[name]
+            buf[self.n] = v[0] * factor if self.batch == 1 else v * factor
+        self.n += 1
+
+    def recording(self, success: bool, message: str, source: str) -> Recording:
+        channels = {"t_s": self.t[: self.n].copy()}
+        units = {"t_s": "s"}
+        for buf, (channel, _, _, _, unit) in zip(self.buffers, self.probes):
+            channels[channel] = buf[: self.n].copy()
+            units[channel] = unit
+        return Recording.from_channels(channels, units, success, message, source)
+
+
+@dataclass
+class RunResult:
+    """What a run returns (python-control style).
+
+    Attributes
+    ----------
+    recording : Recording
+        Recorded channels (batched when the system has ``B > 1``).
+    success : bool
+        True when the stop condition was reached (or the time limit, when
+        there is no stop condition).
+    message : str
+        Why the run ended.
+    steps : int
+        Communication steps taken.
+    t_end : float
+        Time reached, s.
+    """
+
+    recording: Recording
+    success: bool
+    message: str
+    steps: int
+    t_end: float
+    stopped_at: np.ndarray = field(default_factory=lambda: np.empty(0))
+
+
+class Master:
+    """Fixed-step co-simulation master for a :class:`System`.
+
+    Parameters
+    ----------
+    system : System
+        Components and connections.
+    settings : MasterSettings, optional
+        Step, time limit, stop signal, coupling method, decimation.
+    probes : sequence of Probe or str, optional
+        What to record; a plain ``"component.variable"`` string records that
+        variable under its own name and unit.
+    progress : callable, optional
+        ``progress(t, t_final_estimate)`` called about every 1 % of the time limit
+        or of ``expected_duration``.
+    """
+
+    def __init__(
+        self,
+        system: System,
+        settings: MasterSettings | None = None,
+        probes: Sequence[Probe | str] = (),
+        progress: Callable[[float, float], None] | None = None,
+        expected_duration: float | None = None,
+    ) -> None:
+        self.system = system
+        self.settings = settings or MasterSettings()
+        self.progress = progress
+        self.expected_duration = expected_duration
+        if not system.components:
+            raise SystemDescriptionError(f"{system.name}: the system has no components")
+        self.order = system.execution_order()
+        self.probes = [p if isinstance(p, Probe) else Probe(p, p) for p in probes]
+        for probe in self.probes:
+            comp, var = split_reference(probe.reference)
+            system.component(comp).variable(var)
+        if self.settings.stop_when is not None:
+            comp, var = split_reference(self.settings.stop_when)
+            system.component(comp).variable(var)
+        self._wires: dict[str, list[_Wire]] = {name: [] for name in system.components}
+        self._connections_by_target: dict[str, list[Connection]] = {name: [] for name in system.components}
+        for c in system.connections:
+            self._connections_by_target[c.target_component].append(c)
+
+    # ------------------------------------------------------------------ internals
+    def _resolve_wires(self) -> None:
+        """Bind connections to the components' value dictionaries once."""
+        comps = self.system.components
+        for name, conns in self._connections_by_target.items():
+            self._wires[name] = [
+                _Wire(comps[c.target_component].values, c.target_variable,
+                      comps[c.source_component].values, c.source_variable, c.factor)
+                for c in conns
+            ]
+
+    @staticmethod
+    def _transfer(wires: list[_Wire], snapshot: dict[int, np.ndarray] | None = None) -> None:
+        for w in wires:
+            src = snapshot[id(w)] if snapshot is not None else w.source_values[w.source_name]
+            dst = w.target_values[w.target_name]
+            if w.factor == 1.0:
+                np.copyto(dst, src, casting="unsafe")
+            else:
+                np.multiply(src, w.factor, out=dst, casting="unsafe")
+
+    def _check_finite(self, t: float) -> None:
+        for name, wires in self._wires.items():
+            for w in wires:
+                src = w.source_values[w.source_name]
+                if src.dtype.kind == "f" and not np.isfinite(src).all():
+                    bad = np.flatnonzero(~np.isfinite(src))
+                    source = next(c.source for c in self._connections_by_target[name] if c.target_variable == w.target_name)
+                    raise SimulationError(
+                        f"simulation diverged at t = {t:.6f} s: {source} is not finite "
+                        f"(batch member(s) {bad[:5].tolist()})"
+                    )
+
+    def _stop_flags(self) -> np.ndarray | None:
+        if self.settings.stop_when is None:
+            return None
+        comp, var = split_reference(self.settings.stop_when)
+        return np.asarray(self.system.components[comp].values[var], dtype=bool)
+
+    # ------------------------------------------------------------------ run
+    def run(self) -> RunResult:
+        """Initialise every component, step until the stop condition, terminate.
+
+        Returns
+        -------
+        RunResult
+            With ``success = False`` and the recording up to the failure when
+            a component fails or the simulation diverges.
+        """
+        s = self.settings
+        system = self.system
+        comps = system.components
+        h = s.step
+        n_fine = system.substeps
+        schedule = []  # per fine tick: list of (name, h_i)
+        for j in range(n_fine):
+            tick = []
+            for name in self.order:
+                every = n_fine // system.rates[name]
+                if j % every == 0:
+                    tick.append((name, h / system.rates[name]))
+            schedule.append(tick)
+
+        max_steps = int(math.floor(s.time_limit / h + 1e-9))
+        expected = self.expected_duration or s.time_limit
+        capacity = min(max_steps, int(expected / h) + 16) // s.decimation + 2
+        probes = []
+        for p in self.probes:
+            comp, var = split_reference(p.reference)
+            declared = comps[comp].variable(var)
+            unit = p.unit or declared.unit
+            probes.append((p.channel, None, var, conversion_factor(declared.unit, unit), unit, comp))
+        recorder = None
+        batch = system.batch
+        t = s.t0
+        k = 0
+        success, message = True, ""
+        stopped_at = np.full(batch, np.nan)
+        try:
+            # initialise along the signal flow: each component gets its inputs from the
+            # components already initialised (start values inside feedback loops)
+            self._resolve_wires()
+            for name in self.order:
+                self._transfer(self._wires[name])
+                comps[name].setup(s.t0)
+            self._resolve_wires()
+            recorder = _Recorder(
+                [(ch, comps[comp].values, var, f, u) for ch, _, var, f, u, comp in probes], batch, max(capacity, 2)
+            )
+            recorder.sample(t)
+            report_every = max(1, int(expected / h / 100))
+            jacobi = s.method == "jacobi"
+            while True:
+                flags = self._stop_flags()
+                if flags is not None:
+                    newly = flags & np.isnan(stopped_at)
+                    stopped_at[newly] = t
+                    if flags.all():
+                        message = f"{s.stop_when} at t = {t:.3f} s"
+                        break
+                if k >= max_steps:
+                    if s.stop_when is not None:
+                        success = False
+                        message = f"time limit of {s.time_limit:g} s reached before {s.stop_when}"
+                    else:
+                        message = f"time limit of {s.time_limit:g} s reached"
+                    break
+                for j, tick in enumerate(schedule):
+                    t_tick = s.t0 + (k * n_fine + j) * (h / n_fine)
+                    if jacobi:
+                        snap = {id(w): w.source_values[w.source_name].copy() for name, _ in tick for w in self._wires[name]}
+                        for name, h_i in tick:
+                            self._transfer(self._wires[name], snap)
+                        for name, h_i in tick:
+                            comps[name].do_step(t_tick, h_i)
+                    else:
+                        for name, h_i in tick:
+                            self._transfer(self._wires[name])
+                            comps[name].do_step(t_tick, h_i)
+                k += 1
+                t = s.t0 + k * h
+                if k % s.check_every == 0:
+                    self._check_finite(t)
+                if k % s.decimation == 0:
+                    recorder.sample(t)
+                if self.progress is not None and k % report_every == 0:
+                    self.progress(t - s.t0, expected)
+            self._check_finite(t)
+            if (k % s.decimation) != 0:
+                recorder.sample(t)
+        except CncTwinError as exc:
+            success = False
+            message = str(exc) if isinstance(exc, SimulationError) else f"simulation failed at t = {t:.6f} s: {exc}"
+            log.error("%s", message)
+        finally:
+            for name in self.order:
+                if getattr(comps[name], "state", "") == "initialized":
+                    comps[name].terminate()
+        if recorder is None:
+            recorder = _Recorder([], batch, 2)
+        recording = recorder.recording(success, message, system.name)
+        return RunResult(recording, success, message, k, t, stopped_at)
+
+
+def simulate_system(
+    system: System,
+    probes: Sequence[Probe | str] = (),
+    settings: MasterSettings | None = None,
+    **kwargs: object,
+) -> RunResult:
+    """Run ``system`` with a :class:`Master` (convenience wrapper).
+
+    Parameters
+    ----------
+    system : System
+        Components and connections.
+    probes : sequence of Probe or str
+        What to record.
+    settings : MasterSettings, optional
+        Run settings; keyword arguments are forwarded to :class:`MasterSettings`
+        when ``settings`` is None (unknown keywords raise ``TypeError``).
+    """
+    if settings is None:
+        settings = MasterSettings(**kwargs)  # type: ignore[arg-type]
+    elif kwargs:
+        raise TypeError(f"give either settings or keyword settings, not both: {sorted(kwargs)}")
+    return Master(system, settings, probes).run()

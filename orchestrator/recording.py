@@ -1,0 +1,274 @@
+"""Recordings: named, unit-carrying time series, read and written per ``shared/spec/recording.md``.
+
+A :class:`Recording` wraps a numpy structured array (one field per channel,
+first field ``t_s``), the unit of every channel, and the run's ``success`` and
+``message``. Channel names carry their unit (``x_ref_mm``); "not measured at
+this sample" is NaN in memory and an empty cell in CSV.
+
+A batched run (``B`` members) gives a recording whose channels have shape
+``(n, B)``; :meth:`Recording.member` picks one member as an ordinary
+recording.
+"""
+from __future__ import annotations
+
+import csv
+import io
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Iterable, Mapping
+
+import numpy as np
+
+from fmus_src.units import split_unit_suffix
+
+from .atomic import atomic_write_text
+from .errors import CncTwinError
+
+#: Columns defined by the recording contract, with their units.
+SPEC_COLUMNS: dict[str, str] = {
+    "t_s": "s",
+    "line": "1",
+    **{f"{a}_ref_mm": "mm" for a in "xyz"},
+    **{f"{a}_mm": "mm" for a in "xyz"},
+    **{f"{a}_tcmd_A": "A" for a in "xyz"},
+    "spindle_ref_rpm": "rpm",
+    "spindle_rpm": "rpm",
+    **{f"f{a}_N": "N" for a in "xyz"},
+    "fc_N": "N",
+}
+
+
+class RecordingError(CncTwinError):
+    """A recording file or object does not follow the recording contract."""
+
+
+def unit_of_column(name: str) -> str:
+    """Unit of a column from its name (``"x_ref_mm"`` → ``"mm"``; ``"line"`` → ``"1"``)."""
+    if name in SPEC_COLUMNS:
+        return SPEC_COLUMNS[name]
+    return split_unit_suffix(name)[1]
+
+
+@dataclass
+class Recording:
+    """Time series of named channels with units.
+
+    Parameters
+    ----------
+    data : numpy structured array, shape (n,)
+        One field per channel; the first is ``t_s``. Fields have shape
+        ``()`` for a single run or ``(B,)`` for a batched run (``t_s`` is
+        always scalar per sample).
+    units : dict[str, str]
+        Unit symbol of every field.
+    success : bool
+        Whether the run reached its end condition.
+    message : str
+        Why it stopped (or what went wrong).
+    source : str
+        Where it came from (file path or description), for error messages.
+    """
+
+    data: np.ndarray
+    units: dict[str, str]
+    success: bool = True
+    message: str = ""
+    source: str = "<memory>"
+    meta: dict = field(default_factory=dict)
+
+    # ------------------------------------------------------------------ construction
+    @classmethod
+    def from_channels(
+        cls,
+        channels: Mapping[str, np.ndarray],
+        units: Mapping[str, str] | None = None,
+        success: bool = True,
+        message: str = "",
+        source: str = "<memory>",
+    ) -> "Recording":
+        """Build from a mapping name → array (``t_s`` required, shape (n,) or (n, B)).
+
+        Integer channels (``line``) are stored as float so that "not
+        measured" (NaN) is representable.
+        """
+        if "t_s" not in channels:
+            raise RecordingError(f"{source}: a recording needs a 't_s' channel")
+        t = np.asarray(channels["t_s"], dtype=float)
+        if t.ndim != 1:
+            raise RecordingError(f"{source}: t_s must be one-dimensional, got shape {t.shape}")
+        n = t.shape[0]
+        fields = []
+        arrays = {}
+        for name, values in channels.items():
+            arr = np.asarray(values, dtype=float)
+            if arr.shape[:1] != (n,):
+                raise RecordingError(f"{source}: channel {name!r} has {arr.shape[0]} samples, t_s has {n}")
+            arrays[name] = arr
+            fields.append((name, np.float64, arr.shape[1:]))
+        data = np.empty(n, dtype=fields)
+        for name, arr in arrays.items():
+            data[name] = arr
+        unit_map = {name: (units or {}).get(name) or unit_of_column(name) for name in channels}
+        return cls(data, unit_map, success, message, source)
+
+    # ------------------------------------------------------------------ access
+    @property
+    def channels(self) -> list[str]:
+        """Channel names in column order (``t_s`` first)."""
+        return list(self.data.dtype.names or ())
+
+    @property
+    def t(self) -> np.ndarray:
+        """Sample times, s, shape (n,)."""
+        return self.data["t_s"]
+
+    @property
+    def batch(self) -> int:
+        """Number of batch members (1 for an ordinary recording)."""
+        shapes = [self.data.dtype[n].shape for n in self.channels if n != "t_s"]
+        return shapes[0][0] if shapes and shapes[0] else 1
+
+    def __len__(self) -> int:
+        return int(self.data.shape[0])
+
+    def __contains__(self, name: object) -> bool:
+        return name in self.channels
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        if name not in self.channels:
+            raise RecordingError(f"{self.source}: no channel {name!r}; channels are {self.channels}")
+        return self.data[name]
+
+    def member(self, b: int) -> "Recording":
+        """Batch member ``b`` as an ordinary recording."""
+        if self.batch == 1 and not any(self.data.dtype[n].shape for n in self.channels):
+            if b != 0:
+                raise RecordingError(f"{self.source}: not a batched recording; member {b} does not exist")
+            return self
+        channels = {"t_s": self.t}
+        for name in self.channels[1:]:
+            col = self.data[name]
+            channels[name] = col[:, b] if col.ndim == 2 else col
+        return Recording.from_channels(channels, self.units, self.success, self.message, f"{self.source}[{b}]")
+
+    def following_error_um(self, axis: str) -> np.ndarray:
+        """Following error ``ref - actual`` of one axis in µm (derived, never stored)."""
+        return (self[f"{axis}_ref_mm"] - self[f"{axis}_mm"]) * 1000.0
+
+    def to_pandas(self):  # -> pandas.DataFrame
+        """A pandas DataFrame indexed by ``t_s`` (needs pandas; single-member recordings only)."""
+        try:
+            import pandas as pd
+        except ImportError as exc:  # pragma: no cover - depends on the environment
+            raise CncTwinError("to_pandas() needs pandas: pip install 'cnctwin[pandas]'") from exc
+        single = self.member(0) if self.batch == 1 else None
+        if single is None:
+            raise RecordingError("to_pandas() needs a single-member recording; use member(b) first")
+        frame = pd.DataFrame({n: single.data[n] for n in single.channels[1:]}, index=single.t)
+        frame.index.name = "t_s"
+        frame.attrs["units"] = dict(self.units)
+        return frame
+
+    # ------------------------------------------------------------------ CSV
+    def to_csv_text(self) -> str:
+        """CSV text per the recording contract (empty cell for NaN)."""
+        if self.batch != 1 or any(self.data.dtype[n].shape for n in self.channels):
+            raise RecordingError("only a single-member recording can be written as CSV; use member(b)")
+        buffer = io.StringIO()
+        buffer.write(",".join(self.channels) + "\n")
+        columns = []
+        for name in self.channels:
+            col = self.data[name]
+            if name == "line":
+                cells = ["" if math.isnan(v) else str(int(v)) for v in col.tolist()]
+            else:
+                cells = ["" if math.isnan(v) else f"{v:.12g}" for v in col.tolist()]
+            columns.append(cells)
+        for row in zip(*columns):
+            buffer.write(",".join(row))
+            buffer.write("\n")
+        return buffer.getvalue()
+
+    def write_csv(self, path: str | Path) -> Path:
+        """Write the recording as CSV atomically (temp file + rename)."""
+        return atomic_write_text(Path(path), self.to_csv_text())
+
+    @classmethod
+    def read_csv(cls, path: str | Path, required: Iterable[str] = ()) -> "Recording":
+        """Read a recording CSV and check it against the contract.
+
+        Parameters
+        ----------
+        path : str or Path
+            CSV file.
+        required : iterable of str
+            Columns the caller needs besides ``t_s``.
+
+        Raises
+        ------
+        RecordingError
+            Missing file, no header, no ``t_s``, duplicated columns, a cell
+            that is not a plain decimal number, NaN/empty ``t_s``, time not
+            strictly increasing, or a required column missing. The message
+            names the file, the line and the column.
+        """
+        path = Path(path)
+        if not path.is_file():
+            raise RecordingError(f"{path}: recording file not found")
+        try:
+            text = path.read_text(encoding="utf-8-sig")
+        except UnicodeDecodeError as exc:
+            raise RecordingError(f"{path}: not a UTF-8 text file ({exc.reason} at byte {exc.start})") from None
+        rows = list(csv.reader(io.StringIO(text)))
+        if not rows or not any(cell.strip() for cell in rows[0]):
+            raise RecordingError(f"{path}:1: empty file; expected a header row with column names, 't_s' first")
+        header = [cell.strip() for cell in rows[0]]
+        if "t_s" not in header:
+            raise RecordingError(f"{path}:1: no 't_s' column; header is {header}")
+        seen: set[str] = set()
+        for name in header:
+            if not name:
+                raise RecordingError(f"{path}:1: a column has no name")
+            if name in seen:
+                raise RecordingError(f"{path}:1: column {name!r} appears twice")
+            seen.add(name)
+        missing = [c for c in required if c not in header]
+        if missing:
+            raise RecordingError(f"{path}:1: missing column(s) {missing} needed here; header is {header}")
+        body = [(i + 2, r) for i, r in enumerate(rows[1:]) if any(cell.strip() for cell in r)]
+        values = np.full((len(body), len(header)), np.nan)
+        for k, (lineno, row) in enumerate(body):
+            if len(row) != len(header):
+                raise RecordingError(f"{path}:{lineno}: {len(row)} cells, header has {len(header)} columns")
+            for j, cell in enumerate(row):
+                cell = cell.strip()
+                if not cell:
+                    continue
+                try:
+                    value = float(cell)
+                except ValueError:
+                    raise RecordingError(
+                        f"{path}:{lineno}: column {header[j]!r}: {cell!r} is not a plain decimal number"
+                    ) from None
+                if not math.isfinite(value):
+                    raise RecordingError(
+                        f"{path}:{lineno}: column {header[j]!r}: {cell!r}; write an empty cell for 'not measured'"
+                    )
+                values[k, j] = value
+        it = header.index("t_s")
+        t = values[:, it]
+        if np.isnan(t).any():
+            bad = body[int(np.flatnonzero(np.isnan(t))[0])][0]
+            raise RecordingError(f"{path}:{bad}: empty t_s; every row needs a time")
+        if len(t) > 1:
+            steps = np.diff(t)
+            if (steps <= 0).any():
+                k = int(np.flatnonzero(steps <= 0)[0]) + 1
+                what = "repeats" if steps[k - 1] == 0 else "goes back"
+                raise RecordingError(
+                    f"{path}:{body[k][0]}: t_s {what} ({t[k - 1]!r} then {t[k]!r}); rows must be in strictly increasing time"
+                )
+        order = [it] + [j for j in range(len(header)) if j != it]
+        channels = {header[j]: values[:, j] for j in order}
+        return cls.from_channels(channels, source=str(path))

@@ -1,0 +1,130 @@
+"""``simulate``: run a G-code program on the twin and write recording, summary and overview."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+from .atomic import atomic_write_json
+from .case import Case, CaseError, case_for_program, load_case
+from .cost import CostModel
+from .master import Master, MasterSettings
+from .plots import overview_png
+from .recording import Recording
+from .summary import summarize
+from .twin import TwinOptions, build_twin
+
+
+@dataclass
+class SimulationResult:
+    """Outcome of :func:`simulate`.
+
+    Attributes
+    ----------
+    recording : Recording
+        Spec channels (``t_s``, ``line``, ``x_ref_mm`` … ``fc_N``).
+    summary : dict
+        What ``summary.json`` holds (cycle time, per-line times and loads,
+        following error, cost).
+    success : bool
+        The program reached its end.
+    message : str
+        Why the run ended.
+    files : dict[str, Path]
+        Files written (when ``out`` was given).
+    """
+
+    recording: Recording
+    summary: dict[str, Any]
+    success: bool
+    message: str
+    files: dict[str, Path] = field(default_factory=dict)
+
+    def to_pandas(self):  # -> pandas.DataFrame
+        """The recording as a pandas DataFrame."""
+        return self.recording.to_pandas()
+
+
+def resolve_case(
+    program: str | Path | None = None,
+    case: str | Path | Case | None = None,
+    machine: str | Path | None = None,
+) -> Case:
+    """The case to run: a case file/folder, a bare program (air cut), or both (program overrides)."""
+    if isinstance(case, Case):
+        resolved = case
+    elif case is not None:
+        resolved = load_case(case, machine_override=machine)
+    elif program is not None:
+        resolved = case_for_program(program, machine or "default")
+    else:
+        raise CaseError("give a program, a case, or both")
+    if program is not None:
+        resolved.program = Path(program)
+    if not resolved.program.is_file():
+        raise CaseError(f"{resolved.program}: program file not found")
+    return resolved
+
+
+def simulate(
+    program: str | Path | None = None,
+    case: str | Path | Case | None = None,
+    machine: str | Path | None = None,
+    out: str | Path | None = None,
+    options: TwinOptions | None = None,
+    time_limit_s: float = 3600.0,
+    progress: Callable[[float, float], None] | None = None,
+    plot: bool = True,
+) -> SimulationResult:
+    """Run a program on the default twin.
+
+    Parameters
+    ----------
+    program : str or Path, optional
+        G-code file; overrides the case's ``program``. Without a case the
+        program runs as an air cut on ``machine`` (default: ``"default"``).
+    case : str, Path or Case, optional
+        Case folder or ``case.toml`` (stock, tool, machine).
+    machine : str or Path, optional
+        Machine set name or file; overrides the case's.
+    out : str or Path, optional
+        Folder for ``recording.csv``, ``summary.json`` and ``overview.png``.
+    options : TwinOptions, optional
+        Communication step, start position, cutting on/off.
+    time_limit_s : float
+        Simulated-time limit, s.
+    progress : callable, optional
+        ``progress(t, t_expected)``.
+    plot : bool
+        Write ``overview.png``.
+
+    Returns
+    -------
+    SimulationResult
+        ``success`` is False (with the recording so far) when the run failed.
+
+    Examples
+    --------
+    >>> from orchestrator import simulate
+    >>> result = simulate(case="models/examples/paper_part")  # doctest: +SKIP
+    >>> result.summary["cycle_time_s"]                        # doctest: +SKIP
+    """
+    resolved = resolve_case(program, case, machine)
+    twin = build_twin(resolved, batch=1, options=options)
+    settings = MasterSettings(step=twin.options.step, time_limit=time_limit_s, stop_when="nck.done")
+    run = Master(twin.system, settings, twin.probes, progress=progress).run()
+    recording = run.recording
+    stop = run.stopped_at[0] if run.stopped_at.size else math.nan
+    cycle_time = float(stop - settings.t0) if math.isfinite(stop) else float(run.t_end - settings.t0)
+    summary = summarize(recording, cycle_time, CostModel.from_machine(resolved.machine), resolved.tool.diameter_mm)
+    summary["program"] = str(resolved.program)
+    summary["machine"] = resolved.machine.name
+    result = SimulationResult(recording, summary, run.success, run.message)
+    if out is not None:
+        out = Path(out)
+        result.files["recording"] = recording.write_csv(out / "recording.csv")
+        result.files["summary"] = atomic_write_json(out / "summary.json", summary)
+        if plot and len(recording) > 1:
+            result.files["overview"] = overview_png(recording, out / "overview.png", title=resolved.program.name)
+    return result

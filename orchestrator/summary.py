@@ -1,0 +1,101 @@
+"""Figures of merit of a run: cycle time, per-line times and loads, following error, cost."""
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from .cost import CostModel, production_cost
+from .recording import Recording
+
+AXES = ("x", "y", "z")
+
+
+def _sample_weights(t: np.ndarray) -> np.ndarray:
+    """Time each sample stands for (forward difference; the last sample gets none), s."""
+    w = np.zeros_like(t)
+    w[:-1] = np.diff(t)
+    return w
+
+
+def line_table(recording: Recording) -> list[dict[str, Any]]:
+    """Per source line: time spent executing it and, with cutting, max and mean load.
+
+    Returns
+    -------
+    list of dict
+        ``{"line", "time_s"[, "max_load_N", "mean_load_N"]}`` in order of first execution.
+    """
+    t = recording.t
+    lines = recording["line"]
+    weights = _sample_weights(t)
+    load = recording["fc_peak_N"] if "fc_peak_N" in recording else (recording["fc_N"] if "fc_N" in recording else None)
+    mean_source = recording["fc_N"] if "fc_N" in recording else None
+    valid = np.isfinite(lines)
+    order, first = np.unique(lines[valid], return_index=True)
+    rows = []
+    for line in order[np.argsort(first)]:
+        mask = lines == line
+        row: dict[str, Any] = {"line": int(line), "time_s": float(weights[mask].sum())}
+        if load is not None and mean_source is not None:
+            w = weights[mask]
+            row["max_load_N"] = float(np.nanmax(load[mask]))
+            row["mean_load_N"] = float(np.sum(mean_source[mask] * w) / w.sum()) if w.sum() > 0 else float(mean_source[mask][0])
+        rows.append(row)
+    return rows
+
+
+def following_error_stats(recording: Recording) -> tuple[dict[str, float], dict[str, float]]:
+    """RMS and max absolute following error per axis, µm."""
+    rms, peak = {}, {}
+    for a in AXES:
+        if f"{a}_ref_mm" in recording and f"{a}_mm" in recording:
+            e = recording.following_error_um(a)
+            e = e[np.isfinite(e)]
+            rms[a] = float(np.sqrt(np.mean(e**2))) if e.size else math.nan
+            peak[a] = float(np.max(np.abs(e))) if e.size else math.nan
+    return rms, peak
+
+
+def summarize(
+    recording: Recording,
+    cycle_time_s: float,
+    cost_model: CostModel | None = None,
+    tool_diameter_mm: float = 6.0,
+) -> dict[str, Any]:
+    """Summary of a single-member run, as written to ``summary.json``.
+
+    Parameters
+    ----------
+    recording : Recording
+        The twin's recording (spec channels).
+    cycle_time_s : float
+        Time from program start to program end, s.
+    cost_model : CostModel, optional
+        When given, ``cost_KRW`` (Eq. 19–22) is included.
+    tool_diameter_mm : float
+        Cutter diameter for the cutting speed in Taylor's equation, mm.
+    """
+    summary: dict[str, Any] = {
+        "success": bool(recording.success),
+        "message": recording.message,
+        "cycle_time_s": float(cycle_time_s),
+    }
+    rms, peak = following_error_stats(recording)
+    if rms:
+        summary["rms_following_error_um"] = rms
+        summary["max_following_error_um"] = peak
+    load_channel = "fc_peak_N" if "fc_peak_N" in recording else ("fc_N" if "fc_N" in recording else None)
+    if load_channel:
+        summary["max_cutting_load_N"] = float(np.nanmax(recording[load_channel]))
+    if cost_model is not None and "spindle_rpm" in recording:
+        cost = production_cost(recording.t, recording["spindle_rpm"], tool_diameter_mm, cost_model, cycle_time_s)
+        summary["cost_KRW"] = cost.total_KRW
+        summary["cost"] = {
+            "tool_KRW": cost.tool_KRW,
+            "machining_KRW": cost.machining_KRW,
+            "tool_life_used": cost.tool_life_used,
+        }
+    summary["lines"] = line_table(recording)
+    return summary

@@ -1,0 +1,184 @@
+"""The default twin: NC kernel → MCU → three drive axes (+ cutting load), with feedback.
+
+:func:`build_twin` maps a machine parameter set and a case onto the native
+components and wires them by variable name::
+
+    nck.{a}_ref ──► mcu.{a}_ref          mcu.{a}_current_cmd ──► {a}_drive.current_cmd
+    {a}_drive.position ──► mcu.{a}_position, cutting.{a}_position
+    {a}_drive.velocity ──► mcu.{a}_velocity
+    nck.spindle_speed ──► cutting.spindle_speed
+    cutting.fx / fy ──► x_drive / y_drive.disturbance_force   (Fd = +F on the workpiece)
+
+The servo loop (MCU and drives) runs at the velocity-loop period inside the
+1 ms communication step (rate 4 by default); the NC kernel and the cutting
+load step at the communication step and substep internally.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Mapping
+
+import numpy as np
+
+from fmus_src.cutting.component import CuttingLoad
+from fmus_src.nck.component import NCKernel
+from fmus_src.servo.drive import DriveAxis
+from fmus_src.servo.mcu import MCU
+
+from .case import Case
+from .machine import AXES, Machine
+from .master import Probe
+from .system import System
+
+#: Default start position of the tool tip in work coordinates, mm (safe height above work zero).
+DEFAULT_START_MM = (0.0, 0.0, 50.0)
+
+
+@dataclass(frozen=True)
+class TwinOptions:
+    """How the twin is assembled.
+
+    Attributes
+    ----------
+    step : float
+        Communication step, s.
+    start_mm : tuple of 3 floats
+        Tool-tip start position, mm.
+    cutting : bool
+        Include the cutting-load component when the case has a stock.
+    """
+
+    step: float = 1e-3
+    start_mm: tuple[float, float, float] = DEFAULT_START_MM
+    cutting: bool = True
+
+
+def _declared(component_cls: type, mapping: Mapping[str, object]) -> dict[str, object]:
+    """The entries of ``mapping`` that ``component_cls`` declares as parameters."""
+    names = {v.name for v in component_cls.variables if v.causality == "parameter"}
+    return {k: v for k, v in mapping.items() if k in names}
+
+
+def nck_parameters(machine: Machine) -> dict[str, object]:
+    """NC kernel parameters (SI) from a machine file."""
+    params: dict[str, object] = dict(machine.si("nck"))
+    params.update({f"spindle_{k}": v for k, v in machine.si("spindle").items()})
+    for a in AXES:
+        params[f"{a}_rapid_feed"] = machine.si(f"axis.{a}")["rapid_feed"]
+    return _declared(NCKernel, params)
+
+
+def mcu_parameters(machine: Machine) -> dict[str, object]:
+    """MCU parameters (SI) from a machine file."""
+    params: dict[str, object] = dict(machine.si("servo"))
+    for a in AXES:
+        params.update({f"{a}_{k}": v for k, v in machine.si(f"axis.{a}").items()})
+    return _declared(MCU, params)
+
+
+def drive_parameters(machine: Machine, axis: str) -> dict[str, object]:
+    """Drive-axis parameters (SI) of one axis from a machine file."""
+    params: dict[str, object] = dict(machine.si(f"axis.{axis}"))
+    for direction in ("positive", "negative"):
+        params.update({f"{k}_{direction}": v for k, v in machine.si(f"axis.{axis}.friction.{direction}").items()})
+    return _declared(DriveAxis, params)
+
+
+def cutting_parameters(case: Case) -> dict[str, object]:
+    """Cutting-load parameters (SI) from a case (tool, stock, material)."""
+    params: dict[str, object] = {
+        "tool_diameter": case.tool.diameter_mm * 1e-3,
+        "flutes": case.tool.flutes,
+    }
+    if case.material:
+        params.update(case.machine.si(f"material.{case.material}"))
+    if case.stock is not None:
+        for i, a in enumerate(AXES):
+            params[f"stock_{a}_min"] = case.stock.min_mm[i] * 1e-3
+            params[f"stock_{a}_max"] = case.stock.max_mm[i] * 1e-3
+    return _declared(CuttingLoad, params)
+
+
+@dataclass
+class Twin:
+    """An assembled twin: the system, its components and what to record."""
+
+    system: System
+    nck: NCKernel
+    mcu: MCU
+    drives: dict[str, DriveAxis]
+    cutting: CuttingLoad | None
+    probes: list[Probe]
+    options: TwinOptions
+
+
+def build_twin(
+    case: Case,
+    batch: int = 1,
+    options: TwinOptions | None = None,
+    program_text: str | None = None,
+) -> Twin:
+    """Assemble the default twin for a case.
+
+    Parameters
+    ----------
+    case : Case
+        Program, stock, tool, machine.
+    batch : int
+        Batch size ``B`` of every component.
+    options : TwinOptions, optional
+        Step, start position, whether to cut.
+    program_text : str, optional
+        G-code text to run instead of reading ``case.program``.
+
+    Returns
+    -------
+    Twin
+    """
+    options = options or TwinOptions()
+    machine = case.machine
+    start = np.asarray(options.start_mm, dtype=float) * 1e-3
+    servo = machine.si("servo")
+    rate = max(1, int(round(options.step / float(servo["velocity_loop_period"]))))
+
+    nck_params = nck_parameters(machine)
+    nck_params.update({f"{a}_initial": start[i] for i, a in enumerate(AXES)})
+    nck = NCKernel("nck", batch=batch, program_file=str(case.program), **nck_params)
+    if program_text is not None:
+        nck.load_program_text(program_text, source=str(case.program))
+    mcu = MCU("mcu", batch=batch, **mcu_parameters(machine))
+    drives = {
+        a: DriveAxis(f"{a}_drive", batch=batch, initial_position=start[i], **drive_parameters(machine, a))
+        for i, a in enumerate(AXES)
+    }
+    system = System("cnctwin")
+    system.add(nck, rate=1)
+    system.add(mcu, rate=rate)
+    for drive in drives.values():
+        system.add(drive, rate=rate)
+    for a in AXES:
+        system.connect(f"nck.{a}_ref", f"mcu.{a}_ref")
+        system.connect(f"{a}_drive.position", f"mcu.{a}_position")
+        system.connect(f"{a}_drive.velocity", f"mcu.{a}_velocity")
+        system.connect(f"mcu.{a}_current_cmd", f"{a}_drive.current_cmd")
+
+    cutting = None
+    if options.cutting and case.stock is not None:
+        cutting = CuttingLoad("cutting", batch=batch, **cutting_parameters(case))
+        system.add(cutting, rate=1)
+        for a in AXES:
+            system.connect(f"{a}_drive.position", f"cutting.{a}_position")
+        system.connect("nck.spindle_speed", "cutting.spindle_speed")
+        system.connect("cutting.fx", "x_drive.disturbance_force")
+        system.connect("cutting.fy", "y_drive.disturbance_force")
+
+    probes = [Probe("line", "nck.line", "1")]
+    probes += [Probe(f"{a}_ref_mm", f"nck.{a}_ref", "mm") for a in AXES]
+    probes += [Probe(f"{a}_mm", f"{a}_drive.position", "mm") for a in AXES]
+    probes += [Probe(f"{a}_tcmd_A", f"mcu.{a}_current_cmd", "A") for a in AXES]
+    probes += [Probe("spindle_ref_rpm", "nck.spindle_ref", "rpm"), Probe("spindle_rpm", "nck.spindle_speed", "rpm")]
+    if cutting is not None:
+        probes += [Probe("fx_N", "cutting.fx", "N"), Probe("fy_N", "cutting.fy", "N"), Probe("fc_N", "cutting.fc", "N")]
+        probes += [Probe("fc_peak_N", "cutting.fc_peak", "N"), Probe("spindle_torque_Nm", "cutting.spindle_torque", "N.m")]
+    probes += [Probe("feed_mm_per_min", "nck.feed_ref", "mm/min")]
+    return Twin(system, nck, mcu, drives, cutting, probes, options)
