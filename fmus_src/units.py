@@ -73,7 +73,7 @@ _register("rpm", _TWO_PI / 60.0, "A/T", "rpm")
 _register("rad/s2", 1.0, "A/T2", "rad_per_s2")
 _register("rpm/s", _TWO_PI / 60.0, "A/T2", "rpm_per_s")
 _register("kg", 1.0, "M", "kg")
-_register("kg.m2", 1.0, "ML2", "kg_m2")
+_register("kg.m2", 1.0, "M.L2", "kg_m2")
 _register("N", 1.0, "F", "N")
 _register("N/m", 1.0, "F/L", "N_per_m")
 _register("N/um", 1e6, "F/L", "N_per_um")
@@ -150,3 +150,29 @@ def si_symbol(symbol: str) -> str:
         if u.dimension == dim and u.factor == 1.0:
             return u.symbol
     raise UnitError(f"no SI unit registered for dimension {dim!r}")
+
+
+_PRIMITIVE_DIMENSIONS: dict[str, dict[str, int]] = {
+    "L": {"m": 1}, "T": {"s": 1}, "M": {"kg": 1}, "I": {"A": 1}, "A": {"rad": 1},
+    "F": {"kg": 1, "m": 1, "s": -2}, "P": {"kg": 1, "m": 2, "s": -3}, "KRW": {},
+}
+
+
+def base_exponents(symbol: str) -> dict[str, int]:
+    """SI base-unit exponents of a unit's dimension (``"N.s/m"`` → ``{"kg": 1, "s": -1}``).
+
+    Used to write ``<ssc:BaseUnit>`` elements of SSP files. Currency (KRW)
+    has no SI base unit and maps to no exponents.
+    """
+    dim = unit(symbol).dimension
+    out: dict[str, int] = {}
+    numerator, _, denominator = dim.partition("/")
+    for part, sign in ((numerator, 1), (denominator, -1)):
+        for token in filter(None, part.split(".")):
+            if token == "1":
+                continue
+            name = token.rstrip("0123456789")
+            power = int(token[len(name):] or 1)
+            for base, exp in _PRIMITIVE_DIMENSIONS[name].items():
+                out[base] = out.get(base, 0) + sign * power * exp
+    return {k: v for k, v in out.items() if v}

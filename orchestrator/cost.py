@@ -56,8 +56,8 @@ class CostModel:
             taylor_C=float(c["taylor_C"]),
         )
 
-    def tool_life_s(self, spindle_rpm: np.ndarray | float, diameter_mm: float) -> np.ndarray:
-        """Taylor tool life, s (inf where the spindle stands still).
+    def tool_wear_rate_per_s(self, spindle_rpm: np.ndarray | float, diameter_mm: float) -> np.ndarray:
+        """Fraction of tool life used per second, ``1 / Tl``, 1/s (0 while the spindle stands).
 
         Parameters
         ----------
@@ -67,9 +67,12 @@ class CostModel:
             Cutter diameter, mm.
         """
         v_m_per_min = math.pi * diameter_mm * np.abs(np.asarray(spindle_rpm, dtype=float)) / 1000.0
+        return (v_m_per_min / self.taylor_C) ** (1.0 / self.taylor_n) / 60.0
+
+    def tool_life_s(self, spindle_rpm: np.ndarray | float, diameter_mm: float) -> np.ndarray:
+        """Taylor tool life ``Tl = (C/V)^(1/n)``, s (inf while the spindle stands)."""
         with np.errstate(divide="ignore"):
-            life_min = np.where(v_m_per_min > 0, (self.taylor_C / np.maximum(v_m_per_min, 1e-300)) ** (1.0 / self.taylor_n), np.inf)
-        return life_min * 60.0
+            return 1.0 / self.tool_wear_rate_per_s(spindle_rpm, diameter_mm)
 
 
 @dataclass(frozen=True)
@@ -108,7 +111,7 @@ def production_cost(
     t = np.asarray(t_s, dtype=float)
     tp = float(t[-1] - t[0]) if machining_time_s is None else float(machining_time_s)
     if len(t) > 1:
-        inverse_life = 1.0 / model.tool_life_s(spindle_rpm, diameter_mm)
+        inverse_life = model.tool_wear_rate_per_s(spindle_rpm, diameter_mm)
         used = float(np.sum(0.5 * (inverse_life[1:] + inverse_life[:-1]) * np.diff(t)))
     else:
         used = 0.0
