@@ -10,7 +10,7 @@ Components
 from __future__ import annotations
 
 from .control import CascadeGains, CascadeState, position_loop, velocity_loop
-from .drive import DEFAULT_INTEGRATION_STEP, DriveAxis
+from .drive import DEFAULT_INTEGRATION_STEP, DriveAxis, stribeck_step_cap
 from .errors import ServoError
 from .friction import StribeckParameters, stribeck_force
 from .mcu import MCU
@@ -18,7 +18,7 @@ from .params import drive_parameters, mcu_parameters
 from .stick_slip import SlipState, advance
 
 __all__ = [
-    "MCU", "DriveAxis", "ServoError", "DEFAULT_INTEGRATION_STEP", "CascadeGains", "CascadeState",
+    "MCU", "DriveAxis", "ServoError", "DEFAULT_INTEGRATION_STEP", "stribeck_step_cap", "CascadeGains", "CascadeState",
     "position_loop", "velocity_loop", "StribeckParameters", "stribeck_force", "SlipState", "advance",
     "mcu_parameters", "drive_parameters",
 ]

@@ -20,13 +20,15 @@ Discrete-time law (``k`` = velocity tick index, ``N = Tp / Tv``)::
         I_k     = I_{k-1} + Vi Svi Tv e_k                   (backward-Euler integrator, A)
         i_k     = sat(Vp Svp e_k + I_k + i_ff, +-Ipeak)
 
-Anti-windup: **conditional integration (integrator clamping)**. The
-integrator update of a tick is discarded when the unsaturated command
-exceeds the peak current *and* the velocity error has the same sign as that
-command (integrating would push further into saturation); in addition
-``|I| <= Ipeak``. The integrator therefore never winds up beyond the value
-it had when saturation began, and the loop leaves saturation as soon as the
-error changes sign.
+Anti-windup: **integrator clamping (conditional integration)**. When the
+unsaturated command exceeds the peak current *and* the velocity error has
+the same sign as that command (integrating would push further into
+saturation), the integrator may only grow up to the value that puts the
+command exactly at the limit, ``s I <= Ipeak - s (Vp Svp e + i_ff)`` with
+``s`` the sign of the command, and is never pulled back by this clamp; in
+addition ``|I| <= Ipeak``. The integrator therefore stops winding up the
+tick saturation is reached, and the loop leaves saturation as soon as the
+velocity error changes sign.
 
 The feed-forward derivatives lag by half a position period (backward
 differences); with both gains 0 (the default, as the paper's controller) the
@@ -142,10 +144,16 @@ def velocity_loop(state: CascadeState, gains: CascadeGains, velocity: np.ndarray
     """
     err = state.velocity_cmd - velocity
     i_max = gains.peak_current
+    p_term = gains.velocity_p * err + state.current_ff
     candidate = np.clip(state.integrator + gains.velocity_i * period * err, -i_max, i_max)
-    unsat = gains.velocity_p * err + candidate + state.current_ff
-    winding = (np.abs(unsat) > i_max) & (np.sign(unsat) == np.sign(err))
-    state.integrator = np.where(winding, state.integrator, candidate)
-    cmd = np.clip(gains.velocity_p * err + state.integrator + state.current_ff, -i_max, i_max)
+    unsat = p_term + candidate
+    sgn = np.sign(unsat)
+    winding = (np.abs(unsat) > i_max) & (sgn == np.sign(err))
+    # integrator may grow (in the saturating direction) only up to the value that puts the
+    # command exactly at the limit, and is never pulled back by the clamp
+    headroom = i_max - sgn * p_term
+    clamped = sgn * np.maximum(sgn * state.integrator, np.minimum(sgn * candidate, headroom))
+    state.integrator = np.where(winding, clamped, candidate)
+    cmd = np.clip(p_term + state.integrator, -i_max, i_max)
     state.current_cmd = cmd
     return cmd

@@ -46,6 +46,10 @@ class StribeckParameters:
     stribeck_velocity_neg: np.ndarray
     viscous_neg: np.ndarray
 
+    def take(self, index: np.ndarray) -> "StribeckParameters":
+        """Parameters of the batch members ``index`` (integer index array)."""
+        return StribeckParameters(*(getattr(self, f)[index] for f in self.__dataclass_fields__))
+
     def select(self, direction: np.ndarray) -> "DirectedFriction":
         """Parameters of the branch ``direction`` (+1 or -1; 0 gives the negative branch), shape (B,)."""
         pos = direction > 0
@@ -77,6 +81,10 @@ class DirectedFriction:
     delta: np.ndarray
     inv_stribeck_velocity: np.ndarray
     viscous: np.ndarray
+
+    def take(self, index: np.ndarray) -> "DirectedFriction":
+        """Branch parameters of the batch members ``index`` (integer index array)."""
+        return DirectedFriction(*(getattr(self, f)[index] for f in self.__dataclass_fields__))
 
     def force(self, v: np.ndarray, direction: np.ndarray) -> np.ndarray:
         """Sliding friction [N] of branch ``direction`` at velocity ``v`` [m/s].

@@ -72,8 +72,10 @@ def _integer_ratio(num: float, den: float, what: str, owner: str) -> int:
 class MCU(Component):
     """Cascade P (position) / PI (velocity) servo controller of three axes with current saturation.
 
-    Variables are listed in the module docstring of :mod:`fmus_src.servo`;
-    defaults are the values of ``default.toml``.
+    Per axis ``a`` in x, y, z: parameters ``{a}_position_gain`` ... ``{a}_screw_lead``
+    (see ``MCU.variables``), inputs ``{a}_ref``, ``{a}_position``, ``{a}_velocity``, outputs
+    ``{a}_current_cmd``, ``{a}_velocity_cmd``; shared ``position_loop_period``,
+    ``velocity_loop_period``. Defaults are the values of ``default.toml``.
     """
 
     variables = _declare()

@@ -207,9 +207,7 @@ def advance(
         v_new = np.where(slip, v1, v)
         if crossed.any():
             idx = np.nonzero(crossed)[0]
-            sub = DirectedFriction(
-                branch.coulomb[idx], branch.delta[idx], branch.inv_stribeck_velocity[idx], branch.viscous[idx]
-            )
+            sub = branch.take(idx)
             f_i, im_i, d_i = force[idx], inv_mass[idx], d[idx]
             tau, x_c = _locate_crossing(x[idx], v[idx], dt, v1[idx], f_i, im_i, sub, d_i)
             d_new = _break_away(f_i, friction.static_pos[idx], friction.static_neg[idx])
@@ -220,7 +218,7 @@ def advance(
             if rev.any():
                 j = np.nonzero(rev)[0]
                 gidx = idx[j]
-                br2 = friction.select(d_new[j])
+                br2 = friction.take(gidx).select(d_new[j])
                 d2 = d_new[j]
                 xr, vr = _rk4(x_c[j], np.zeros(j.size), rest[j], force[gidx], inv_mass[gidx], br2, d2)
                 x_out[j] = xr
