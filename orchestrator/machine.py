@@ -44,7 +44,7 @@ SCHEMA: dict[str, set[str]] = {
         "accel_before_interp_mm_per_s2", "accel_change_time_before_interp_ms",
         "corner_velocity_difference_mm_per_min", "arc_accel_mm_per_s2",
         "cutting_time_constant_ms", "cutting_filter", "rapid_time_constant_ms", "rapid_filter",
-        "in_position_width_mm",
+        "in_position_width_mm", "tool_change_time_s",
     },
     "spindle": {"max_speed_rpm", "ramp_rpm_per_s", "speed_arrival_tolerance_percent", "power_kW"},
     "servo": {"position_loop_period_ms", "velocity_loop_period_ms"},

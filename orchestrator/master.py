@@ -70,9 +70,9 @@ class MasterSettings:
         Start time, s.
     time_limit : float
         Stop at ``t0 + time_limit`` at the latest, s.
-    stop_when : str or None
-        ``"component.variable"`` (Boolean output); the run ends when it is
-        true for all batch members.
+    stop_when : str, tuple of str, or None
+        ``"component.variable"`` (Boolean output), or several; the run ends
+        when all of them are true for all batch members.
     method : {"gauss-seidel", "jacobi"}
         Coupling scheme.
     decimation : int
@@ -84,7 +84,7 @@ class MasterSettings:
     step: float = 1e-3
     t0: float = 0.0
     time_limit: float = 3600.0
-    stop_when: str | None = None
+    stop_when: str | tuple[str, ...] | None = None
     method: Method = "gauss-seidel"
     decimation: int = 1
     check_every: int = 50
@@ -98,6 +98,12 @@ class MasterSettings:
             raise SystemDescriptionError(f"method must be 'gauss-seidel' or 'jacobi', got {self.method!r}")
         if int(self.decimation) != self.decimation or self.decimation < 1:
             raise SystemDescriptionError(f"decimation must be a positive integer, got {self.decimation!r}")
+
+    def stop_signals(self) -> tuple[str, ...]:
+        """The stop signals as a tuple (empty when the run goes to the time limit)."""
+        if self.stop_when is None:
+            return ()
+        return (self.stop_when,) if isinstance(self.stop_when, str) else tuple(self.stop_when)
 
 
 @dataclass
@@ -206,8 +212,9 @@ class Master:
         for probe in self.probes:
             comp, var = split_reference(probe.reference)
             system.component(comp).variable(var)
-        if self.settings.stop_when is not None:
-            comp, var = split_reference(self.settings.stop_when)
+        self._stop_refs = self.settings.stop_signals()
+        for reference in self._stop_refs:
+            comp, var = split_reference(reference)
             system.component(comp).variable(var)
         self._wires: dict[str, list[_Wire]] = {name: [] for name in system.components}
         self._connections_by_target: dict[str, list[Connection]] = {name: [] for name in system.components}
@@ -248,10 +255,13 @@ class Master:
                     )
 
     def _stop_flags(self) -> np.ndarray | None:
-        if self.settings.stop_when is None:
+        if not self._stop_refs:
             return None
-        comp, var = split_reference(self.settings.stop_when)
-        return np.asarray(self.system.components[comp].values[var], dtype=bool)
+        flags = np.ones(self.system.batch, dtype=bool)
+        for reference in self._stop_refs:
+            comp, var = split_reference(reference)
+            flags &= np.asarray(self.system.components[comp].values[var], dtype=bool)
+        return flags
 
     # ------------------------------------------------------------------ run
     def run(self) -> RunResult:
@@ -312,12 +322,12 @@ class Master:
                     newly = flags & np.isnan(stopped_at)
                     stopped_at[newly] = t
                     if flags.all():
-                        message = f"{s.stop_when} at t = {t:.3f} s"
+                        message = f"{' and '.join(self._stop_refs)} at t = {t:.3f} s"
                         break
                 if k >= max_steps:
-                    if s.stop_when is not None:
+                    if self._stop_refs:
                         success = False
-                        message = f"time limit of {s.time_limit:g} s reached before {s.stop_when}"
+                        message = f"time limit of {s.time_limit:g} s reached before {' and '.join(self._stop_refs)}"
                     else:
                         message = f"time limit of {s.time_limit:g} s reached"
                     break

@@ -97,7 +97,7 @@ class SystemSpec:
     step: float = 1e-3
     start_time: float = 0.0
     stop_time: float | None = None
-    stop_when: str | None = None
+    stop_when: tuple[str, ...] | None = None
     folder: Path = Path(".")
 
 
@@ -215,8 +215,8 @@ def system_to_ssp(
                                stopTime=repr(settings.t0 + settings.time_limit))
     ann = ET.SubElement(ET.SubElement(experiment, _q("ssc", "Annotations")), _q("ssc", "Annotation"), type=ANNOTATION_TYPE)
     master_attrs = {"step": repr(settings.step), "method": settings.method}
-    if settings.stop_when:
-        master_attrs["stopWhen"] = settings.stop_when
+    if settings.stop_signals():
+        master_attrs["stopWhen"] = " ".join(settings.stop_signals())
     ET.SubElement(ann, _q("cnctwin", "Master"), master_attrs)
     atomic_write_text(ssv_path, parameter_set_xml(f"{system.name}-parameters", parameters))
     atomic_write_text(ssd_path, _pretty(root))
@@ -364,7 +364,8 @@ def read_ssd(path: str | Path) -> SystemSpec:
         master = experiment.find(f"ssc:Annotations/ssc:Annotation[@type='{ANNOTATION_TYPE}']/cnctwin:Master", NS)
         if master is not None:
             system_spec.step = float(master.get("step", "0.001"))
-            system_spec.stop_when = master.get("stopWhen")
+            stop = master.get("stopWhen")
+            system_spec.stop_when = tuple(stop.split()) if stop else None
     return system_spec
 
 

@@ -71,6 +71,7 @@ def nck_parameters(machine: Machine) -> dict[str, object]:
 def mcu_parameters(machine: Machine) -> dict[str, object]:
     """MCU parameters (SI) from a machine file."""
     params: dict[str, object] = dict(machine.si("servo"))
+    params["in_position_width"] = machine.si("nck")["in_position_width"]
     for a in AXES:
         params.update({f"{a}_{k}": v for k, v in machine.si(f"axis.{a}").items()})
     return _declared(MCU, params)
@@ -110,6 +111,7 @@ class Twin:
     cutting: CuttingLoad | None
     probes: list[Probe]
     options: TwinOptions
+    stop_when: tuple[str, ...] = ("nck.done",)
 
 
 def build_twin(
@@ -145,7 +147,7 @@ def build_twin(
     nck_params.update({f"{a}_initial": start[i] for i, a in enumerate(AXES)})
     nck = NCKernel("nck", batch=batch, program_file=str(case.program), **nck_params)
     if program_text is not None:
-        nck.load_program_text(program_text, source=str(case.program))
+        nck.set_program_text(program_text, str(case.program))
     mcu = MCU("mcu", batch=batch, **mcu_parameters(machine))
     drives = {
         a: DriveAxis(f"{a}_drive", batch=batch, initial_position=start[i], **drive_parameters(machine, a))
@@ -181,4 +183,5 @@ def build_twin(
         probes += [Probe("fx_N", "cutting.fx", "N"), Probe("fy_N", "cutting.fy", "N"), Probe("fc_N", "cutting.fc", "N")]
         probes += [Probe("fc_peak_N", "cutting.fc_peak", "N"), Probe("spindle_torque_Nm", "cutting.spindle_torque", "N.m")]
     probes += [Probe("feed_mm_per_min", "nck.feed_ref", "mm/min")]
-    return Twin(system, nck, mcu, drives, cutting, probes, options)
+    stop_when = ("nck.done", "mcu.in_position")
+    return Twin(system, nck, mcu, drives, cutting, probes, options, stop_when)

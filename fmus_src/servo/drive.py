@@ -113,7 +113,7 @@ class DriveAxis(Component):
 
     def _net_force(self) -> np.ndarray:
         u = self.values["current_cmd"] * self._kf
-        self.values["motor_force"] = u
+        self.values["motor_force"][...] = u
         return u - self.values["disturbance_force"]
 
     # ------------------------------------------------------------------ protocol
@@ -137,9 +137,9 @@ class DriveAxis(Component):
         self._publish(friction_force(self._state, self._net_force(), self._friction))
 
     def _publish(self, ff: np.ndarray) -> None:
-        self.values["position"] = self._state.position.copy()
-        self.values["velocity"] = self._state.velocity.copy()
-        self.values["friction_force"] = ff
+        self.values["position"][...] = self._state.position
+        self.values["velocity"][...] = self._state.velocity
+        self.values["friction_force"][...] = ff
 
     def _do_step(self, t: float, h: float) -> None:
         force = self._net_force()

@@ -52,6 +52,8 @@ def _declare() -> tuple[Variable, ...]:
             out.append(Variable(f"{a}_{suffix}", "parameter", unit, defaults[a], f"{a.upper()}: {text}"))
     out.append(Variable("position_loop_period", "parameter", "s", 1e-3, "position loop period Tp"))
     out.append(Variable("velocity_loop_period", "parameter", "s", 250e-6, "velocity loop period Tv"))
+    out.append(Variable("in_position_width", "parameter", "m", 20e-6,
+                        "in-position width (FANUC No. 1826): |ref - actual| below it on every axis sets in_position"))
     for a in AXES:
         out.append(Variable(f"{a}_ref", "input", "m", 0.0, f"{a.upper()}: reference position from the NC kernel"))
         out.append(Variable(f"{a}_position", "input", "m", 0.0, f"{a.upper()}: actual position (drive feedback)"))
@@ -59,6 +61,8 @@ def _declare() -> tuple[Variable, ...]:
     for a in AXES:
         out.append(Variable(f"{a}_current_cmd", "output", "A", 0.0, f"{a.upper()}: current (torque) command Atc"))
         out.append(Variable(f"{a}_velocity_cmd", "output", "m/s", 0.0, f"{a.upper()}: velocity command of the position loop"))
+    out.append(Variable("in_position", "output", "1", False,
+                        "all axes within in_position_width of their reference (servo position deviation)", "Boolean"))
     return tuple(out)
 
 
@@ -116,8 +120,10 @@ class MCU(Component):
 
     def _publish(self) -> None:
         for i, a in enumerate(AXES):
-            self.values[f"{a}_current_cmd"] = self._state.current_cmd[i].copy()
-            self.values[f"{a}_velocity_cmd"] = self._state.velocity_cmd[i].copy()
+            self.values[f"{a}_current_cmd"][...] = self._state.current_cmd[i]
+            self.values[f"{a}_velocity_cmd"][...] = self._state.velocity_cmd[i]
+        deviation = np.abs(self._stack("ref") - self._stack("position"))
+        self.values["in_position"][...] = np.all(deviation <= self.values["in_position_width"], axis=0)
 
     def _do_step(self, t: float, h: float) -> None:
         n = _integer_ratio(h, self._tv, "step size h", self.name)

@@ -1,0 +1,30 @@
+"""NC kernel: FANUC-dialect interpreter, program writer, look-ahead interpolator, acc/dec and spindle.
+
+Public API
+----------
+interpret, InterpreterSettings, Program and the typed blocks
+    G-code text → typed blocks (SI, machine coordinates).
+rewrite_program
+    Re-emit a program with new F/S words on given lines, every other byte untouched.
+NCKernel
+    The batch-capable component (reference trajectories for the servo axes).
+NCParams, plan_batch, plan_member, build_schedule
+    The planner used by NCKernel, usable on its own.
+"""
+from __future__ import annotations
+
+from .blocks import (
+    Arc, Block, Coolant, Dwell, Linear, Program, ProgramEnd, Rapid, SpindleSpeed, SpindleStop, ToolChange,
+)
+from .component import NCKernel
+from .errors import GCodeError, NCParameterError
+from .interpreter import InterpreterSettings, interpret
+from .params import NCParams
+from .planner import BatchPlan, MemberPlan, build_schedule, plan_batch, plan_member
+from .writer import rewrite_program
+
+__all__ = [
+    "Arc", "BatchPlan", "Block", "Coolant", "Dwell", "GCodeError", "InterpreterSettings", "Linear", "MemberPlan",
+    "NCKernel", "NCParameterError", "NCParams", "Program", "ProgramEnd", "Rapid", "SpindleSpeed", "SpindleStop",
+    "ToolChange", "build_schedule", "interpret", "plan_batch", "plan_member", "rewrite_program",
+]

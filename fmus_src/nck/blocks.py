@@ -1,0 +1,202 @@
+"""Typed blocks: the interpreter's output (canonical machining commands).
+
+Every block is a frozen dataclass carrying the 1-based source ``line`` it came
+from. Positions are machine coordinates in metres (programmed tool-tip
+position + active work offset + active tool length on Z), feeds in m/s,
+spindle speeds in rad/s, times in s. Downstream code never re-parses text.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+Vec3 = tuple[float, float, float]
+
+#: Axis indices (first in-plane axis, second in-plane axis, normal axis) of each plane.
+PLANE_AXES: dict[str, tuple[int, int, int]] = {"XY": (0, 1, 2), "ZX": (2, 0, 1), "YZ": (1, 2, 0)}
+
+
+@dataclass(frozen=True, slots=True)
+class Rapid:
+    """G0 positioning from ``start`` to ``end`` (m, machine coordinates)."""
+
+    line: int
+    start: Vec3
+    end: Vec3
+
+
+@dataclass(frozen=True, slots=True)
+class Linear:
+    """G1 linear cutting feed.
+
+    Attributes
+    ----------
+    feed : float
+        Programmed path feed (m/s), before any clamp.
+    feed_line : int
+        Source line whose F word set ``feed`` (used to apply per-line overrides).
+    """
+
+    line: int
+    start: Vec3
+    end: Vec3
+    feed: float
+    feed_line: int
+
+
+@dataclass(frozen=True, slots=True)
+class Arc:
+    """G2/G3 circular (or helical) cutting feed.
+
+    Attributes
+    ----------
+    center : Vec3
+        Arc centre (m); its normal-axis coordinate equals the start's.
+    plane : {"XY", "ZX", "YZ"}
+        G17, G18, G19. Angles are counted from the first towards the second
+        in-plane axis (right-handed about the plane normal +Z, +Y, +X).
+    clockwise : bool
+        True for G2.
+    feed, feed_line
+        As for :class:`Linear`.
+    turns : int
+        1 for an ordinary arc (at most one revolution). A full circle
+        (IJK, end == start) has ``turns = 1`` and a sweep of 2 pi.
+    """
+
+    line: int
+    start: Vec3
+    end: Vec3
+    center: Vec3
+    plane: str
+    clockwise: bool
+    feed: float
+    feed_line: int
+    turns: int = 1
+
+    @property
+    def axes(self) -> tuple[int, int, int]:
+        """Indices of (first in-plane, second in-plane, normal) axes."""
+        return PLANE_AXES[self.plane]
+
+    @property
+    def radius_start(self) -> float:
+        """Radius at the start point (m)."""
+        i, j, _ = self.axes
+        return math.hypot(self.start[i] - self.center[i], self.start[j] - self.center[j])
+
+    @property
+    def radius_end(self) -> float:
+        """Radius at the end point (m); equals ``radius_start`` within 0.002 mm."""
+        i, j, _ = self.axes
+        return math.hypot(self.end[i] - self.center[i], self.end[j] - self.center[j])
+
+    @property
+    def start_angle(self) -> float:
+        """Angle of the start point about the centre (rad)."""
+        i, j, _ = self.axes
+        return math.atan2(self.start[j] - self.center[j], self.start[i] - self.center[i])
+
+    @property
+    def sweep(self) -> float:
+        """Signed swept angle (rad): positive counter-clockwise (G3), negative for G2."""
+        i, j, _ = self.axes
+        a0 = self.start_angle
+        a1 = math.atan2(self.end[j] - self.center[j], self.end[i] - self.center[i])
+        d = a1 - a0
+        if self.clockwise:
+            d = -((-d) % (2.0 * math.pi))
+            if d == 0.0:
+                d = -2.0 * math.pi
+            return d - 2.0 * math.pi * (self.turns - 1)
+        d = d % (2.0 * math.pi)
+        if d == 0.0:
+            d = 2.0 * math.pi
+        return d + 2.0 * math.pi * (self.turns - 1)
+
+    @property
+    def helix(self) -> float:
+        """Travel along the plane normal (m)."""
+        k = self.axes[2]
+        return self.end[k] - self.start[k]
+
+    @property
+    def length(self) -> float:
+        """Path length (m) of the (possibly helical, slightly spiral) arc."""
+        r = 0.5 * (self.radius_start + self.radius_end)
+        return math.hypot(abs(self.sweep) * r, self.helix)
+
+
+@dataclass(frozen=True, slots=True)
+class Dwell:
+    """G4 dwell of ``seconds`` (s), after the axes are in position."""
+
+    line: int
+    seconds: float
+
+
+@dataclass(frozen=True, slots=True)
+class SpindleSpeed:
+    """Spindle command: ``speed`` (rad/s, >= 0), ``direction`` +1 (M3), -1 (M4), 0 (not turning).
+
+    ``speed_line`` is the source line whose S word set ``speed``.
+    """
+
+    line: int
+    speed: float
+    direction: int
+    speed_line: int
+
+
+@dataclass(frozen=True, slots=True)
+class SpindleStop:
+    """M5 spindle stop."""
+
+    line: int
+
+
+@dataclass(frozen=True, slots=True)
+class ToolChange:
+    """M6 tool change to ``tool`` (the last T word)."""
+
+    line: int
+    tool: int
+
+
+@dataclass(frozen=True, slots=True)
+class Coolant:
+    """M7/M8 (``on=True``) or M9 (``on=False``)."""
+
+    line: int
+    on: bool
+
+
+@dataclass(frozen=True, slots=True)
+class ProgramEnd:
+    """Program end: ``reason`` is ``"M30"``, ``"M2"``, ``"%"`` or ``"end of file"``."""
+
+    line: int
+    reason: str
+
+
+Block = Rapid | Linear | Arc | Dwell | SpindleSpeed | SpindleStop | ToolChange | Coolant | ProgramEnd
+Motion = (Rapid, Linear, Arc)
+
+
+@dataclass(frozen=True)
+class Program:
+    """An interpreted program.
+
+    Attributes
+    ----------
+    file : str
+        Name used in messages.
+    blocks : tuple of Block
+        Typed blocks in execution order; the last one is a :class:`ProgramEnd`.
+    initial : Vec3
+        Machine position before the first block (m).
+    """
+
+    file: str
+    blocks: tuple[Block, ...]
+    initial: Vec3

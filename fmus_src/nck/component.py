@@ -1,0 +1,226 @@
+"""``NCKernel``: the NC kernel as a batch-capable co-simulation component.
+
+The whole program is planned at ``setup`` (see :mod:`.planner`); ``do_step(t,
+h)`` reads the planned samples at ``t + h`` (linear interpolation between
+interpolation periods for Real outputs when ``t + h`` is not on the grid).
+
+The program comes from the String parameter ``program_file`` or, in Python,
+from the ``program_text`` keyword of the constructor / :meth:`NCKernel.set_program_text`
+(text wins when both are given).
+"""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import ClassVar, Mapping
+
+import numpy as np
+
+from ..component import Component, ComponentError, Variable
+from .blocks import Block, Program
+from .errors import NCParameterError
+from .interpreter import InterpreterSettings, interpret
+from .overrides import insert_spindle_commands, resolve_values
+from .params import NCParams
+from .planner import BatchPlan, build_schedule, plan_batch
+
+#: Number of tool length offset parameters ``tool_length_1 .. tool_length_N`` (H1..HN).
+N_TOOL_LENGTHS = 20
+WORK_OFFSETS = (54, 55, 56, 57, 58, 59)
+
+_D = NCParams()
+
+
+def _variables() -> tuple[Variable, ...]:
+    p = "parameter"
+    v: list[Variable] = [
+        Variable("program_file", p, "1", "", "path of the G-code program file", "String"),
+        Variable("interpolation_period", p, "s", _D.interpolation_period, "interpolation period Ts"),
+        Variable("lookahead_blocks", p, "1", _D.lookahead_blocks, "look-ahead window in blocks", "Integer"),
+        Variable("max_cutting_feed", p, "m/s", _D.max_cutting_feed, "maximum cutting feed (FANUC No. 1430)"),
+        Variable("accel_before_interp", p, "m/s2", _D.accel_before_interp,
+                 "tangential acceleration of acc/dec before interpolation (No. 1660)"),
+        Variable("accel_change_time_before_interp", p, "s", _D.accel_change_time_before_interp,
+                 "acceleration change time of bell-shaped acc/dec before interpolation (No. 1772); 0 = trapezoidal"),
+        Variable("corner_velocity_difference", p, "m/s", _D.corner_velocity_difference,
+                 "allowable per-axis velocity difference at corners (No. 1783)"),
+        Variable("arc_accel", p, "m/s2", _D.arc_accel, "allowable centripetal acceleration on arcs (No. 1735)"),
+        Variable("cutting_time_constant", p, "s", _D.cutting_time_constant,
+                 "time constant of acc/dec after interpolation in cutting feed (No. 1769)"),
+        Variable("cutting_filter", p, "1", _D.cutting_filter, "after-interpolation filter in cutting: linear|bell",
+                 "String"),
+        Variable("rapid_time_constant", p, "s", _D.rapid_time_constant, "time constant of rapid acc/dec (No. 1620)"),
+        Variable("rapid_filter", p, "1", _D.rapid_filter, "after-interpolation filter in rapid: linear|bell", "String"),
+        Variable("in_position_width", p, "m", _D.in_position_width, "in-position width (No. 1826)"),
+        Variable("spindle_max_speed", p, "rad/s", _D.spindle_max_speed, "maximum spindle speed (S is clamped)"),
+        Variable("spindle_ramp", p, "rad/s2", _D.spindle_ramp, "spindle acceleration"),
+        Variable("spindle_speed_arrival_tolerance", p, "1", _D.spindle_speed_arrival_tolerance,
+                 "spindle speed arrival tolerance as a fraction of the command"),
+        Variable("spindle_power", p, "W", 11000.0, "spindle motor power (accepted, not used by the NC kernel)"),
+    ]
+    for a in "xyz":
+        v.append(Variable(f"{a}_rapid_feed", p, "m/s", getattr(_D, f"{a}_rapid_feed"), f"{a.upper()} rapid traverse rate"))
+    for a in "xyz":
+        v.append(Variable(f"{a}_initial", p, "m", 0.0, f"{a.upper()} machine position at program start"))
+    for g in WORK_OFFSETS:
+        for a in "xyz":
+            v.append(Variable(f"g{g}_{a}", p, "m", 0.0, f"G{g} work offset, {a.upper()}"))
+    for h in range(1, N_TOOL_LENGTHS + 1):
+        v.append(Variable(f"tool_length_{h}", p, "m", 0.0, f"tool length offset H{h} (added to Z with G43)"))
+    v.append(Variable("tool_change_time", p, "s", _D.tool_change_time, "M6 tool change time (assumption: 3 s)"))
+    v.append(Variable("block_delete", p, "1", False, "block delete switch: skip blocks starting with /", "Boolean"))
+    o = "output"
+    v += [
+        Variable("x_ref", o, "m", 0.0, "X reference position after acc/dec after interpolation"),
+        Variable("y_ref", o, "m", 0.0, "Y reference position after acc/dec after interpolation"),
+        Variable("z_ref", o, "m", 0.0, "Z reference position after acc/dec after interpolation"),
+        Variable("feed_ref", o, "m/s", 0.0, "path speed before the after-interpolation filter"),
+        Variable("spindle_ref", o, "rad/s", 0.0, "commanded spindle speed (+ M3, - M4, 0 stopped)"),
+        Variable("spindle_speed", o, "rad/s", 0.0, "actual (ramped) spindle speed"),
+        Variable("line", o, "1", 0, "source line executing", "Integer"),
+        Variable("done", o, "1", False, "program finished and in position", "Boolean"),
+        Variable("tool", o, "1", 0, "tool in the spindle", "Integer"),
+    ]
+    return tuple(v)
+
+
+class NCKernel(Component):
+    """NC kernel: interpreter, look-ahead interpolator, acc/dec, spindle.
+
+    Parameters
+    ----------
+    name : str
+        Instance name.
+    batch : int
+        Number of batch members B.
+    program_text : str, optional
+        Program source given directly (Python only); otherwise ``program_file`` is read.
+    **parameters
+        Values of the parameters listed in :attr:`variables` (SI).
+
+    Attributes
+    ----------
+    blocks_ : tuple of Block
+        Typed blocks after setup (with spindle commands inserted for spindle overrides).
+    program_ : Program
+        The interpreted program.
+    duration_ : ndarray (B,)
+        Planned program time until done (s).
+    plan_ : BatchPlan
+        The sampled references of all members.
+    """
+
+    variables: ClassVar[tuple[Variable, ...]] = _variables()
+
+    def __init__(self, name: str = "", batch: int = 1, program_text: str | None = None, **parameters: object) -> None:
+        super().__init__(name, batch, **parameters)
+        self._text: str | None = program_text
+        self._text_file = "<text>"
+        self._feed_over: dict[int, object] = {}
+        self._spindle_over: dict[int, object] = {}
+
+    # ------------------------------------------------------------------ Python-side inputs
+    def set_program_text(self, text: str, file: str = "<text>") -> None:
+        """Give the program as text (before ``setup``); ``file`` names it in messages."""
+        if self.state != "instantiated":
+            raise ComponentError(f"{self.name}: set_program_text() must be called before setup()")
+        self._text = text
+        self._text_file = file
+
+    def set_overrides(self, feed: Mapping[int, object] | None = None, spindle: Mapping[int, object] | None = None
+                      ) -> None:
+        """Replace F and S of source lines per batch member (before ``setup``).
+
+        Parameters
+        ----------
+        feed : mapping line -> scalar or array (B,), m/s
+            New feed of the given 1-based source lines (modal, like rewriting the F word there).
+        spindle : mapping line -> scalar or array (B,), rad/s
+            New spindle speed of the given lines (like rewriting the S word there).
+        """
+        if self.state != "instantiated":
+            raise ComponentError(f"{self.name}: set_overrides() must be called before setup()")
+        self._feed_over = dict(feed or {})
+        self._spindle_over = dict(spindle or {})
+
+    # ------------------------------------------------------------------ helpers
+    def _uniform(self, name: str) -> float:
+        arr = self.values[name]
+        assert isinstance(arr, np.ndarray)
+        if not np.all(arr == arr[0]):
+            raise NCParameterError(f"{self.name}.{name} must be the same for all batch members, got {arr.tolist()}")
+        return float(arr[0])
+
+    def _read_program(self) -> tuple[str, str]:
+        if self._text is not None:
+            return self._text, self._text_file
+        path = str(self.values["program_file"])
+        if not path:
+            raise ComponentError(f"{self.name}: no program: set program_file or give program_text")
+        p = Path(path)
+        if not p.is_file():
+            raise ComponentError(f"{self.name}: program_file {path!r} not found")
+        return p.read_text(encoding="utf-8", errors="strict"), path
+
+    def _member_params(self, b: int) -> NCParams:
+        kw = {}
+        for name in NCParams.names():
+            val = self.values[name]
+            kw[name] = val if isinstance(val, str) else val[b].item()
+        return NCParams(**kw)
+
+    # ------------------------------------------------------------------ protocol
+    def _setup(self, t0: float) -> None:
+        text, file = self._read_program()
+        settings = InterpreterSettings(
+            initial=tuple(self._uniform(f"{a}_initial") for a in "xyz"),  # type: ignore[arg-type]
+            work_offsets={g: tuple(self._uniform(f"g{g}_{a}") for a in "xyz") for g in WORK_OFFSETS},  # type: ignore[misc]
+            tool_lengths=[self._uniform(f"tool_length_{h}") for h in range(1, N_TOOL_LENGTHS + 1)],
+            block_delete=bool(self.values["block_delete"][0]),  # type: ignore[index]
+        )
+        self.program_: Program = interpret(text, file, settings)
+        blocks: tuple[Block, ...] = insert_spindle_commands(self.program_.blocks, list(self._spindle_over))
+        self.blocks_ = blocks
+        feeds, speeds = resolve_values(blocks, self.batch, self._feed_over, self._spindle_over)
+        self._uniform("interpolation_period")
+        params = [self._member_params(b) for b in range(self.batch)]
+        schedule = build_schedule(blocks, settings.initial)
+        self.plan_: BatchPlan = plan_batch(schedule, params, feeds, speeds)
+        self.duration_ = self.plan_.duration.astype(float)
+        self._rows = np.arange(self.batch)
+        self._write(0.0)
+
+    def _write(self, kf: float) -> None:
+        plan = self.plan_
+        K = plan.feed.shape[1]
+        kf = min(max(kf, 0.0), K - 1.0)
+        k0 = int(np.floor(kf + 1e-9))
+        frac = kf - k0
+        if frac < 1e-9:
+            frac = 0.0
+        k1 = min(k0 + 1, K - 1)
+        r = self._rows
+        pos = plan.position[:, k0]
+        feed = plan.feed[:, k0]
+        sref = plan.spindle_ref[:, k0]
+        sact = plan.spindle_speed[:, k0]
+        if frac > 0.0:
+            pos = pos + frac * (plan.position[:, k1] - pos)
+            feed = feed + frac * (plan.feed[:, k1] - feed)
+            sact = sact + frac * (plan.spindle_speed[:, k1] - sact)
+        v = self.values
+        v["x_ref"][r] = pos[:, 0]  # type: ignore[index]
+        v["y_ref"][r] = pos[:, 1]  # type: ignore[index]
+        v["z_ref"][r] = pos[:, 2]  # type: ignore[index]
+        v["feed_ref"][r] = feed  # type: ignore[index]
+        v["spindle_ref"][r] = sref  # type: ignore[index]
+        v["spindle_speed"][r] = sact  # type: ignore[index]
+        v["line"][r] = plan.line[:, k0]  # type: ignore[index]
+        v["tool"][r] = plan.tool[:, k0]  # type: ignore[index]
+        v["done"][r] = k0 >= plan.done_index  # type: ignore[index]
+
+    def _do_step(self, t: float, h: float) -> None:
+        self._write((t + h - self.t0) / self.plan_.period)
+
+    def _reset(self) -> None:
+        for name in ("plan_", "blocks_", "program_", "duration_"):
+            self.__dict__.pop(name, None)

@@ -1,0 +1,48 @@
+"""Errors of the NC kernel (dependency-free, shipped inside FMUs)."""
+from __future__ import annotations
+
+from ..errors import CncTwinError
+
+
+class GCodeError(CncTwinError):
+    """A G-code program cannot be interpreted (or rewritten).
+
+    Parameters
+    ----------
+    file : str
+        Program file name as given by the user (``"<text>"`` for programs passed as text).
+    line : int
+        1-based source line number (0 when the problem is not tied to a line).
+    word : str
+        The offending word or block text (e.g. ``"R0.5"``, ``"G95"``).
+    expected : str
+        What would have been accepted.
+    problem : str
+        What is wrong.
+    block : str
+        The source text of the block (stripped), quoted in the message.
+
+    Attributes
+    ----------
+    file, line, word, expected, problem, block
+        As given.
+
+    Examples
+    --------
+    ``part.nc:12: 'G2 X10 R0.5': arc radius 0.5 mm is smaller than half the chord (5.0 mm); expected R >= 5.0``
+    """
+
+    def __init__(self, file: str, line: int, word: str, expected: str, problem: str, block: str = "") -> None:
+        self.file = file
+        self.line = line
+        self.word = word
+        self.expected = expected
+        self.problem = problem
+        self.block = block
+        where = f"{file}:{line}" if line else file
+        quoted = f" '{block}':" if block else ""
+        super().__init__(f"{where}:{quoted} {problem}; expected {expected}")
+
+
+class NCParameterError(CncTwinError):
+    """An NC kernel parameter or override is out of range or inconsistent across the batch."""

@@ -1,0 +1,150 @@
+"""Interpolation of chains of feed blocks and of rapid moves at the interpolation period.
+
+Both produce the *pre-filter* reference: positions (m) sampled at
+``k × Ts`` for ``k = 0..n`` from rest to rest, and the path speed (m/s).
+The last sample is exactly the end point.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .geometry import ChainGeometry, evaluate
+from .lookahead import ChainSpeeds
+from .profiles import SpeedChange
+
+
+@dataclass(frozen=True)
+class Segment:
+    """Pre-filter samples of one motion (from rest to rest).
+
+    Attributes
+    ----------
+    position : ndarray (n + 1, 3)
+        Positions at sample times ``k Ts``, ``k = 0..n`` (m).
+    speed : ndarray (n + 1,)
+        Path speed (m/s).
+    block_start : ndarray (nb,)
+        Start time of each block relative to the segment start (s).
+    duration : float
+        Continuous-time duration (s) before rounding to samples.
+    """
+
+    position: np.ndarray
+    speed: np.ndarray
+    block_start: np.ndarray
+    duration: float
+
+    @property
+    def n(self) -> int:
+        """Number of sample periods."""
+        return len(self.speed) - 1
+
+
+def _n_periods(duration: float, period: float) -> int:
+    return max(int(math.ceil(duration / period - 1e-9)), 0)
+
+
+def interpolate_chain(geo: ChainGeometry, speeds: ChainSpeeds, sc: SpeedChange, period: float) -> Segment:
+    """Sample a chain of feed blocks with block-wise acc/dec before interpolation.
+
+    Parameters
+    ----------
+    geo : ChainGeometry
+    speeds : ChainSpeeds
+        Junction speeds and block limits from :func:`plan_chain_speeds`.
+    sc : SpeedChange
+        Acc/dec law.
+    period : float
+        Interpolation period Ts (s).
+
+    Returns
+    -------
+    Segment
+    """
+    v = speeds.junction.tolist()
+    vmax = speeds.vmax.tolist()
+    L = geo.length.tolist()
+    cum = geo.cum.tolist()
+    t0: list[float] = []
+    s0: list[float] = []
+    v0: list[float] = []
+    a0: list[float] = []
+    jk: list[float] = []
+    block_start = []
+    t = 0.0
+    for i in range(len(L)):
+        block_start.append(t)
+        va, vb = v[i], v[i + 1]
+        vp = sc.peak(va, vb, L[i], vmax[i])
+        up = sc.pieces(va, vp)
+        down = sc.pieces(vp, vb)
+        cruise = L[i] - sc.distance(va, vp) - sc.distance(vp, vb)
+        plist = up + ([(cruise / vp, 0.0, 0.0)] if cruise > 0.0 and vp > 0.0 else []) + down
+        s, vel = cum[i], va
+        for dur, acc, jerk in plist:
+            t0.append(t)
+            s0.append(s)
+            v0.append(vel)
+            a0.append(acc)
+            jk.append(jerk)
+            s += vel * dur + 0.5 * acc * dur * dur + jerk * dur ** 3 / 6.0
+            vel += acc * dur + 0.5 * jerk * dur * dur
+            t += dur
+    duration = t
+    n = _n_periods(duration, period)
+    tk = np.arange(n + 1) * period
+    total = cum[-1]
+    if not t0:
+        pos = np.repeat(geo.start[:1], n + 1, axis=0)
+        return Segment(pos, np.zeros(n + 1), np.array(block_start), duration)
+    T0 = np.array(t0)
+    idx = np.searchsorted(T0, tk, side="right") - 1
+    tau = tk - T0[idx]
+    S0, V0, A0, JK = np.array(s0), np.array(v0), np.array(a0), np.array(jk)
+    s = S0[idx] + tau * (V0[idx] + tau * (0.5 * A0[idx] + tau * JK[idx] / 6.0))
+    vel = V0[idx] + tau * (A0[idx] + 0.5 * tau * JK[idx])
+    past = tk >= duration
+    s[past] = total
+    vel[past] = 0.0
+    s = np.clip(np.maximum.accumulate(s), 0.0, total)
+    s[-1] = total
+    vel = np.maximum(vel, 0.0)
+    b = np.clip(np.searchsorted(geo.cum, s, side="right") - 1, 0, len(L) - 1)
+    frac = np.clip((s - geo.cum[b]) / geo.length[b], 0.0, 1.0)
+    frac[-1] = 1.0
+    b[-1] = len(L) - 1
+    pos = evaluate(geo, b, frac)
+    return Segment(pos, vel, np.array(block_start), duration)
+
+
+def rapid_speed(start: np.ndarray, end: np.ndarray, rapid_feed: tuple[float, float, float]) -> float:
+    """Path speed (m/s) of linear-interpolation-type positioning: the slowest axis sets the time."""
+    d = np.abs(np.asarray(end, dtype=float) - np.asarray(start, dtype=float))
+    length = float(np.linalg.norm(d))
+    if length == 0.0:
+        return 0.0
+    time = max(d[a] / rapid_feed[a] for a in range(3))
+    return length / time
+
+
+def interpolate_rapid(start: np.ndarray, end: np.ndarray, rapid_feed: tuple[float, float, float],
+                      period: float) -> Segment:
+    """Sample a G0 move: constant speed along the straight line (acc/dec comes from the rapid filter)."""
+    start = np.asarray(start, dtype=float)
+    end = np.asarray(end, dtype=float)
+    d = end - start
+    length = float(np.linalg.norm(d))
+    if length == 0.0:
+        return Segment(start[None, :].copy(), np.zeros(1), np.zeros(1), 0.0)
+    v = rapid_speed(start, end, rapid_feed)
+    duration = length / v
+    n = _n_periods(duration, period)
+    tk = np.arange(n + 1) * period
+    s = np.minimum(v * tk, length)
+    pos = start + (s / length)[:, None] * d
+    pos[-1] = end
+    speed = np.where(tk < duration - 1e-12, v, 0.0)
+    return Segment(pos, speed, np.zeros(1), duration)

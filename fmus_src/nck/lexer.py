@@ -1,0 +1,135 @@
+"""Lexer: one source line → words with their columns (shared by interpreter and writer).
+
+Rules (FANUC milling dialect):
+
+* ``( ... )`` comments anywhere on the line (several allowed, not nested);
+  ``;`` starts a comment running to the end of the line.
+* A line whose only content is ``%`` is a tape start/end marker.
+* A ``/`` as first non-blank character marks a block-delete block.
+* A word is a letter (either case) followed by a number; blanks between the
+  letter and the number are allowed. Numbers: optional sign, digits with an
+  optional decimal point (``10``, ``10.``, ``-.5``).
+"""
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+
+_COMMENT = re.compile(r"\([^()]*\)")
+_TOKEN = re.compile(r"([A-Za-z])[ \t]*([^A-Za-z \t(;/]*)|([ \t]+)|(.)")
+_NUMBER = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)\Z")
+
+
+@dataclass(frozen=True, slots=True)
+class Word:
+    """One word of a block.
+
+    Attributes
+    ----------
+    letter : str
+        Upper-case address letter.
+    text : str
+        The number as written (``"-12.5"``).
+    value : float
+        The number.
+    start, end : int
+        Column span ``[start, end)`` of the whole word in the source line.
+    """
+
+    letter: str
+    text: str
+    value: float
+    start: int
+    end: int
+
+    @property
+    def has_point(self) -> bool:
+        """True when the number was written with a decimal point."""
+        return "." in self.text
+
+
+@dataclass(frozen=True, slots=True)
+class LexedLine:
+    """Result of lexing one line.
+
+    Attributes
+    ----------
+    words : tuple of Word
+        Words in source order.
+    percent : bool
+        The line is a ``%`` marker.
+    block_delete : bool
+        The line starts with ``/``.
+    text : str
+        The block text without line ending, stripped (used in messages).
+    """
+
+    words: tuple[Word, ...]
+    percent: bool
+    block_delete: bool
+    text: str
+
+
+class LexError(ValueError):
+    """Raised by :func:`lex_line`; the caller turns it into a :class:`GCodeError`."""
+
+    def __init__(self, word: str, problem: str, expected: str) -> None:
+        super().__init__(problem)
+        self.word = word
+        self.problem = problem
+        self.expected = expected
+
+
+def lex_line(raw: str) -> LexedLine:
+    """Split one source line (without its line ending) into words.
+
+    Parameters
+    ----------
+    raw : str
+        The line as in the file.
+
+    Returns
+    -------
+    LexedLine
+
+    Raises
+    ------
+    LexError
+        Unclosed or unopened comment, a word without a value, a malformed
+        number, or a character that starts no word.
+    """
+    text = raw.strip()
+    if text == "%":
+        return LexedLine((), True, False, text)
+    code = raw
+    if "(" in code or ")" in code:
+        code = _COMMENT.sub(lambda m: " " * len(m.group(0)), code)
+        if "(" in code.split(";", 1)[0]:
+            raise LexError("(", "comment '(' is not closed", "a ')' closing the comment on the same line")
+        if ")" in code.split(";", 1)[0]:
+            raise LexError(")", "')' without an opening '('", "comments written as ( ... )")
+    semi = code.find(";")
+    if semi >= 0:
+        code = code[:semi]
+    block_delete = False
+    stripped = code.lstrip()
+    if stripped.startswith("/"):
+        block_delete = True
+        col = len(code) - len(stripped)
+        code = code[:col] + " " + code[col + 1 :]
+    words: list[Word] = []
+    for m in _TOKEN.finditer(code):
+        letter = m.group(1)
+        if letter is None:
+            if m.group(4) is not None:
+                bad = m.group(4)
+                raise LexError(bad, f"unexpected character {bad!r}", "words made of a letter and a number")
+            continue
+        num = m.group(2)
+        if not num:
+            raise LexError(letter.upper(), f"word {letter.upper()!r} has no value", f"a number after {letter.upper()}")
+        if not _NUMBER.match(num):
+            raise LexError(letter.upper() + num, f"malformed number {num!r} in word {letter.upper()}{num}",
+                           "a number like 12, -3.5 or .25")
+        words.append(Word(letter.upper(), num, float(num), m.start(), m.end(2)))
+    return LexedLine(tuple(words), False, block_delete, text)

@@ -1,0 +1,347 @@
+"""Offline planning of a whole program into sampled reference trajectories.
+
+The program and the parameters fully determine the reference, so the NC
+kernel plans everything at setup, sampled at the interpolation period Ts:
+
+1. the block list is cut into *items*: chains of consecutive feed blocks
+   (G1/G2/G3, coolant blocks do not interrupt them), single rapids, dwells,
+   spindle commands, tool changes and the program end;
+2. each chain is planned with look-ahead (:mod:`.lookahead`) and interpolated
+   with acc/dec before interpolation (:mod:`.interpolator`); each rapid is
+   interpolated at its linear-positioning speed;
+3. the interpolated increments of feed moves and of rapids are filtered by
+   their own acc/dec after interpolation (:mod:`.filters`) and summed;
+4. waits are inserted as a FANUC-like controller does: exact stop after a
+   rapid (filtered reference within ``in_position_width`` of its end point,
+   computed on the move's own filtered reference), in-position before dwell,
+   tool change and program end, spindle speed arrival before the next chain
+   of feed blocks, ``tool_change_time`` for M6.
+
+Every spindle command and tool change stops the path (the chain ends at rest).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+
+from .blocks import (
+    Arc, Block, Coolant, Dwell, Linear, Program, ProgramEnd, Rapid, SpindleSpeed, SpindleStop, ToolChange,
+)
+from .filters import apply_fir, box_lengths, filter_extension
+from .geometry import ChainGeometry, chain_geometry
+from .interpolator import Segment, interpolate_chain, interpolate_rapid
+from .lookahead import plan_chain_speeds
+from .params import NCParams
+from .profiles import SpeedChange
+from .spindle import arrival_time, sample_spindle, speed_after
+
+#: Feed blocks shorter than this are treated as zero-length (no motion, no time), m.
+MIN_LENGTH = 1e-12
+
+
+@dataclass(frozen=True)
+class Item:
+    """One step of the schedule: ``kind`` in {"chain", "rapid", "dwell", "spindle", "stop", "tool",
+    "coolant", "end"}; ``blocks`` are indices into the block list."""
+
+    kind: str
+    blocks: tuple[int, ...]
+    geometry: ChainGeometry | None = None
+
+
+@dataclass(frozen=True)
+class Schedule:
+    """The program cut into items (shared by all batch members)."""
+
+    blocks: tuple[Block, ...]
+    items: tuple[Item, ...]
+    initial: np.ndarray
+
+
+def build_schedule(blocks: Sequence[Block], initial: Sequence[float]) -> Schedule:
+    """Cut a block list into items.
+
+    Parameters
+    ----------
+    blocks : sequence of Block
+        Ending with :class:`ProgramEnd`.
+    initial : (3,) machine position before the program (m).
+    """
+    items: list[Item] = []
+    chain: list[int] = []
+
+    def flush() -> None:
+        if chain:
+            moving = tuple(i for i in chain if _length(blocks[i]) > MIN_LENGTH)
+            if moving:
+                items.append(Item("chain", moving, chain_geometry([blocks[i] for i in moving])))
+            chain.clear()
+
+    for i, b in enumerate(blocks):
+        if isinstance(b, (Linear, Arc)):
+            chain.append(i)
+            continue
+        if isinstance(b, Coolant):
+            items.append(Item("coolant", (i,)))  # zero time, keeps the chain going
+            continue
+        flush()
+        kind = {Rapid: "rapid", Dwell: "dwell", SpindleSpeed: "spindle", SpindleStop: "stop",
+                ToolChange: "tool", ProgramEnd: "end"}[type(b)]
+        items.append(Item(kind, (i,)))
+    flush()
+    # coolant items inside a chain were appended before the chain: order by first block index
+    items.sort(key=lambda it: it.blocks[0])
+    return Schedule(tuple(blocks), tuple(items), np.asarray(initial, dtype=float))
+
+
+def _length(b: Block) -> float:
+    if isinstance(b, Arc):
+        return b.length
+    return math.dist(b.start, b.end)  # type: ignore[union-attr]
+
+
+@dataclass
+class MemberPlan:
+    """Sampled reference of one batch member (index k ↔ time t0 + k Ts).
+
+    Attributes
+    ----------
+    position : ndarray (K, 3)
+        Reference after acc/dec after interpolation (m).
+    feed : ndarray (K,)
+        Path speed before the after-interpolation filter (m/s).
+    line, tool : ndarray (K,) of int
+        Executing source line, tool in the spindle.
+    spindle_ref, spindle_speed : ndarray (K,)
+        Commanded (signed) and actual spindle speed (rad/s).
+    done_index : int
+        First sample at which the program is finished (in position after the end).
+    """
+
+    position: np.ndarray
+    feed: np.ndarray
+    line: np.ndarray
+    tool: np.ndarray
+    spindle_ref: np.ndarray
+    spindle_speed: np.ndarray
+    done_index: int
+
+
+def _in_position(seg: Segment, boxes: list[int], width: float) -> int:
+    """Samples after the segment start at which its own filtered reference is within ``width`` of its end."""
+    n = seg.n
+    ext = filter_extension(boxes)
+    if n == 0:
+        return 0
+    inc = np.zeros((n + ext + 1, 3))
+    inc[1 : n + 1] = np.diff(seg.position, axis=0)
+    pos = seg.position[0] + np.cumsum(apply_fir(inc, boxes), axis=0)
+    dist = np.linalg.norm(pos - seg.position[-1], axis=1)
+    out = np.nonzero(dist > width)[0]
+    last_out = int(out[-1]) if len(out) else -1
+    return max(n, last_out + 1)
+
+
+def _ceil_periods(seconds: float, period: float) -> int:
+    return max(int(math.ceil(seconds / period - 1e-9)), 0)
+
+
+def plan_member(schedule: Schedule, params: NCParams, feeds: np.ndarray, speeds: np.ndarray) -> MemberPlan:
+    """Plan one batch member.
+
+    Parameters
+    ----------
+    schedule : Schedule
+    params : NCParams
+    feeds : ndarray (n_blocks,)
+        Feed of each feed block (m/s), NaN elsewhere.
+    speeds : ndarray (n_blocks,)
+        Speed of each spindle command (rad/s), NaN elsewhere.
+
+    Returns
+    -------
+    MemberPlan
+    """
+    ts = params.interpolation_period
+    sc = SpeedChange(params.accel_before_interp, params.accel_change_time_before_interp)
+    cut_boxes = box_lengths(params.cutting_time_constant, params.cutting_filter, ts)
+    rapid_boxes = box_lengths(params.rapid_time_constant, params.rapid_filter, ts)
+    blocks = schedule.blocks
+    k = 0
+    segments: list[tuple[int, str, Segment]] = []
+    line_cp: list[tuple[int, int]] = [(0, blocks[0].line if blocks else 0)]
+    tool_cp: list[tuple[int, int]] = [(0, 0)]
+    sp_events: list[tuple[int, float]] = []
+    sp_last = (0, 0.0, 0.0)  # (sample, speed at that sample, command)
+    ready = 0
+    last: tuple[int, Segment, list[int]] | None = None
+    end_reason = "end of file"
+    stop_spindle_at_end = False
+
+    def settled(k_now: int) -> int:
+        if last is None:
+            return k_now
+        k0, seg, boxes = last
+        return max(k_now, k0 + _in_position(seg, boxes, params.in_position_width))
+
+    def spindle_now(k_now: int) -> float:
+        k_e, w_e, cmd = sp_last
+        return float(speed_after(w_e, cmd, params.spindle_ramp, (k_now - k_e) * ts))
+
+    for item in schedule.items:
+        b = blocks[item.blocks[0]]
+        if item.kind == "chain":
+            line_cp.append((k, b.line))
+            k0 = max(k, ready)
+            geo = item.geometry
+            assert geo is not None
+            f = feeds[list(item.blocks)]
+            sp = plan_chain_speeds(geo, f, sc, max_cutting_feed=params.max_cutting_feed, arc_accel=params.arc_accel,
+                                   corner_velocity_difference=params.corner_velocity_difference,
+                                   lookahead_blocks=params.lookahead_blocks)
+            seg = interpolate_chain(geo, sp, sc, ts)
+            for bi, tb in zip(item.blocks, seg.block_start.tolist()):
+                line_cp.append((k0 + _ceil_periods(tb, ts), blocks[bi].line))
+            segments.append((k0, "cut", seg))
+            last = (k0, seg, cut_boxes)
+            k = k0 + seg.n
+        elif item.kind == "rapid":
+            line_cp.append((k, b.line))
+            seg = interpolate_rapid(np.array(b.start), np.array(b.end), params.rapid_feed, ts)  # type: ignore[union-attr]
+            segments.append((k, "rapid", seg))
+            last = (k, seg, rapid_boxes)
+            k = settled(k)
+        elif item.kind == "dwell":
+            k = settled(k)
+            line_cp.append((k, b.line))
+            k += _ceil_periods(b.seconds, ts)  # type: ignore[union-attr]
+        elif item.kind == "tool":
+            k = settled(k)
+            line_cp.append((k, b.line))
+            k += _ceil_periods(params.tool_change_time, ts)
+            tool_cp.append((k, b.tool))  # type: ignore[union-attr]
+        elif item.kind in ("spindle", "stop"):
+            line_cp.append((k, b.line))
+            if item.kind == "spindle":
+                cmd = b.direction * min(float(speeds[item.blocks[0]]), params.spindle_max_speed)  # type: ignore[union-attr]
+            else:
+                cmd = 0.0
+            w = spindle_now(k)
+            sp_events.append((k, cmd))
+            sp_last = (k, w, cmd)
+            ready = k + _ceil_periods(arrival_time(w, cmd, params.spindle_ramp,
+                                                   params.spindle_speed_arrival_tolerance), ts)
+        elif item.kind == "coolant":
+            line_cp.append((k, b.line))
+        elif item.kind == "end":
+            k = settled(k)
+            line_cp.append((k, b.line))
+            end_reason = b.reason  # type: ignore[union-attr]
+            stop_spindle_at_end = end_reason in ("M30", "M2")
+    k_interp_end = k
+    ext = filter_extension(cut_boxes) + filter_extension(rapid_boxes)
+    K = max(k_interp_end, max((k0 + s.n for k0, _, s in segments), default=0)) + ext + 2
+    inc_cut = np.zeros((K, 3))
+    inc_rapid = np.zeros((K, 3))
+    feed = np.zeros(K)
+    for k0, kind, seg in segments:
+        if seg.n == 0:
+            continue
+        target = inc_cut if kind == "cut" else inc_rapid
+        target[k0 + 1 : k0 + seg.n + 1] += np.diff(seg.position, axis=0)
+        feed[k0 : k0 + seg.n + 1] = seg.speed
+    y = apply_fir(inc_cut, cut_boxes) + apply_fir(inc_rapid, rapid_boxes)
+    position = schedule.initial + np.cumsum(y, axis=0)
+    final = segments[-1][2].position[-1] if segments else schedule.initial
+    moving = np.nonzero(np.any(y != 0.0, axis=1))[0]
+    if len(moving):
+        position[moving[-1]:] = final  # the last increment lands exactly on the end point
+    dist = np.linalg.norm(position - final, axis=1)
+    out = np.nonzero(dist > params.in_position_width)[0]
+    done = max(k_interp_end, int(out[-1]) + 1 if len(out) else 0)
+    # spindle: stopped by M30/M2 when the program is done; keep samples until it stands still
+    k_total = K
+    if stop_spindle_at_end:
+        w_end = spindle_now(done)
+        if sp_last[2] != 0.0 or w_end != 0.0:
+            sp_events.append((done, 0.0))
+            k_total = max(K, done + _ceil_periods(abs(w_end) / params.spindle_ramp, ts) + 2)
+    if k_total > K:
+        position = np.concatenate((position, np.repeat(position[-1:], k_total - K, axis=0)))
+        feed = np.concatenate((feed, np.zeros(k_total - K)))
+    spindle_ref, spindle_speed = sample_spindle(sp_events, k_total, ts, params.spindle_ramp)
+    grid = np.arange(k_total)
+    lk = np.array([c[0] for c in line_cp])
+    lv = np.array([c[1] for c in line_cp])
+    line = lv[np.searchsorted(lk, grid, side="right") - 1]
+    tk = np.array([c[0] for c in tool_cp])
+    tv = np.array([c[1] for c in tool_cp])
+    tool = tv[np.searchsorted(tk, grid, side="right") - 1]
+    return MemberPlan(position, feed, line.astype(np.int64), tool.astype(np.int64), spindle_ref, spindle_speed, done)
+
+
+@dataclass
+class BatchPlan:
+    """Sampled references of B members padded to a common length K (values held after each member's end).
+
+    Attributes
+    ----------
+    position : ndarray (B, K, 3)
+    feed, spindle_ref, spindle_speed : ndarray (B, K)
+    line, tool : ndarray (B, K) of int
+    done_index : ndarray (B,) of int
+    period : float
+        Ts (s).
+    """
+
+    position: np.ndarray
+    feed: np.ndarray
+    line: np.ndarray
+    tool: np.ndarray
+    spindle_ref: np.ndarray
+    spindle_speed: np.ndarray
+    done_index: np.ndarray
+    period: float
+
+    @property
+    def duration(self) -> np.ndarray:
+        """Program time until done (s), shape (B,)."""
+        return self.done_index * self.period
+
+
+def plan_batch(schedule: Schedule, params: Sequence[NCParams], feeds: np.ndarray, speeds: np.ndarray) -> BatchPlan:
+    """Plan B members (identical members are planned once).
+
+    Parameters
+    ----------
+    schedule : Schedule
+    params : sequence of NCParams, length B
+        All with the same interpolation period.
+    feeds, speeds : ndarray (B, n_blocks)
+        From :func:`fmus_src.nck.overrides.resolve_values`.
+    """
+    cache: dict[tuple, MemberPlan] = {}
+    plans: list[MemberPlan] = []
+    for b, p in enumerate(params):
+        key = (p, feeds[b].tobytes(), speeds[b].tobytes())
+        if key not in cache:
+            cache[key] = plan_member(schedule, p, feeds[b], speeds[b])
+        plans.append(cache[key])
+    B = len(plans)
+    K = max(len(pl.feed) for pl in plans)
+
+    def pad(name: str, fill_zero: bool = False) -> np.ndarray:
+        first = getattr(plans[0], name)
+        out = np.empty((B, K) + first.shape[1:], dtype=first.dtype)
+        for i, pl in enumerate(plans):
+            a = getattr(pl, name)
+            out[i, : len(a)] = a
+            out[i, len(a):] = 0 if fill_zero else a[-1]
+        return out
+
+    return BatchPlan(pad("position"), pad("feed", True), pad("line"), pad("tool"), pad("spindle_ref"),
+                     pad("spindle_speed"), np.array([pl.done_index for pl in plans], dtype=np.int64),
+                     params[0].interpolation_period)

@@ -1,0 +1,136 @@
+"""Program writer: change F and S words on given lines, every other character untouched.
+
+Rules
+-----
+* Only the number of an existing F (S) word changes (letter case, blanks
+  before the number and everything else on the line are kept).
+* A line without an F (S) word gets one appended right after its last word,
+  separated by one blank, i.e. before any comment and trailing blanks.
+* Feeds are given in mm/min and written in the program's unit at that line
+  (mm/min under G21, in/min under G20) with at most 3 (G21) or 4 (G20)
+  decimals; a decimal point is kept when the original word had one.
+  Spindle speeds are given in rpm and written as integers (FANUC S words
+  are integers).
+* Line endings (LF, CRLF, CR) and a missing final newline are preserved, so
+  an empty change set returns the input byte for byte.
+* A line that is not a block (empty, comment only, ``%``) cannot take a word:
+  :class:`GCodeError`.
+"""
+from __future__ import annotations
+
+import math
+from typing import Mapping
+
+from .errors import GCodeError
+from .lexer import LexError, LexedLine, Word, lex_line
+
+
+def _format(value: float, decimals: int, point: bool) -> str:
+    text = f"{value:.{decimals}f}".rstrip("0")
+    if text.endswith("."):
+        return text if point else text[:-1]
+    return text
+
+
+def rewrite_program(text: str, feed_by_line: Mapping[int, float] | None = None,
+                    spindle_by_line: Mapping[int, float] | None = None, file: str = "<text>") -> str:
+    """Re-emit ``text`` with new F (mm/min) and S (rpm) values on the given 1-based lines.
+
+    Parameters
+    ----------
+    text : str
+        Program source.
+    feed_by_line : mapping line -> feed (mm/min), optional
+    spindle_by_line : mapping line -> speed (rpm), optional
+    file : str
+        Name used in error messages.
+
+    Returns
+    -------
+    str
+        The program; byte-identical to ``text`` when nothing is changed.
+
+    Raises
+    ------
+    GCodeError
+        Line out of range, not a block, malformed, or a value that is not finite and positive.
+    """
+    feed_by_line = dict(feed_by_line or {})
+    spindle_by_line = dict(spindle_by_line or {})
+    if not feed_by_line and not spindle_by_line:
+        return text
+    lines = text.splitlines(keepends=True)
+    targets = sorted(set(feed_by_line) | set(spindle_by_line))
+    inch_at = _inch_mode(lines, targets, file) if feed_by_line else {}
+    for number in targets:
+        if number < 1 or number > len(lines):
+            raise GCodeError(file, number, "", f"a line number in 1..{len(lines)}", f"line {number} does not exist")
+        full = lines[number - 1]
+        body = full.rstrip("\r\n")
+        eol = full[len(body):]
+        lexed = _lex(body, number, file)
+        if not lexed.words:
+            raise GCodeError(file, number, body.strip(), "a line holding a block",
+                             "cannot put an F or S word on a line without a block", body.strip())
+        edits: list[tuple[str, float, int, bool]] = []
+        if number in feed_by_line:
+            value = float(feed_by_line[number])
+            _check(value, number, "F", file, body)
+            inch = inch_at.get(number, False)
+            edits.append(("F", value / 25.4 if inch else value, 4 if inch else 3, True))
+        if number in spindle_by_line:
+            value = float(spindle_by_line[number])
+            _check(value, number, "S", file, body, allow_zero=True)
+            edits.append(("S", value, 0, False))
+        for letter, value, decimals, keep_point in edits:
+            body = _set_word(body, letter, value, decimals, keep_point, number, file)
+        lines[number - 1] = body + eol
+    return "".join(lines)
+
+
+def _check(value: float, number: int, letter: str, file: str, body: str, allow_zero: bool = False) -> None:
+    if not math.isfinite(value) or value < 0.0 or (value == 0.0 and not allow_zero):
+        raise GCodeError(file, number, f"{letter}{value}", f"a finite {letter} value > 0",
+                         f"new {letter} value {value!r} is not valid", body.strip())
+
+
+def _lex(body: str, number: int, file: str) -> LexedLine:
+    try:
+        return lex_line(body)
+    except LexError as exc:
+        raise GCodeError(file, number, exc.word, exc.expected, exc.problem, body.strip()) from None
+
+
+def _set_word(body: str, letter: str, value: float, decimals: int, keep_point: bool, number: int, file: str) -> str:
+    lexed = _lex(body, number, file)
+    words = [w for w in lexed.words if w.letter == letter]
+    if len(words) > 1:
+        raise GCodeError(file, number, letter, f"at most one {letter} word", f"word {letter} appears twice",
+                         body.strip())
+    if words:
+        w: Word = words[0]
+        num = _format(value, decimals, keep_point and w.has_point) if decimals else str(int(round(value)))
+        head = body[w.start : w.end - len(w.text)]  # letter (original case) and blanks
+        return body[: w.start] + head + num + body[w.end :]
+    num = _format(value, decimals, False) if decimals else str(int(round(value)))
+    end = max(x.end for x in lexed.words)
+    return body[:end] + f" {letter}{num}" + body[end:]
+
+
+def _inch_mode(lines: list[str], targets: list[int], file: str) -> dict[int, bool]:
+    """Whether G20 (inch) is active on each target line (G20/G21 on the line itself count)."""
+    if not any(("G20" in ln.upper()) or ("G 20" in ln.upper()) for ln in lines):
+        return {}
+    state: dict[int, bool] = {}
+    inch = False
+    wanted = set(targets)
+    for number, full in enumerate(lines, start=1):
+        if number > targets[-1]:
+            break
+        body = full.rstrip("\r\n")
+        for w in _lex(body, number, file).words:
+            if w.letter == "G" and w.value in (20.0, 21.0):
+                inch = w.value == 20.0
+        if number in wanted:
+            state[number] = inch
+    return state

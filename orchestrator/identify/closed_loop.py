@@ -1,0 +1,161 @@
+"""Closed-loop replay: MCU + drive axes driven by a recorded reference position.
+
+Used by servo identification (and by the synthetic recordings of the tests):
+the components are the twin's own (:class:`fmus_src.servo.MCU`,
+:class:`fmus_src.servo.DriveAxis`), batched over ``B`` parameter sets.
+
+Timing follows the twin (:mod:`orchestrator.twin`, Gauss-Seidel master):
+
+* the servo ticks at the velocity-loop period ``Tv`` on the grid
+  ``t0 + k Tv`` with ``t0`` the first sample of the recording; the MCU steps
+  first (feedback from the drive at ``t_k``), then the drives (current
+  command of this tick);
+* the NC kernel steps before the MCU in each 1 ms communication step, so the
+  position loop at ``t`` sees the reference **valid at t + 1 ms**; the replay
+  reproduces this with ``ref_lead = position loop period`` (linear
+  interpolation of the recorded reference between samples);
+* outputs are sampled after each tick and interpolated linearly to the
+  requested times (the recording's).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Mapping
+
+import numpy as np
+
+from fmus_src.servo import MCU, DriveAxis
+
+from ..machine import Machine
+from ..twin import drive_parameters, mcu_parameters
+from .errors import IdentificationError
+
+
+@dataclass
+class ReplayResult:
+    """Outputs of :func:`replay` at the requested times.
+
+    Attributes
+    ----------
+    t : ndarray, shape (n,)
+        Times, s.
+    position : dict[str, ndarray]
+        Axis -> actual position [m], shape (n, B).
+    current : dict[str, ndarray]
+        Axis -> current command [A], shape (n, B).
+    ticks : int
+        Velocity-loop ticks simulated.
+    """
+
+    t: np.ndarray
+    position: dict[str, np.ndarray]
+    current: dict[str, np.ndarray]
+    ticks: int
+
+
+def _column(values: np.ndarray, batch: int) -> np.ndarray:
+    arr = np.asarray(values, dtype=float)
+    if arr.ndim == 1:
+        arr = arr[:, None]
+    if arr.shape[1] not in (1, batch):
+        raise IdentificationError(f"reference has {arr.shape[1]} columns, expected 1 or {batch}")
+    return np.broadcast_to(arr, (arr.shape[0], batch))
+
+
+def replay(
+    machine: Machine,
+    t_ref: np.ndarray,
+    refs: Mapping[str, np.ndarray],
+    batch: int = 1,
+    mcu_values: Mapping[str, np.ndarray | float] | None = None,
+    drive_values: Mapping[str, Mapping[str, np.ndarray | float]] | None = None,
+    initial_position: Mapping[str, np.ndarray | float] | None = None,
+    t_out: np.ndarray | None = None,
+    ref_lead: float | None = None,
+) -> ReplayResult:
+    """Simulate the servo loops of some axes driven by recorded reference positions.
+
+    Parameters
+    ----------
+    machine : Machine
+        Gains, masses, friction (overridable per member below).
+    t_ref : ndarray, shape (n,)
+        Sample times of the reference, s (strictly increasing, any spacing).
+    refs : mapping axis -> ndarray, shape (n,) or (n, B)
+        Reference positions [m] of the axes to simulate; other axes stay at
+        rest and are not simulated.
+    batch : int
+        ``B``.
+    mcu_values : mapping, optional
+        MCU parameters per member (e.g. ``{"x_position_scale": (B,) array}``).
+    drive_values : mapping axis -> mapping, optional
+        DriveAxis parameters per member (e.g. friction of a fitted set).
+    initial_position : mapping axis -> float or (B,), optional
+        Table position at ``t_ref[0]`` [m]; default the reference there.
+    t_out : ndarray, optional
+        Output times (default ``t_ref``), within ``[t_ref[0], t_ref[-1]]``.
+    ref_lead : float, optional
+        The position loop at ``t`` uses the reference at ``t + ref_lead``;
+        default the position-loop period (the twin's convention).
+
+    Returns
+    -------
+    ReplayResult
+    """
+    t_ref = np.asarray(t_ref, dtype=float)
+    t_out = t_ref if t_out is None else np.asarray(t_out, dtype=float)
+    servo = machine.si("servo")
+    tv = float(servo["velocity_loop_period"])
+    tp = float(servo["position_loop_period"])
+    lead = tp if ref_lead is None else float(ref_lead)
+    axes = [a for a in "xyz" if a in refs]
+    if not axes:
+        raise IdentificationError("replay needs the reference of at least one axis")
+    t0 = float(t_ref[0])
+    n_ticks = int(np.floor((float(t_out[-1]) - t0) / tv + 1e-9)) + 1
+    tick_t = t0 + tv * np.arange(n_ticks + 1)
+    query = np.clip(tick_t + lead, t_ref[0], t_ref[-1])
+    idx = np.clip(np.searchsorted(t_ref, query, side="right"), 1, t_ref.size - 1)
+    w = ((query - t_ref[idx - 1]) / (t_ref[idx] - t_ref[idx - 1]))[:, None]
+    ref_ticks = {a: _column(refs[a], batch)[idx - 1] * (1.0 - w) + _column(refs[a], batch)[idx] * w for a in axes}
+
+    params = mcu_parameters(machine)
+    params.update(dict(mcu_values or {}))
+    mcu = MCU("mcu", batch=batch, **params)
+    drives: dict[str, DriveAxis] = {}
+    for a in axes:
+        dp = drive_parameters(machine, a)
+        dp.update(dict((drive_values or {}).get(a, {})))
+        x0 = (initial_position or {}).get(a, ref_ticks[a][0])
+        drives[a] = DriveAxis(f"{a}_drive", batch=batch, initial_position=x0, **dp)
+        mcu.set(f"{a}_ref", ref_ticks[a][0])
+        mcu.set(f"{a}_position", drives[a].values["position"])
+    mcu.setup(t0)
+    for d in drives.values():
+        d.setup(t0)
+    pos = {a: np.empty((n_ticks + 1, batch)) for a in axes}
+    cur = {a: np.empty((n_ticks + 1, batch)) for a in axes}
+    for a in axes:
+        pos[a][0] = drives[a].values["position"]
+        cur[a][0] = mcu.values[f"{a}_current_cmd"]
+    mv = mcu.values
+    for k in range(n_ticks):
+        t = t0 + k * tv
+        for a in axes:
+            d = drives[a].values
+            mv[f"{a}_ref"][...] = ref_ticks[a][k]
+            mv[f"{a}_position"][...] = d["position"]
+            mv[f"{a}_velocity"][...] = d["velocity"]
+        mcu.do_step(t, tv)
+        for a in axes:
+            drive = drives[a]
+            drive.values["current_cmd"][...] = mv[f"{a}_current_cmd"]
+            drive.do_step(t, tv)
+            pos[a][k + 1] = drive.values["position"]
+            cur[a][k + 1] = mv[f"{a}_current_cmd"]
+    # linear interpolation of the tick outputs to the requested times
+    j = np.clip(np.searchsorted(tick_t, t_out, side="right"), 1, n_ticks)
+    f = ((t_out - tick_t[j - 1]) / tv)[:, None]
+    out_p = {a: pos[a][j - 1] * (1.0 - f) + pos[a][j] * f for a in axes}
+    out_c = {a: cur[a][j - 1] * (1.0 - f) + cur[a][j] * f for a in axes}
+    return ReplayResult(t_out, out_p, out_c, n_ticks)

@@ -1,0 +1,151 @@
+"""Loading and checking the recordings an identification needs.
+
+Every fit reads its cases through :func:`load_inputs`, which checks the
+columns it needs, refuses NaN inside them and gives one
+:class:`~orchestrator.identify.errors.IdentificationError` naming the file.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterable, Sequence
+
+import numpy as np
+
+from ..case import Case, load_case
+from ..recording import Recording, RecordingError
+from .errors import IdentificationError
+
+
+@dataclass
+class CaseData:
+    """A case with its recording, ready for identification.
+
+    Attributes
+    ----------
+    case : Case
+        The loaded case (machine, tool, stock, program).
+    recording : Recording
+        Its recording (single member).
+    name : str
+        Short label (folder name) for reports and provenance.
+    """
+
+    case: Case
+    recording: Recording
+    name: str
+
+    @property
+    def source(self) -> str:
+        """The recording file, for error messages."""
+        return str(self.recording.source)
+
+
+def as_case(item: str | Path | Case) -> Case:
+    """A :class:`Case` from a case folder, a ``case.toml`` path or a Case."""
+    return item if isinstance(item, Case) else load_case(item)
+
+
+def load_recording(case: Case) -> Recording:
+    """Read the case's recording (``recording`` field of ``case.toml``).
+
+    Raises
+    ------
+    IdentificationError
+        The case names no recording or the file does not exist.
+    """
+    if case.recording is None:
+        raise IdentificationError(
+            f"{case.source or case.folder}: the case names no recording; add recording = \"recording.csv\" "
+            "to case.toml and put the measured file next to it"
+        )
+    if not Path(case.recording).is_file():
+        raise IdentificationError(
+            f"{case.recording}: recording file not found (run the experiment program on the machine and "
+            "save the log there, columns per shared/spec/recording.md)"
+        )
+    try:
+        return Recording.read_csv(case.recording)
+    except RecordingError as exc:
+        raise IdentificationError(str(exc)) from None
+
+
+def check_columns(recording: Recording, columns: Sequence[str], purpose: str) -> None:
+    """Check that ``columns`` exist and hold no NaN (empty cell) and that time increases.
+
+    Parameters
+    ----------
+    recording : Recording
+        Single-member recording.
+    columns : sequence of str
+        Columns the fit needs.
+    purpose : str
+        What for (``"friction identification of axis x"``), for the message.
+
+    Raises
+    ------
+    IdentificationError
+        Missing column, empty/NaN cell in a needed column, fewer than 3
+        samples, or time not strictly increasing.
+    """
+    src = recording.source
+    missing = [c for c in columns if c not in recording]
+    if missing:
+        raise IdentificationError(
+            f"{src}: {purpose} needs column(s) {missing}; the recording has {recording.channels}"
+        )
+    if len(recording) < 3:
+        raise IdentificationError(f"{src}: {purpose} needs at least 3 samples, the recording has {len(recording)}")
+    t = recording.t
+    if not np.all(np.isfinite(t)):
+        raise IdentificationError(f"{src}: t_s has NaN or infinite values at row(s) {_rows(~np.isfinite(t))}")
+    if np.any(np.diff(t) <= 0.0):
+        k = int(np.flatnonzero(np.diff(t) <= 0.0)[0]) + 1
+        raise IdentificationError(
+            f"{src}: t_s is not strictly increasing at data row {k + 1} ({t[k - 1]!r} then {t[k]!r})"
+        )
+    for c in columns:
+        bad = ~np.isfinite(np.asarray(recording[c], dtype=float))
+        if bad.any():
+            raise IdentificationError(
+                f"{src}: column {c!r} has {int(bad.sum())} empty or NaN cell(s) (first at data row(s) {_rows(bad)}); "
+                f"{purpose} needs it at every sample"
+            )
+
+
+def _rows(mask: np.ndarray) -> list[int]:
+    """1-based data-row numbers (file line = row + 1) of the first few True entries."""
+    return [int(i) + 1 for i in np.flatnonzero(mask)[:5]]
+
+
+def load_inputs(cases: Iterable[str | Path | Case]) -> list[CaseData]:
+    """Load cases and their recordings.
+
+    Parameters
+    ----------
+    cases : iterable of str, Path or Case
+        Case folders (or ``case.toml`` paths, or loaded cases).
+
+    Returns
+    -------
+    list of CaseData
+    """
+    out = []
+    for item in cases:
+        case = as_case(item)
+        rec = load_recording(case)
+        out.append(CaseData(case, rec, Path(case.folder).name or str(case.folder)))
+    if not out:
+        raise IdentificationError("no case given; pass at least one case folder with a recording")
+    return out
+
+
+def axes_in(recording: Recording, suffixes: Sequence[str]) -> list[str]:
+    """Axes (of ``x, y, z``) for which every ``{axis}{suffix}`` column exists."""
+    return [a for a in "xyz" if all(f"{a}{s}" in recording for s in suffixes)]
+
+
+def force_per_amp(case: Case, axis: str) -> float:
+    """Driving force per ampere of current command, ``kt 2 pi / Lb`` [N/A] (Eq. 2)."""
+    sec = case.machine.si(f"axis.{axis}")
+    return float(sec["torque_constant"]) * 2.0 * np.pi / float(sec["screw_lead"])

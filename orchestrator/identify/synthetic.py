@@ -1,0 +1,82 @@
+"""Measurement imperfections for synthetic recordings (robustness studies and tests).
+
+:func:`degrade` turns a clean simulated recording into what a logger would
+deliver: Gaussian sensor noise, encoder quantisation, current-command
+quantisation, dynamometer noise and a clock offset between logger and
+program. All random draws come from one seeded generator.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from ..recording import Recording
+
+
+@dataclass(frozen=True)
+class Imperfections:
+    """Noise levels of a logged recording.
+
+    Attributes
+    ----------
+    position_noise_um : float
+        Standard deviation of actual-position noise, µm (before quantisation).
+    position_quantum_um : float
+        Encoder resolution, µm (0 = none).
+    current_noise_A : float
+        Standard deviation of current-command noise, A.
+    current_quantum_A : float
+        Current-command resolution, A (0 = none).
+    force_noise_N : float
+        Standard deviation of dynamometer noise on fx, fy, fz, N.
+    time_offset_s : float
+        Logger clock minus program clock, s.
+    """
+
+    position_noise_um: float = 0.3
+    position_quantum_um: float = 1.0
+    current_noise_A: float = 0.02
+    current_quantum_A: float = 0.01
+    force_noise_N: float = 1.0
+    time_offset_s: float = 1.2345
+
+    def scaled(self, factor: float) -> "Imperfections":
+        """Noise levels (not resolutions, not the offset) multiplied by ``factor``."""
+        return replace(self, position_noise_um=self.position_noise_um * factor,
+                       current_noise_A=self.current_noise_A * factor, force_noise_N=self.force_noise_N * factor)
+
+
+def _quantise(x: np.ndarray, q: float) -> np.ndarray:
+    return np.round(x / q) * q if q > 0.0 else x
+
+
+def degrade(recording: Recording, imperfections: Imperfections | None = None, seed: int = 0) -> Recording:
+    """A copy of a single-member recording with measurement imperfections.
+
+    Actual positions ``{a}_mm`` get noise and encoder quantisation; the
+    reference ``{a}_ref_mm`` (a controller variable) stays exact; current
+    commands get noise and quantisation; forces get noise and ``fc_N`` is
+    recomputed from the noisy ``fx_N``, ``fy_N`` when both exist.
+    """
+    imp = imperfections or Imperfections()
+    rng = np.random.default_rng(seed)
+    channels = {name: np.array(recording[name], dtype=float) for name in recording.channels}
+    n = len(recording)
+    channels["t_s"] = channels["t_s"] + imp.time_offset_s
+    for a in "xyz":
+        if f"{a}_mm" in channels:
+            noisy = channels[f"{a}_mm"] + rng.normal(0.0, imp.position_noise_um * 1e-3, n)
+            channels[f"{a}_mm"] = _quantise(noisy, imp.position_quantum_um * 1e-3)
+        if f"{a}_tcmd_A" in channels:
+            noisy = channels[f"{a}_tcmd_A"] + rng.normal(0.0, imp.current_noise_A, n)
+            channels[f"{a}_tcmd_A"] = _quantise(noisy, imp.current_quantum_A)
+        if f"f{a}_N" in channels:
+            channels[f"f{a}_N"] = channels[f"f{a}_N"] + rng.normal(0.0, imp.force_noise_N, n)
+    if "fc_N" in channels:
+        if "fx_N" in channels and "fy_N" in channels:
+            channels["fc_N"] = np.hypot(channels["fx_N"], channels["fy_N"])
+        else:
+            channels["fc_N"] = np.abs(channels["fc_N"] + rng.normal(0.0, imp.force_noise_N, n))
+    return Recording.from_channels(channels, recording.units, recording.success, recording.message,
+                                   f"{recording.source} (degraded, seed {seed})")
