@@ -197,6 +197,7 @@ def write_experiment(
     stroke_limit_mm: dict[str, float] | None = None,
     feeds_mm_min: Sequence[float] = (300.0, 450.0),
     spindle_rpm: float = 6000.0,
+    block_mm: tuple[float, float] = (60.0, 40.0),
 ) -> dict[str, Path]:
     """Write an identification experiment as a case folder.
 
@@ -221,6 +222,8 @@ def write_experiment(
         Largest stroke per axis (default :data:`STROKE_LIMIT_MM`).
     feeds_mm_min, spindle_rpm
         Cutting conditions.
+    block_mm : (float, float)
+        Length (X) and width (Y) of the block, mm.
 
     Returns
     -------
@@ -252,7 +255,7 @@ def write_experiment(
         runs = [r for a in axes for r in plan_runs(a, speeds, plateau, m, limits[a], min(min_plateau_s, plateau))]
         program = reciprocating_program("SERVO SCALE-FACTOR IDENTIFICATION: RECIPROCATING RUNS", runs, dwell_s)
     elif kind == "cutting":
-        program, stock = cutting_program(feeds_mm_min, spindle_rpm)
+        program, stock = cutting_program(feeds_mm_min, spindle_rpm, length_mm=block_mm[0], width_mm=block_mm[1])
     else:
         raise ExperimentError(f"unknown experiment {kind!r}; expected 'friction', 'servo' or 'cutting'")
     return {

@@ -254,6 +254,12 @@ class Master:
                         f"(batch member(s) {bad[:5].tolist()})"
                     )
 
+    def _terminate_all(self) -> None:
+        for name in self.order:
+            component = self.system.components[name]
+            if getattr(component, "state", "") == "initialized":
+                component.terminate()
+
     def _stop_flags(self) -> np.ndarray | None:
         if not self._stop_refs:
             return None
@@ -296,24 +302,28 @@ class Master:
             declared = comps[comp].variable(var)
             unit = p.unit or declared.unit
             probes.append((p.channel, None, var, conversion_factor(declared.unit, unit), unit, comp))
-        recorder = None
         batch = system.batch
         t = s.t0
         k = 0
         success, message = True, ""
         stopped_at = np.full(batch, np.nan)
+        # initialise along the signal flow: each component gets its inputs from the
+        # components already initialised (start values inside feedback loops). A failure
+        # here (bad program, bad parameters) is raised: there is nothing to keep yet.
+        self._resolve_wires()
         try:
-            # initialise along the signal flow: each component gets its inputs from the
-            # components already initialised (start values inside feedback loops)
-            self._resolve_wires()
             for name in self.order:
                 self._transfer(self._wires[name])
                 comps[name].setup(s.t0)
-            self._resolve_wires()
-            recorder = _Recorder(
-                [(ch, comps[comp].values, var, f, u) for ch, _, var, f, u, comp in probes], batch, max(capacity, 2)
-            )
-            recorder.sample(t)
+        except BaseException:
+            self._terminate_all()
+            raise
+        self._resolve_wires()
+        recorder = _Recorder(
+            [(ch, comps[comp].values, var, f, u) for ch, _, var, f, u, comp in probes], batch, max(capacity, 2)
+        )
+        recorder.sample(t)
+        try:
             report_every = max(1, int(expected / h / 100))
             jacobi = s.method == "jacobi"
             while True:
@@ -359,11 +369,7 @@ class Master:
             message = str(exc) if isinstance(exc, SimulationError) else f"simulation failed at t = {t:.6f} s: {exc}"
             log.error("%s", message)
         finally:
-            for name in self.order:
-                if getattr(comps[name], "state", "") == "initialized":
-                    comps[name].terminate()
-        if recorder is None:
-            recorder = _Recorder([], batch, 2)
+            self._terminate_all()
         recording = recorder.recording(success, message, system.name)
         return RunResult(recording, success, message, k, t, stopped_at)
 

@@ -95,6 +95,7 @@ class System:
         self.components: dict[str, ComponentLike] = {}
         self.rates: dict[str, int] = {}
         self.connections: list[Connection] = []
+        self._order: list[str] | None = None
 
     # ----------------------------------------------------------------- building
     def add(self, component: ComponentLike, rate: int = 1) -> ComponentLike:
@@ -176,13 +177,30 @@ class System:
         """Fine ticks per communication step: the least common multiple of the rates."""
         return math.lcm(*self.rates.values()) if self.rates else 1
 
-    def execution_order(self) -> list[str]:
-        """Order components along the signal flow (Gauss–Seidel order).
+    def set_execution_order(self, names: Iterable[str]) -> None:
+        """Fix the Gauss–Seidel order explicitly (a permutation of all component names).
 
-        Kahn's topological sort of the connection graph; inside a feedback
-        loop (no component free of unmet inputs) the earliest-added component
-        of the loop goes first. Ties follow the order of addition.
+        Use it where the signal-flow order is not the physical one, e.g. a
+        sampled controller that must read its command of the *current* period
+        before the command generator advances.
         """
+        order = list(names)
+        if sorted(order) != sorted(self.components):
+            raise SystemDescriptionError(
+                f"{self.name}: execution order {order} must name every component once: {sorted(self.components)}"
+            )
+        self._order = order
+
+    def execution_order(self) -> list[str]:
+        """Order in which components step within a tick (Gauss–Seidel order).
+
+        The explicit order when one was set; otherwise Kahn's topological
+        sort of the connection graph, where inside a feedback loop (no
+        component free of unmet inputs) the earliest-added component of the
+        loop goes first. Ties follow the order of addition.
+        """
+        if self._order is not None:
+            return list(self._order)
         names = list(self.components)
         preds: dict[str, set[str]] = {n: set() for n in names}
         for c in self.connections:

@@ -174,6 +174,13 @@ def build_twin(
         system.connect("cutting.fx", "x_drive.disturbance_force")
         system.connect("cutting.fy", "y_drive.disturbance_force")
 
+    # The position loop samples the NC command of the current interpolation period, as a real
+    # controller does: the MCU and drives step before the NC kernel advances. (The signal-flow
+    # order would hand the MCU the next period's command, 1 ms early, and shrink the ramp
+    # following error from v/Kp to v/Kp - v*h.)
+    order = ["mcu", *(f"{a}_drive" for a in AXES), "nck"] + (["cutting"] if cutting is not None else [])
+    system.set_execution_order(order)
+
     probes = [Probe("line", "nck.line", "1")]
     probes += [Probe(f"{a}_ref_mm", f"nck.{a}_ref", "mm") for a in AXES]
     probes += [Probe(f"{a}_mm", f"{a}_drive.position", "mm") for a in AXES]

@@ -183,3 +183,45 @@ def test_component_protocol_rejects_misuse():
     g.set("x", 0.5)
     g.setup(0.0)
     assert g.get("u")[0] == pytest.approx(-2.0)
+
+
+def test_errors_during_initialisation_are_raised_and_components_terminated():
+    class BadSetup(Component):
+        variables = (Variable("y", "output", "1", 0.0),)
+
+        def _setup(self, t0):
+            raise ComponentError("bad.nc:3: 'G1 X1': no feed rate")
+
+        def _do_step(self, t, h):
+            pass
+
+    system = System("init")
+    good = system.add(Clock("clock"))
+    system.add(BadSetup("bad"))
+    with pytest.raises(ComponentError, match="bad.nc:3"):
+        Master(system, MasterSettings(step=1e-3, time_limit=1.0)).run()
+    assert good.state == "terminated"
+
+
+def test_explicit_execution_order_changes_gauss_seidel_sampling():
+    # x = x0 + t (integrator of a constant input 1 m/s, unconnected); the gain (a = -1) copies x into u.
+    # Signal-flow order: the gain samples x after the integrator stepped (x at t_k);
+    # gain first: it samples x of the previous tick (x at t_{k-1}).
+    def chain():
+        system = System("chain")
+        integ = system.add(Integrator("integ", x0=1.0))
+        integ.set("u", 1.0)
+        system.add(Gain("gain", a=-1.0))
+        system.connect("integ.x", "gain.x")
+        return system
+
+    h, n = 0.01, 20
+    t = np.arange(n + 1) * h
+    flow = Master(chain(), MasterSettings(step=h, time_limit=n * h), ["gain.u"]).run().recording["gain.u"]
+    np.testing.assert_allclose(flow, 1.0 + t, rtol=1e-12)
+    reversed_system = chain()
+    reversed_system.set_execution_order(["gain", "integ"])
+    late = Master(reversed_system, MasterSettings(step=h, time_limit=n * h), ["gain.u"]).run().recording["gain.u"]
+    np.testing.assert_allclose(late[1:], 1.0 + t[:-1], rtol=1e-12)
+    with pytest.raises(SystemDescriptionError, match="every component once"):
+        reversed_system.set_execution_order(["gain"])

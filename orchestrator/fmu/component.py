@@ -39,7 +39,7 @@ from fmpy.fmi2 import fmi2CallbackFreeMemoryTYPE, fmi2CoSimulation
 from fmpy.model_description import ModelDescription, ScalarVariable
 
 from fmus_src.component import Variable
-from fmus_src.units import UnitError, conversion_factor, unit as lookup_unit
+from fmus_src.units import UnitError, conversion_factor
 
 from .errors import FMUError, status_name
 from .roles import Role, get_role
@@ -278,6 +278,7 @@ class FMUComponent:
         self._real_in = _Channel(self.values, by_causality.get(("input", "Real"), []))
         self._real_out = _Channel(self.values, by_causality.get(("output", "Real"), []))
         self.messages: deque[str] = deque(maxlen=log_capacity)
+        self._worst_logged = 0
         self.time = float("nan")
         self.state = "instantiated"
         self._instantiate()
@@ -445,6 +446,7 @@ class FMUComponent:
     def _logger(self, env: Any, instance: bytes, status: int, category: bytes, message: bytes) -> None:
         text = message.decode("utf-8", "replace") if message else ""
         label = status_name(status)
+        self._worst_logged = max(self._worst_logged, int(status))
         self.messages.append(f"[{label}] {text}")
         log.debug("%s: [%s] %s", self.name, label, text)
 
@@ -568,7 +570,12 @@ class FMUComponent:
         self._fmi("fmi2SetupExperiment", 0, 0.0, self.t0, 0, 0.0)
         self._fmi("fmi2EnterInitializationMode")
         self._set_all(("parameter", "input"))
+        self._worst_logged = 0
         self._fmi("fmi2ExitInitializationMode")
+        if self._worst_logged >= 3:
+            # the initialisation failed but the FMU could not say so in its status (pythonfmu: see
+            # fmus_src.fmu.slave.ComponentSlave.exit_initialization_mode); the log names the cause
+            raise self._failure("fmi2ExitInitializationMode", self._worst_logged)
         self._pull_outputs()
         self.state = "initialized"
 

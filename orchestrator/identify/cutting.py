@@ -1,0 +1,310 @@
+"""Cutting-coefficient identification: Kt and Ke from measured forces (Sim & Lee 2023, Eq. 14-16).
+
+The twin's own :class:`fmus_src.cutting.CuttingLoad` is driven with the
+**recorded** actual tool positions (lightly smoothed: encoder quantisation
+would otherwise enter the chip thickness through the feed per tooth) and the
+recorded spindle speed, on the case's stock and tool, so the engagement is
+exactly the one the twin computes for that program.
+
+The force is linear in ``Kt`` and in ``Kt Ke``::
+
+    F(t) = Kt A(t) + Kt Ke B(t),   A = F(Kt=1, Ke=0),  B = F(Kt=1, Ke=1) - A
+
+so one batched run gives ``A`` and ``B`` for every candidate. The spindle
+angle at the start of the recording is unknown (no encoder phase is logged):
+it is estimated by a scan over one tooth pitch (``phases`` members) and a
+parabolic refinement, then a final run at that phase.
+
+``"default"``
+    With ``fx_N`` and ``fy_N``: linear least squares for ``(Kt, Kt Ke)``
+    (exact, no iterations). With only ``fc_N``: nonlinear least squares on
+    ``Fc = Kt |A + Ke B|`` (trust region, from a linear initial guess).
+``"paper-ga"``
+    pymoo GA on ``J = sum e^2 + max |e|`` of the cutting load ``Fc``
+    (Eq. 14-16), 500 generations at most, fitness limit 1 N^2, at the
+    estimated spindle phase.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Iterable, Sequence
+
+import numpy as np
+from scipy.optimize import least_squares
+from scipy.signal import savgol_filter
+
+from fmus_src.cutting import CuttingLoad
+
+from ..case import Case
+from ..twin import cutting_parameters
+from .common import fitted_machine, provenance, write_outputs
+from .data import CaseData, check_columns, load_inputs
+from .errors import IdentificationError
+from .ga import paper_objective, run_ga
+
+#: Kt of the unit runs, N/m2 (a realistic magnitude keeps every threshold of the component meaningful).
+KT_UNIT = 1.0e9
+PAPER_GENERATIONS = 500
+PAPER_FITNESS_LIMIT = 1.0
+
+
+@dataclass
+class _Prepared:
+    """One case: samples, measured forces and the basis forces A, B at the estimated phase."""
+
+    data: CaseData
+    t: np.ndarray
+    measured: dict[str, np.ndarray]   # "fx", "fy" and/or "fc", N
+    a: np.ndarray                     # (n, 2) basis A (fx, fy), N per (N/m2) * KT_UNIT
+    b: np.ndarray                     # (n, 2)
+    mask: np.ndarray                  # samples used in the fit
+    phase: float
+
+
+@dataclass
+class CuttingFit:
+    """Result of :func:`identify_cutting` (attributes ending in ``_``).
+
+    Attributes
+    ----------
+    kt_ : float
+        Tangential cutting coefficient, N/m2.
+    ke_ : float
+        Radial / tangential ratio.
+    fitness_ : float
+        ``J = sum e^2 + max |e|`` of the cutting load ``Fc`` (Eq. 14), N^2.
+    rms_ : dict
+        Residual RMS of ``fc`` (and ``fx``, ``fy`` when measured), N.
+    spindle_phase_ : list of float
+        Estimated initial spindle angle per case, rad.
+    iterations_ : int
+    machine_ : Machine
+    provenance_ : dict
+    material : str
+    method : str
+    wall_time_ : float
+    traces_ : list of dict
+        Per case: ``t``, measured and simulated ``fc`` (for plots).
+    """
+
+    kt_: float
+    ke_: float
+    fitness_: float
+    rms_: dict[str, float]
+    spindle_phase_: list[float]
+    iterations_: int
+    machine_: object
+    provenance_: dict[str, str]
+    material: str
+    method: str
+    wall_time_: float
+    cases: list[str] = field(default_factory=list)
+    traces_: list[dict] = field(default_factory=list, repr=False)
+
+    def report(self) -> dict:
+        """JSON-ready report."""
+        return {"kind": "cutting", "method": self.method, "cases": self.cases, "material": self.material,
+                "kt_N_per_m2": self.kt_, "ke": self.ke_, "fitness_J_N2": self.fitness_,
+                "residual_rms_N": self.rms_, "spindle_phase_rad": self.spindle_phase_,
+                "iterations": self.iterations_, "wall_time_s": self.wall_time_}
+
+    def write(self, out: str | Path, plots: bool = True) -> dict[str, Path]:
+        """Write ``machine.toml``, ``report.json`` and ``cutting_load.png`` (Fig. 6c style)."""
+        files = write_outputs(out, self.machine_, self.provenance_, self.report())
+        if plots:
+            from .plots import cutting_png
+
+            files["cutting_load"] = cutting_png(self, Path(out) / "cutting_load.png")
+        return files
+
+
+def smooth_positions(t: np.ndarray, x: np.ndarray, window_s: float) -> np.ndarray:
+    """Savitzky-Golay smoothing (quadratic, ``window_s``) when sampling is uniform within 1 %, else ``x``."""
+    dt = np.diff(t)
+    if window_s <= 0.0 or dt.size < 5 or np.ptp(dt) > 0.01 * np.median(dt):
+        return x
+    n = int(round(window_s / float(np.median(dt)))) | 1
+    if n < 5 or n > x.size:
+        return x
+    return savgol_filter(x, n, 2, mode="interp")
+
+
+def _columns(d: CaseData) -> tuple[str, list[str]]:
+    rec = d.recording
+    spindle = "spindle_rpm" if "spindle_rpm" in rec else "spindle_ref_rpm"
+    forces = ["fx_N", "fy_N"] if ("fx_N" in rec and "fy_N" in rec) else (["fc_N"] if "fc_N" in rec else [])
+    if not forces:
+        raise IdentificationError(
+            f"{d.source}: cutting identification needs measured forces: 'fx_N' and 'fy_N' (dynamometer) or at "
+            f"least 'fc_N'; the recording has {rec.channels}"
+        )
+    need = ["t_s", "x_mm", "y_mm", "z_mm", spindle] + forces
+    check_columns(rec, need, "cutting identification")
+    if d.case.stock is None:
+        raise IdentificationError(f"{d.case.source or d.case.folder}: cutting identification needs the [stock] block "
+                                  "of the workpiece in case.toml (min, max in mm)")
+    return spindle, forces
+
+
+def basis_forces(d: CaseData, phases: np.ndarray, smooth_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """Forces of the unit runs at spindle phases ``phases``: ``A``, ``B`` of shape (n, P, 2) [N at Kt = KT_UNIT]."""
+    rec = d.recording
+    spindle, _ = _columns(d)
+    t = np.asarray(rec.t, dtype=float)
+    pos = np.stack([smooth_positions(t, np.asarray(rec[f"{a}_mm"], dtype=float), smooth_s) * 1e-3 for a in "xyz"], 1)
+    omega = np.maximum(np.asarray(rec[spindle], dtype=float), 0.0) * (2.0 * math.pi / 60.0)
+    p = phases.size
+    params = cutting_parameters(d.case)
+    params.update(kt=KT_UNIT, ke=np.tile([0.0, 1.0], p), initial_spindle_angle=np.repeat(phases, 2))
+    comp = CuttingLoad("cutting", batch=2 * p, **params)
+    for i, a in enumerate("xyz"):
+        comp.set(f"{a}_position", pos[0, i])
+    comp.setup(float(t[0]))
+    n = t.size
+    fx = np.zeros((n, 2 * p))
+    fy = np.zeros((n, 2 * p))
+    v = comp.values
+    for k in range(n - 1):
+        for i, a in enumerate("xyz"):
+            v[f"{a}_position"][...] = pos[k + 1, i]
+        v["spindle_speed"][...] = omega[k + 1]
+        comp.do_step(float(t[k]), float(t[k + 1] - t[k]))
+        fx[k + 1] = v["fx"]
+        fy[k + 1] = v["fy"]
+    f = np.stack([fx, fy], axis=-1).reshape(n, p, 2, 2)  # (n, phase, ke, xy)
+    return f[:, :, 0, :], f[:, :, 1, :] - f[:, :, 0, :]
+
+
+def _linear_fit(meas: dict[str, np.ndarray], a: np.ndarray, b: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, float]:
+    """(Kt/KT_UNIT, Kt Ke/KT_UNIT) and the SSE: least squares on fx, fy, or on fc with Ke from a 1-D scan."""
+    if "fx" in meas:
+        y = np.concatenate([meas["fx"][mask], meas["fy"][mask]])
+        x = np.column_stack([np.concatenate([a[mask, 0], a[mask, 1]]), np.concatenate([b[mask, 0], b[mask, 1]])])
+        c, *_ = np.linalg.lstsq(x, y, rcond=None)
+        r = y - x @ c
+        return c, float(r @ r)
+    fc = meas["fc"][mask]
+    best = (np.array([0.0, 0.0]), math.inf)
+    for ke in np.linspace(0.0, 2.0, 81):
+        g = np.hypot(a[mask, 0] + ke * b[mask, 0], a[mask, 1] + ke * b[mask, 1])
+        kt = float(g @ fc / max(g @ g, 1e-300))
+        r = fc - kt * g
+        sse = float(r @ r)
+        if sse < best[1]:
+            best = (np.array([kt, kt * ke]), sse)
+    return best
+
+
+def _prepare(d: CaseData, phases: int, smooth_s: float) -> _Prepared:
+    rec = d.recording
+    _, forces = _columns(d)
+    meas = {"fx": np.asarray(rec["fx_N"], float), "fy": np.asarray(rec["fy_N"], float)} if "fx_N" in forces \
+        else {"fc": np.asarray(rec["fc_N"], float)}
+    flutes = int(d.case.tool.flutes)
+    pitch = 2.0 * math.pi / flutes
+    grid = np.arange(phases) * (pitch / phases)
+    a, b = basis_forces(d, grid, smooth_s)
+    engaged = np.any(np.abs(a).sum(axis=2) > 0.0, axis=1)
+    if int(engaged.sum()) < 10:
+        raise IdentificationError(
+            f"{d.source}: the recorded tool path cuts the stock of {d.case.source} in {int(engaged.sum())} samples; "
+            "expected a cut (check that positions are in work coordinates and [stock] matches the block)"
+        )
+    sse = np.array([_linear_fit(meas, a[:, j], b[:, j], engaged)[1] for j in range(phases)])
+    j = int(np.argmin(sse))
+    s_m, s_0, s_p = sse[(j - 1) % phases], sse[j], sse[(j + 1) % phases]
+    denom = s_m - 2.0 * s_0 + s_p
+    shift = 0.5 * (s_m - s_p) / denom if denom > 0 else 0.0
+    phase = float(np.mod(grid[j] + np.clip(shift, -1.0, 1.0) * pitch / phases, pitch))
+    a1, b1 = basis_forces(d, np.array([phase]), smooth_s)
+    return _Prepared(d, np.asarray(rec.t, float), meas, a1[:, 0], b1[:, 0], engaged, phase)
+
+
+def identify_cutting(
+    cases: Iterable[str | Path | Case],
+    method: str = "default",
+    seed: int = 0,
+    phases: int = 12,
+    smooth_s: float = 0.021,
+) -> CuttingFit:
+    """Identify the cutting coefficients Kt, Ke of the case's material.
+
+    Parameters
+    ----------
+    cases : iterable of case folders / ``case.toml`` / Case
+        Cuts in a block (``cnctwin experiment cutting``) with ``t_s``,
+        ``x_mm``, ``y_mm``, ``z_mm`` (work coordinates), ``spindle_rpm`` (or
+        ``spindle_ref_rpm``) and ``fx_N``, ``fy_N`` (or ``fc_N``); the case
+        gives stock and tool.
+    method : {"default", "paper-ga"}
+    seed : int
+        GA seed.
+    phases : int
+        Spindle-phase candidates over one tooth pitch.
+    smooth_s : float
+        Savitzky-Golay window on the recorded positions, s (0 = none).
+
+    Returns
+    -------
+    CuttingFit
+    """
+    start = time.perf_counter()
+    data = load_inputs(cases)
+    prepared = [_prepare(d, phases, smooth_s) for d in data]
+    use_xy = all("fx" in p.measured for p in prepared)
+
+    def stack(fn) -> np.ndarray:
+        return np.concatenate([fn(p) for p in prepared])
+
+    a_all = stack(lambda p: p.a[p.mask])
+    b_all = stack(lambda p: p.b[p.mask])
+    if use_xy:
+        meas_all = {"fx": stack(lambda p: p.measured["fx"][p.mask]), "fy": stack(lambda p: p.measured["fy"][p.mask])}
+        fc_meas = np.hypot(meas_all["fx"], meas_all["fy"])
+    else:
+        fc_meas = stack(lambda p: (p.measured["fc"] if "fc" in p.measured
+                                   else np.hypot(p.measured["fx"], p.measured["fy"]))[p.mask])
+        meas_all = {"fc": fc_meas}
+    full = np.ones(a_all.shape[0], dtype=bool)
+    c, _ = _linear_fit(meas_all, a_all, b_all, full)
+    iterations = 1
+
+    def fc_model(kt: np.ndarray, ke: np.ndarray) -> np.ndarray:
+        return np.abs(kt)[..., None] * np.hypot(a_all[:, 0] + ke[..., None] * b_all[:, 0],
+                                                a_all[:, 1] + ke[..., None] * b_all[:, 1])
+
+    if method == "default":
+        kt, ke = float(c[0]), float(c[1] / c[0]) if c[0] != 0 else 0.0
+        if not use_xy:
+            sol = least_squares(lambda z: fc_meas - fc_model(np.array(z[0]), np.array(z[1])), [kt, ke],
+                                method="trf", x_scale=[max(abs(kt), 1e-3), 0.1])
+            kt, ke, iterations = float(sol.x[0]), float(sol.x[1]), int(sol.nfev)
+    elif method == "paper-ga":
+        res = run_ga(lambda x: paper_objective(fc_meas[None, :] - fc_model(x[:, 0], x[:, 1])),
+                     np.array([0.1, 0.0]), np.array([10.0, 2.0]), PAPER_GENERATIONS, PAPER_FITNESS_LIMIT, seed=seed)
+        kt, ke, iterations = float(res.x[0]), float(res.x[1]), res.generations
+    else:
+        raise IdentificationError(f"unknown cutting method {method!r}; expected 'default' or 'paper-ga'")
+    fc_fit = fc_model(np.array(kt), np.array(ke))
+    e = fc_meas - fc_fit
+    rms = {"fc": float(np.sqrt(np.mean(e * e)))}
+    if use_xy:
+        for i, name in enumerate(("fx", "fy")):
+            r = meas_all[name] - kt * (a_all[:, i] + ke * b_all[:, i])
+            rms[name] = float(np.sqrt(np.mean(r * r)))
+    traces = []
+    for p in prepared:
+        sim = kt * (p.a + ke * p.b)
+        meas_fc = p.measured["fc"] if "fc" in p.measured else np.hypot(p.measured["fx"], p.measured["fy"])
+        traces.append({"case": p.data.name, "t": p.t, "fc_meas": meas_fc, "fc_sim": np.hypot(sim[:, 0], sim[:, 1])})
+    material = data[0].case.material or "A6061"
+    names = [d.name for d in data]
+    source = provenance(f"cutting {method} ({'fx, fy linear least squares' if use_xy else 'fc'}, "
+                        "engagement of the twin's CuttingLoad on the recorded path, Eq. 14-16)", names)
+    fitted, extra = fitted_machine(data[0].case.machine, {f"material.{material}": {
+        "kt_N_per_m2": kt * KT_UNIT, "ke": ke}}, source, "cutting")
+    return CuttingFit(kt * KT_UNIT, ke, float(paper_objective(e)), rms, [p.phase for p in prepared], iterations,
+                      fitted, extra, material, method, time.perf_counter() - start, names, traces)
