@@ -3,7 +3,7 @@
 Every capability is a Python call first and a ``cnctwin`` command second::
 
     from orchestrator import simulate
-    result = simulate("models/examples/paper_part/program.nc", case="models/examples/paper_part/case.toml")
+    result = simulate(case="models/examples/paper_part", out="out/paper_part")
 """
 from __future__ import annotations
 
@@ -13,10 +13,11 @@ from .errors import CncTwinError, SimulationError, SystemDescriptionError
 from .machine import Machine, MachineFileError, load_machine
 from .master import Master, MasterSettings, Probe, RunResult, simulate_system
 from .recording import Recording, RecordingError
+from .simulate import SimulationResult, simulate
 from .system import Connection, System
 
 __all__ = [
     "CncTwinError", "Component", "ComponentError", "Connection", "Machine", "MachineFileError", "Master",
     "MasterSettings", "Probe", "Recording", "RecordingError", "RunResult", "SimulationError", "System",
-    "SystemDescriptionError", "Variable", "load_machine", "simulate_system",
+    "SimulationResult", "SystemDescriptionError", "Variable", "load_machine", "simulate", "simulate_system",
 ]
