@@ -7,7 +7,7 @@ components and wires them by variable name::
     {a}_drive.position ──► mcu.{a}_position, cutting.{a}_position
     {a}_drive.velocity ──► mcu.{a}_velocity
     nck.spindle_speed ──► cutting.spindle_speed
-    cutting.fx / fy ──► x_drive / y_drive.disturbance_force   (Fd = +F on the workpiece)
+    cutting.fx_mean / fy_mean ──► x_drive / y_drive.disturbance_force   (Fd = +F on the workpiece)
 
 The servo loop (MCU and drives) runs at the velocity-loop period inside the
 1 ms communication step (rate 4 by default); the NC kernel and the cutting
@@ -171,8 +171,9 @@ def build_twin(
         for a in AXES:
             system.connect(f"{a}_drive.position", f"cutting.{a}_position")
         system.connect("nck.spindle_speed", "cutting.spindle_speed")
-        system.connect("cutting.fx", "x_drive.disturbance_force")
-        system.connect("cutting.fy", "y_drive.disturbance_force")
+        # step-mean forces: instantaneous samples at 1 ms would alias the tooth frequency
+        system.connect("cutting.fx_mean", "x_drive.disturbance_force")
+        system.connect("cutting.fy_mean", "y_drive.disturbance_force")
 
     # The position loop samples the NC command of the current interpolation period, as a real
     # controller does: the MCU and drives step before the NC kernel advances. (The signal-flow
@@ -189,6 +190,7 @@ def build_twin(
     if cutting is not None:
         probes += [Probe("fx_N", "cutting.fx", "N"), Probe("fy_N", "cutting.fy", "N"), Probe("fc_N", "cutting.fc", "N")]
         probes += [Probe("fc_peak_N", "cutting.fc_peak", "N"), Probe("spindle_torque_Nm", "cutting.spindle_torque", "N.m")]
+        probes += [Probe("spindle_power_W", "cutting.spindle_power", "W"), Probe("mrr_mm3_per_min", "cutting.mrr", "mm3/min")]
     probes += [Probe("feed_mm_per_min", "nck.feed_ref", "mm/min")]
     stop_when = ("nck.done", "mcu.in_position")
     return Twin(system, nck, mcu, drives, cutting, probes, options, stop_when)

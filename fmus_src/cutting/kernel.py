@@ -1,0 +1,174 @@
+"""One communication step of the cutting mechanics (pure function, batched).
+
+Used by :class:`.component.CuttingLoad`; see its module docstring for the
+time discretisation (substeps, exact interval integration, location of the
+entry/exit instants, peak search).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .engagement import NearField, tooth_depth
+from .force import chip_thickness, interval_mean_quantities, tooth_quantities
+from .stock import ZMapStock
+
+#: Spindle speed below which the tooth period is taken at this speed, rad/s.
+#: Feeding into material with a stopped spindle then gives a huge force (a crash).
+OMEGA_FLOOR = 1e-3
+#: Entry/exit location inside a substep: rounds of equal sections (16**3 = 4096 parts).
+SECTIONS = 16
+SECTION_ROUNDS = 3
+
+
+@dataclass(frozen=True)
+class StepResult:
+    """Outputs of :func:`cut_step` (forces on the **tool**).
+
+    Attributes
+    ----------
+    force : ndarray, shape (B, 2)
+        Force on the tool at the end of the step, N.
+    fc_peak : ndarray, shape (B,)
+        Largest cutting load within the step, N.
+    mean : ndarray, shape (B, 4)
+        Step means of Fx, Fy on the tool (N), torque (N.m), removal rate (m3/s).
+    axial_depth, chip_thickness : ndarray, shape (B,)
+        Largest over teeth in material at the end of the step, m.
+    engaged_teeth : ndarray of int, shape (B,)
+        Teeth in material with a positive chip at the end of the step.
+    """
+
+    force: np.ndarray
+    fc_peak: np.ndarray
+    mean: np.ndarray
+    axial_depth: np.ndarray
+    chip_thickness: np.ndarray
+    engaged_teeth: np.ndarray
+
+
+def cut_step(
+    stock: ZMapStock, near: NearField, p_old: np.ndarray, p_new: np.ndarray, theta0: np.ndarray,
+    omega: np.ndarray, h: float, n: int, radius: np.ndarray, flutes: np.ndarray, kt: np.ndarray, ke: np.ndarray,
+) -> StepResult:
+    """Cutting forces while the tool moves linearly from ``p_old`` to ``p_new`` in ``h`` seconds.
+
+    Parameters
+    ----------
+    stock : ZMapStock
+        Committed material (not modified).
+    near : NearField
+        Recent sweep up to the last stored path point.
+    p_old, p_new : ndarray, shape (B, 3)
+        Tool-tip position at the start and end of the step, m.
+    theta0 : ndarray, shape (B,)
+        Spindle angle (tooth 0) at the start of the step, rad.
+    omega : ndarray, shape (B,)
+        Spindle speed, held over the step, rad/s (>= 0).
+    h : float
+        Step length, s.
+    n : int
+        Substeps (the ``n + 1`` instants ``t + k h / n`` are evaluated).
+    radius : ndarray, shape (B,)
+        Tool radius, m.
+    flutes : ndarray of int, shape (B,)
+        Teeth per member.
+    kt, ke : ndarray, shape (B,)
+        Cutting coefficients, N/m2 and 1.
+
+    Returns
+    -------
+    StepResult
+    """
+    B = p_old.shape[0]
+    R = radius
+    dp = p_new - p_old
+    nmax = int(flutes.max())
+    pitch = 2.0 * math.pi / flutes
+    frac = np.arange(n + 1) / n  # (n+1,)
+    centre = p_old[:, None, :] + frac[None, :, None] * dp[:, None, :]  # (B, n+1, 3)
+    theta = theta0[:, None] + (omega * h)[:, None] * frac[None, :]  # (B, n+1)
+    teeth = np.arange(nmax)
+    phi = theta[:, :, None] + teeth[None, None, :] * pitch[:, None, None]  # (B, n+1, N)
+    tooth_ok = (teeth[None, :] < flutes[:, None])[:, None, :]
+
+    # feed per tooth vector from the tool-centre velocity over the step
+    period = 2.0 * math.pi / (flutes * np.maximum(omega, OMEGA_FLOOR))
+    feed = dp[:, :2] / h * period[:, None]  # (B, 2)
+    hc = chip_thickness(feed[:, 0, None, None], feed[:, 1, None, None], phi)
+
+    # a tooth is engaged when it is in material AND has a chip (trailing teeth are not evaluated)
+    shape = phi.shape
+    member = np.broadcast_to(np.arange(B)[:, None, None], shape).ravel()
+    c_flat = np.broadcast_to(centre[:, :, None, :], shape + (3,)).reshape(-1, 3)
+    active = (np.broadcast_to(tooth_ok, shape) & (hc > 0.0)).ravel()
+    depth = tooth_depth(stock, near, member, c_flat, phi.ravel(), R[member], active).reshape(shape)
+
+    q = tooth_quantities(kt[:, None, None], ke[:, None, None], depth, hc, phi,
+                         R[:, None, None], omega[:, None, None])  # (B, n+1, N, 4)
+    f_tot = q[..., :2].sum(axis=2)  # (B, n+1, 2) on the tool
+    fc_samples = np.hypot(f_tot[..., 0], f_tot[..., 1])
+    peak = fc_samples[:, 1:].max(axis=1)
+
+    engaged = depth > 0.0
+    both = engaged[:, :-1] & engaged[:, 1:]
+    fx_t = feed[:, 0, None, None]
+    fy_t = feed[:, 1, None, None]
+    q_int = interval_mean_quantities(
+        kt[:, None, None], ke[:, None, None], 0.5 * (depth[:, :-1] + depth[:, 1:]), fx_t, fy_t,
+        phi[:, :-1], phi[:, 1:], R[:, None, None], omega[:, None, None],
+    )  # (B, n, N, 4)
+    integral = np.where(both[..., None], q_int, 0.0).sum(axis=(1, 2))  # (B, 4), in substeps
+    change = engaged[:, :-1] ^ engaged[:, 1:]
+    if np.any(change):
+        bb, kk, jj = np.nonzero(change)
+        e_lo = engaged[bb, kk, jj]
+        # locate the first change of state: SECTION_ROUNDS rounds of SECTIONS equal parts each
+        lo = np.zeros(bb.size)
+        width = 1.0
+        inner = np.arange(1, SECTIONS) / SECTIONS  # (S-1,)
+        for _ in range(SECTION_ROUNDS):
+            s_try = lo[:, None] + width * inner[None, :]  # (M, S-1)
+            f = (kk[:, None] + s_try) / n
+            c_try = p_old[bb][:, None, :] + f[..., None] * dp[bb][:, None, :]
+            phi_try = theta0[bb][:, None] + (omega[bb] * h)[:, None] * f + (jj * pitch[bb])[:, None]
+            m_try = np.broadcast_to(bb[:, None], f.shape)
+            h_try = chip_thickness(feed[bb, 0][:, None], feed[bb, 1][:, None], phi_try)
+            e_try = tooth_depth(stock, near, m_try.ravel(), c_try.reshape(-1, 3), phi_try.ravel(),
+                                R[m_try.ravel()], (h_try > 0.0).ravel()).reshape(f.shape) > 0.0
+            flipped = e_try != e_lo[:, None]
+            first = np.where(flipped.any(axis=1), flipped.argmax(axis=1), SECTIONS - 1)  # parts kept before it
+            lo = lo + width * first / SECTIONS
+            width /= SECTIONS
+        s_star = lo + 0.5 * width
+        f = (kk + s_star) / n
+        phi_star = theta0[bb] + omega[bb] * h * f + jj * pitch[bb]
+        k_eng = np.where(e_lo, kk, kk + 1)
+        depth_eng = depth[bb, k_eng, jj]
+        h_star = chip_thickness(feed[bb, 0], feed[bb, 1], phi_star)
+        q_star = tooth_quantities(kt[bb], ke[bb], depth_eng, h_star, phi_star, R[bb], omega[bb])
+        phi_a = np.where(e_lo, phi[bb, kk, jj], phi_star)
+        phi_b = np.where(e_lo, phi_star, phi[bb, kk + 1, jj])
+        q_part = interval_mean_quantities(
+            kt[bb], ke[bb], depth_eng, feed[bb, 0], feed[bb, 1], phi_a, phi_b, R[bb], omega[bb]
+        )
+        length = np.where(e_lo, s_star, 1.0 - s_star)
+        np.add.at(integral, bb, length[:, None] * q_part)
+        others0 = f_tot[bb, kk] - q[bb, kk, jj, :2]
+        others1 = f_tot[bb, kk + 1] - q[bb, kk + 1, jj, :2]
+        f_b = q_star[:, :2] + (1.0 - s_star)[:, None] * others0 + s_star[:, None] * others1
+        np.maximum.at(peak, bb, np.hypot(f_b[:, 0], f_b[:, 1]))
+    mean = integral / n
+
+    last = n
+    in_cut = engaged[:, last]
+    return StepResult(
+        force=f_tot[:, last],
+        fc_peak=peak,
+        mean=mean,
+        axial_depth=depth[:, last].max(axis=1),
+        chip_thickness=np.where(engaged[:, last], hc[:, last], 0.0).max(axis=1),
+        engaged_teeth=in_cut.sum(axis=1),
+    )
