@@ -70,6 +70,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--step", type=float, default=1.0, help="communication step, ms (default 1)")
     p.add_argument("--time-limit", type=float, default=3600.0, help="simulated-time limit, s")
     p.set_defaults(func=_cmd_simulate)
+
+    from .cli_fmu import add_parsers as add_fmu_parsers
+
+    add_fmu_parsers(sub)
     return parser
 
 

@@ -426,11 +426,11 @@ class FMUComponent:
         except FMICallException as exc:
             raise self._failure(function, int(exc.status)) from None
 
-    def _failure(self, function: str, status: int) -> FMUError:
+    def _failure(self, function: str, status: int, verb: str = "returned") -> FMUError:
         at = "" if np.isnan(self.time) else f" at t = {self.time:.6f} s"
         detail = "; FMU log: " + " | ".join(self.messages) if self.messages else ""
         error = FMUError(
-            f"{self.name}: {function} returned {status_name(status)}{at} (FMU {self.path}){detail}",
+            f"{self.name}: {function} {verb} {status_name(status)}{at} (FMU {self.path}){detail}",
             path=str(self.path), component=self.name, function=function,
             time=None if np.isnan(self.time) else self.time, status=status,
         )
@@ -575,7 +575,7 @@ class FMUComponent:
         if self._worst_logged >= 3:
             # the initialisation failed but the FMU could not say so in its status (pythonfmu: see
             # fmus_src.fmu.slave.ComponentSlave.exit_initialization_mode); the log names the cause
-            raise self._failure("fmi2ExitInitializationMode", self._worst_logged)
+            raise self._failure("fmi2ExitInitializationMode", self._worst_logged, "logged")
         self._pull_outputs()
         self.state = "initialized"
 

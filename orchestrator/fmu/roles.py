@@ -66,7 +66,8 @@ ROLES: dict[str, Role] = {
         "mcu",
         required=tuple(v for a in _AXES for v in (_in(f"{a}_ref", "m"), _in(f"{a}_position", "m"),
                                                   _in(f"{a}_velocity", "m/s")))
-        + tuple(_out(f"{a}_current_cmd", "A") for a in _AXES),
+        + tuple(_out(f"{a}_current_cmd", "A") for a in _AXES)
+        + (_out("in_position", "1", "Boolean"),),
         optional=tuple(_out(f"{a}_velocity_cmd", "m/s") for a in _AXES),
     ),
     "drive": Role(
