@@ -36,15 +36,20 @@ class _ProgressBar:
 
 
 def _cmd_simulate(args: argparse.Namespace) -> int:
-    from .simulate import simulate
+    from .simulate import simulate, simulate_system_file
     from .twin import TwinOptions
 
     bar = _ProgressBar("simulate")
-    options = TwinOptions(step=args.step * 1e-3)
-    result = simulate(
-        program=args.program, case=args.case, machine=args.machine, out=args.out,
-        options=options, time_limit_s=args.time_limit, progress=bar,
-    )
+    if args.system:
+        result = simulate_system_file(
+            args.system, out=args.out, native=not args.fmu, time_limit_s=args.time_limit, progress=bar
+        )
+    else:
+        options = TwinOptions(step=args.step * 1e-3)
+        result = simulate(
+            program=args.program, case=args.case, machine=args.machine, out=args.out,
+            options=options, time_limit_s=args.time_limit or 3600.0, progress=bar,
+        )
     bar.close()
     s = result.summary
     keys = ["cycle_time_s", "max_cutting_load_N", "cost_KRW", "rms_following_error_um"]
@@ -54,6 +59,15 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     if not result.success:
         print(f"cnctwin: error: {result.message}", file=sys.stderr)
         return 1
+    return 0
+
+
+def _cmd_export_ssp(args: argparse.Namespace) -> int:
+    from .simulate import resolve_case
+    from .twin import write_twin_ssp
+
+    ssd, ssv = write_twin_ssp(resolve_case(args.program, args.case, args.machine), args.ssd)
+    print(f"wrote {ssd}\nwrote {ssv}")
     return 0
 
 
@@ -68,8 +82,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--machine", help="machine parameter set name or TOML file (default: the case's, else 'default')")
     p.add_argument("--out", required=True, help="output folder")
     p.add_argument("--step", type=float, default=1.0, help="communication step, ms (default 1)")
-    p.add_argument("--time-limit", type=float, default=3600.0, help="simulated-time limit, s")
+    p.add_argument("--time-limit", type=float, default=None, help="simulated-time limit, s (default 3600)")
+    p.add_argument("--system", help="run an SSP 1.0 system file (.ssd) instead of the default twin")
+    p.add_argument("--fmu", action="store_true", help="with --system: load every element from its FMU")
     p.set_defaults(func=_cmd_simulate)
+
+    p = sub.add_parser("export-ssp", help="write the twin of a case as SSP 1.0 (.ssd + .ssv)")
+    p.add_argument("--case", help="case folder or case.toml (default: air cut of --program)")
+    p.add_argument("--program", help="G-code file (overrides the case's program)")
+    p.add_argument("--machine", help="machine parameter set name or TOML file")
+    p.add_argument("--ssd", required=True, help="system structure file to write (.ssd); the .ssv goes beside it")
+    p.set_defaults(func=_cmd_export_ssp)
 
     from .cli_fmu import add_parsers as add_fmu_parsers
 
@@ -81,8 +104,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``cnctwin`` console script."""
     parser = build_parser()
     args = parser.parse_args(argv)
-    if args.command == "simulate" and args.program is None and args.case is None:
-        parser.error("simulate needs a PROGRAM, a --case, or both")
+    if args.command == "simulate" and args.program is None and args.case is None and args.system is None:
+        parser.error("simulate needs a PROGRAM, a --case, or both (or --system FILE.ssd)")
+    if args.command == "export-ssp" and args.program is None and args.case is None:
+        parser.error("export-ssp needs a --case or a --program")
     try:
         return int(args.func(args))
     except CncTwinError as exc:

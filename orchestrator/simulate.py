@@ -128,3 +128,67 @@ def simulate(
         if plot and len(recording) > 1:
             result.files["overview"] = overview_png(recording, out / "overview.png", title=resolved.program.name)
     return result
+
+
+def simulate_system_file(
+    system_file: str | Path,
+    out: str | Path | None = None,
+    native: bool = True,
+    time_limit_s: float | None = None,
+    progress: Callable[[float, float], None] | None = None,
+    plot: bool = True,
+) -> SimulationResult:
+    """Run a system described by an SSP 1.0 ``.ssd`` file.
+
+    Parameters
+    ----------
+    system_file : str or Path
+        The ``.ssd``; parameter values come from the ``.ssv`` files it binds.
+    out : str or Path, optional
+        Folder for ``recording.csv``, ``summary.json`` and ``overview.png``.
+    native : bool
+        Run elements that name a native implementation natively (fast); with
+        False every element is loaded from its FMU (build them first with
+        ``cnctwin build-fmus``).
+    time_limit_s : float, optional
+        Overrides the DefaultExperiment's stop time.
+
+    Returns
+    -------
+    SimulationResult
+        The twin's channels when the system has the twin's components,
+        otherwise every output as ``component.variable``.
+    """
+    from .master import Probe
+    from .ssp import build_system, read_ssd
+    from .twin import twin_probes
+
+    system, settings = build_system(read_ssd(system_file), native=native)
+    if time_limit_s is not None:
+        settings.time_limit = float(time_limit_s)
+    probes = twin_probes(system) or [
+        Probe(f"{name}.{var}", f"{name}.{var}")
+        for name, comp in system.components.items()
+        for var in comp.names("output")
+        if comp.variable(var).type != "String"
+    ]
+    run = Master(system, settings, probes, progress=progress).run()
+    recording = run.recording
+    stop = run.stopped_at[0] if run.stopped_at.size else math.nan
+    cycle_time = float(stop - settings.t0) if math.isfinite(stop) else float(run.t_end - settings.t0)
+    if "line" in recording:
+        diameter_mm = 6.0
+        if "cutting" in system.components:
+            diameter_mm = float(system.components["cutting"].values["tool_diameter"][0]) * 1e3
+        summary = summarize(recording, cycle_time, CostModel(), diameter_mm)
+    else:
+        summary = {"success": run.success, "message": run.message, "cycle_time_s": cycle_time}
+    summary["system"] = str(system_file)
+    result = SimulationResult(recording, summary, run.success, run.message)
+    if out is not None:
+        out = Path(out)
+        result.files["recording"] = recording.write_csv(out / "recording.csv")
+        result.files["summary"] = atomic_write_json(out / "summary.json", summary)
+        if plot and "line" in recording and len(recording) > 1:
+            result.files["overview"] = overview_png(recording, out / "overview.png", title=Path(system_file).name)
+    return result

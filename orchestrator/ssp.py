@@ -98,6 +98,8 @@ class SystemSpec:
     start_time: float = 0.0
     stop_time: float | None = None
     stop_when: tuple[str, ...] | None = None
+    method: str = "gauss-seidel"
+    order: tuple[str, ...] | None = None
     folder: Path = Path(".")
 
 
@@ -214,7 +216,8 @@ def system_to_ssp(
     experiment = ET.SubElement(root, _q("ssd", "DefaultExperiment"), startTime=repr(settings.t0),
                                stopTime=repr(settings.t0 + settings.time_limit))
     ann = ET.SubElement(ET.SubElement(experiment, _q("ssc", "Annotations")), _q("ssc", "Annotation"), type=ANNOTATION_TYPE)
-    master_attrs = {"step": repr(settings.step), "method": settings.method}
+    master_attrs = {"step": repr(settings.step), "method": settings.method,
+                    "order": " ".join(system.execution_order())}
     if settings.stop_signals():
         master_attrs["stopWhen"] = " ".join(settings.stop_signals())
     ET.SubElement(ann, _q("cnctwin", "Master"), master_attrs)
@@ -366,6 +369,9 @@ def read_ssd(path: str | Path) -> SystemSpec:
             system_spec.step = float(master.get("step", "0.001"))
             stop = master.get("stopWhen")
             system_spec.stop_when = tuple(stop.split()) if stop else None
+            system_spec.method = master.get("method", "gauss-seidel")
+            order = master.get("order")
+            system_spec.order = tuple(order.split()) if order else None
     return system_spec
 
 
@@ -430,8 +436,11 @@ def build_system(spec: SystemSpec, native: bool = True, batch: int = 1) -> tuple
         system.add(component, rate=el.rate)
     for start, sc, end, ec in spec.connections:
         system.connect(f"{start}.{sc}", f"{end}.{ec}")
+    if spec.order is not None:
+        system.set_execution_order(spec.order)
     limit = (spec.stop_time - spec.start_time) if spec.stop_time is not None else 3600.0
     if not (limit > 0 and math.isfinite(limit)):
         raise SSPError(f"{spec.name}: DefaultExperiment stopTime must be after startTime")
-    settings = MasterSettings(step=spec.step, t0=spec.start_time, time_limit=limit, stop_when=spec.stop_when)
+    settings = MasterSettings(step=spec.step, t0=spec.start_time, time_limit=limit, stop_when=spec.stop_when,
+                              method=spec.method)  # type: ignore[arg-type]
     return system, settings

@@ -16,6 +16,7 @@ load step at the communication step and substep internally.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Mapping
 
 import numpy as np
@@ -26,6 +27,7 @@ from fmus_src.servo.drive import DriveAxis
 from fmus_src.servo.mcu import MCU
 
 from .case import Case
+from .errors import CncTwinError
 from .machine import AXES, Machine
 from .master import Probe
 from .system import System
@@ -182,15 +184,55 @@ def build_twin(
     order = ["mcu", *(f"{a}_drive" for a in AXES), "nck"] + (["cutting"] if cutting is not None else [])
     system.set_execution_order(order)
 
-    probes = [Probe("line", "nck.line", "1")]
-    probes += [Probe(f"{a}_ref_mm", f"nck.{a}_ref", "mm") for a in AXES]
-    probes += [Probe(f"{a}_mm", f"{a}_drive.position", "mm") for a in AXES]
-    probes += [Probe(f"{a}_tcmd_A", f"mcu.{a}_current_cmd", "A") for a in AXES]
-    probes += [Probe("spindle_ref_rpm", "nck.spindle_ref", "rpm"), Probe("spindle_rpm", "nck.spindle_speed", "rpm")]
-    if cutting is not None:
-        probes += [Probe("fx_N", "cutting.fx", "N"), Probe("fy_N", "cutting.fy", "N"), Probe("fc_N", "cutting.fc", "N")]
-        probes += [Probe("fc_peak_N", "cutting.fc_peak", "N"), Probe("spindle_torque_Nm", "cutting.spindle_torque", "N.m")]
-        probes += [Probe("spindle_power_W", "cutting.spindle_power", "W"), Probe("mrr_mm3_per_min", "cutting.mrr", "mm3/min")]
-    probes += [Probe("feed_mm_per_min", "nck.feed_ref", "mm/min")]
+    probes = twin_probes(system)
     stop_when = ("nck.done", "mcu.in_position")
     return Twin(system, nck, mcu, drives, cutting, probes, options, stop_when)
+
+
+#: Recording channels of the twin: (channel, component.variable, unit), per recording.md plus extras.
+TWIN_CHANNELS: tuple[tuple[str, str, str], ...] = (
+    ("line", "nck.line", "1"),
+    *((f"{a}_ref_mm", f"nck.{a}_ref", "mm") for a in AXES),
+    *((f"{a}_mm", f"{a}_drive.position", "mm") for a in AXES),
+    *((f"{a}_tcmd_A", f"mcu.{a}_current_cmd", "A") for a in AXES),
+    ("spindle_ref_rpm", "nck.spindle_ref", "rpm"),
+    ("spindle_rpm", "nck.spindle_speed", "rpm"),
+    ("fx_N", "cutting.fx", "N"),
+    ("fy_N", "cutting.fy", "N"),
+    ("fc_N", "cutting.fc", "N"),
+    ("fc_peak_N", "cutting.fc_peak", "N"),
+    ("spindle_torque_Nm", "cutting.spindle_torque", "N.m"),
+    ("spindle_power_W", "cutting.spindle_power", "W"),
+    ("mrr_mm3_per_min", "cutting.mrr", "mm3/min"),
+    ("feed_mm_per_min", "nck.feed_ref", "mm/min"),
+)
+
+
+def twin_probes(system: System) -> list[Probe]:
+    """The twin's recording channels that ``system`` can provide (components and variables present)."""
+    probes = []
+    for channel, reference, unit in TWIN_CHANNELS:
+        comp, var = reference.split(".")
+        if comp in system.components:
+            try:
+                system.components[comp].variable(var)
+            except CncTwinError:
+                continue
+            probes.append(Probe(channel, reference, unit))
+    return probes
+
+
+def write_twin_ssp(case: Case, ssd_path: Path, ssv_path: Path | None = None, options: TwinOptions | None = None) -> tuple[Path, Path]:
+    """Describe the twin of ``case`` as SSP 1.0: structure (``.ssd``) and parameter values (``.ssv``).
+
+    The machine file (TOML) stays the source of truth; this generates the SSP view of it.
+    Element sources point at ``fmus/<Component>.fmu`` next to the SSD (``cnctwin build-fmus``).
+    """
+    from .master import MasterSettings
+    from .ssp import system_to_ssp
+
+    ssd_path = Path(ssd_path)
+    ssv_path = Path(ssv_path) if ssv_path is not None else ssd_path.with_suffix(".ssv")
+    twin = build_twin(case, batch=1, options=options)
+    settings = MasterSettings(step=twin.options.step, stop_when=twin.stop_when)
+    return system_to_ssp(twin.system, ssd_path, ssv_path, settings)

@@ -1,6 +1,8 @@
 """SSP 1.0: write the system, read it back (ours and another tool's), run it."""
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -85,3 +87,30 @@ def test_bad_ssd_files_give_clear_errors(tmp_path, change, match):
     path.write_text(FOREIGN_SSD.replace(*change))
     with pytest.raises(SSPError, match=match):
         build_system(read_ssd(path))
+
+
+def test_shipped_twin_ssp_is_generated_from_the_machine_file(tmp_path):
+    from orchestrator.simulate import resolve_case
+    from orchestrator.twin import write_twin_ssp
+
+    root = Path(__file__).resolve().parent.parent
+    shipped = read_ssd(root / "models" / "cnctwin.ssd")
+    ssd, _ = write_twin_ssp(resolve_case(case=root / "models" / "examples" / "paper_part"), tmp_path / "cnctwin.ssd")
+    fresh = read_ssd(ssd)
+    assert fresh.connections == shipped.connections and fresh.order == shipped.order
+    for a, b in zip(fresh.elements, shipped.elements):
+        assert (a.name, a.native, a.rate) == (b.name, b.native, b.rate)
+        pa = {k: v for k, v in a.parameters.items() if k != "program_file"}
+        pb = {k: v for k, v in b.parameters.items() if k != "program_file"}
+        assert pa == pb, f"models/cnctwin.ssv is stale for {a.name}: run `cnctwin export-ssp --case models/examples/paper_part --ssd models/cnctwin.ssd`"
+
+
+def test_twin_from_ssd_equals_twin_from_case(tmp_path):
+    from orchestrator.simulate import simulate, simulate_system_file
+
+    root = Path(__file__).resolve().parent.parent
+    from_ssd = simulate_system_file(root / "models" / "cnctwin.ssd", time_limit_s=0.6, plot=False).recording
+    from_case = simulate(case=root / "models" / "examples" / "paper_part", time_limit_s=0.6, plot=False).recording
+    assert from_ssd.channels == from_case.channels
+    for name in from_case.channels:
+        np.testing.assert_array_equal(from_ssd[name], from_case[name])
