@@ -78,7 +78,10 @@ class MasterSettings:
     decimation : int
         Record every ``decimation``-th communication step.
     check_every : int
-        Check connections for NaN/inf every so many communication steps.
+        Check connections for NaN/inf (and ``limits``) every so many communication steps.
+    limits : dict, optional
+        ``{"component.variable": (low, high)}`` in the variable's unit: a value
+        outside marks the batch member as diverged (e.g. a runaway axis).
     """
 
     step: float = 1e-3
@@ -88,6 +91,7 @@ class MasterSettings:
     method: Method = "gauss-seidel"
     decimation: int = 1
     check_every: int = 50
+    limits: dict[str, tuple[float, float]] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if not (self.step > 0 and math.isfinite(self.step)):
@@ -166,6 +170,13 @@ class RunResult:
         Communication steps taken.
     t_end : float
         Time reached, s.
+    stopped_at : ndarray, shape (B,)
+        Time each member met the stop condition, s (NaN if it never did).
+    failed : ndarray of bool, shape (B,)
+        Members that diverged (non-finite values or outside ``limits``); the
+        other members of a batch run on.
+    failures : list of str or None
+        Why each member failed (None for members that did not).
     """
 
     recording: Recording
@@ -174,6 +185,8 @@ class RunResult:
     steps: int
     t_end: float
     stopped_at: np.ndarray = field(default_factory=lambda: np.empty(0))
+    failed: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
+    failures: list = field(default_factory=list)
 
 
 class Master:
@@ -212,6 +225,9 @@ class Master:
         for probe in self.probes:
             comp, var = split_reference(probe.reference)
             system.component(comp).variable(var)
+        for reference in self.settings.limits:
+            comp, var = split_reference(reference)
+            system.component(comp).variable(var)
         self._stop_refs = self.settings.stop_signals()
         for reference in self._stop_refs:
             comp, var = split_reference(reference)
@@ -242,17 +258,42 @@ class Master:
             else:
                 np.multiply(src, w.factor, out=dst, casting="unsafe")
 
-    def _check_finite(self, t: float) -> None:
+    def _check_divergence(self, t: float) -> None:
+        """Mark members with non-finite connection values or values outside the limits as failed.
+
+        Raises
+        ------
+        SimulationError
+            When every member has failed (for B = 1: at the first failure).
+        """
+        checks = []
         for name, wires in self._wires.items():
-            for w in wires:
-                src = w.source_values[w.source_name]
-                if src.dtype.kind == "f" and not np.isfinite(src).all():
-                    bad = np.flatnonzero(~np.isfinite(src))
-                    source = next(c.source for c in self._connections_by_target[name] if c.target_variable == w.target_name)
-                    raise SimulationError(
-                        f"simulation diverged at t = {t:.6f} s: {source} is not finite "
-                        f"(batch member(s) {bad[:5].tolist()})"
-                    )
+            for w, c in zip(wires, self._connections_by_target[name]):
+                checks.append((c.source, w.source_values[w.source_name], None))
+        for reference, bounds in self.settings.limits.items():
+            comp, var = split_reference(reference)
+            checks.append((reference, self.system.components[comp].values[var], bounds))
+        for reference, values, bounds in checks:
+            if values.dtype.kind != "f":
+                continue
+            bad = ~np.isfinite(values)
+            if bounds is not None:
+                with np.errstate(invalid="ignore"):
+                    bad |= (values < bounds[0]) | (values > bounds[1])
+            bad &= ~self._failed
+            if not bad.any():
+                continue
+            for b in np.flatnonzero(bad):
+                value = values[b]
+                what = "is not finite" if not np.isfinite(value) else (
+                    f"= {value:.6g} is outside [{bounds[0]:g}, {bounds[1]:g}]" if bounds else "")
+                self._failures[b] = f"diverged at t = {t:.6f} s: {reference} {what}"
+                log.warning("member %d %s", b, self._failures[b])
+            self._failed |= bad
+        if self._failed.all():
+            first = next(f for f in self._failures if f)
+            members = "" if self.system.batch == 1 else f" (all {self.system.batch} members; first: member {self._failures.index(first)})"
+            raise SimulationError(f"simulation {first}{members}")
 
     def _terminate_all(self) -> None:
         for name in self.order:
@@ -307,6 +348,8 @@ class Master:
         k = 0
         success, message = True, ""
         stopped_at = np.full(batch, np.nan)
+        self._failed = np.zeros(batch, dtype=bool)
+        self._failures: list[str | None] = [None] * batch
         # initialise along the signal flow: each component gets its inputs from the
         # components already initialised (start values inside feedback loops). A failure
         # here (bad program, bad parameters) is raised: there is nothing to keep yet.
@@ -331,7 +374,7 @@ class Master:
                 if flags is not None:
                     newly = flags & np.isnan(stopped_at)
                     stopped_at[newly] = t
-                    if flags.all():
+                    if (flags | self._failed).all():
                         message = f"{' and '.join(self._stop_refs)} at t = {t:.3f} s"
                         break
                 if k >= max_steps:
@@ -356,12 +399,12 @@ class Master:
                 k += 1
                 t = s.t0 + k * h
                 if k % s.check_every == 0:
-                    self._check_finite(t)
+                    self._check_divergence(t)
                 if k % s.decimation == 0:
                     recorder.sample(t)
                 if self.progress is not None and k % report_every == 0:
                     self.progress(t - s.t0, expected)
-            self._check_finite(t)
+            self._check_divergence(t)
             if (k % s.decimation) != 0:
                 recorder.sample(t)
         except CncTwinError as exc:
@@ -371,7 +414,9 @@ class Master:
         finally:
             self._terminate_all()
         recording = recorder.recording(success, message, system.name)
-        return RunResult(recording, success, message, k, t, stopped_at)
+        if success and self._failed.any():
+            message += f"; {int(self._failed.sum())} of {batch} members diverged"
+        return RunResult(recording, success, message, k, t, stopped_at, self._failed.copy(), list(self._failures))
 
 
 def simulate_system(

@@ -112,7 +112,9 @@ def simulate(
     """
     resolved = resolve_case(program, case, machine)
     twin = build_twin(resolved, batch=1, options=options)
-    settings = MasterSettings(step=twin.options.step, time_limit=time_limit_s, stop_when=twin.stop_when)
+    settings = MasterSettings(
+        step=twin.options.step, time_limit=time_limit_s, stop_when=twin.stop_when, limits=twin.limits or {}
+    )
     run = Master(twin.system, settings, twin.probes, progress=progress).run()
     recording = run.recording
     stop = run.stopped_at[0] if run.stopped_at.size else math.nan

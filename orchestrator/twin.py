@@ -114,6 +114,7 @@ class Twin:
     probes: list[Probe]
     options: TwinOptions
     stop_when: tuple[str, ...] = ("nck.done",)
+    limits: dict[str, tuple[float, float]] | None = None
 
 
 def build_twin(
@@ -186,7 +187,14 @@ def build_twin(
 
     probes = twin_probes(system)
     stop_when = ("nck.done", "mcu.in_position")
-    return Twin(system, nck, mcu, drives, cutting, probes, options, stop_when)
+    # a member whose axis runs away (unstable gains or friction a GA tried) is marked diverged:
+    # 2 m is beyond any machining-center travel, 3x rapid beyond any commanded speed
+    limits = {}
+    for a in AXES:
+        rapid = float(machine.si(f"axis.{a}")["rapid_feed"])
+        limits[f"{a}_drive.position"] = (-2.0, 2.0)
+        limits[f"{a}_drive.velocity"] = (-3.0 * rapid, 3.0 * rapid)
+    return Twin(system, nck, mcu, drives, cutting, probes, options, stop_when, limits)
 
 
 #: Recording channels of the twin: (channel, component.variable, unit), per recording.md plus extras.
@@ -234,5 +242,5 @@ def write_twin_ssp(case: Case, ssd_path: Path, ssv_path: Path | None = None, opt
     ssd_path = Path(ssd_path)
     ssv_path = Path(ssv_path) if ssv_path is not None else ssd_path.with_suffix(".ssv")
     twin = build_twin(case, batch=1, options=options)
-    settings = MasterSettings(step=twin.options.step, stop_when=twin.stop_when)
+    settings = MasterSettings(step=twin.options.step, stop_when=twin.stop_when, limits=twin.limits or {})
     return system_to_ssp(twin.system, ssd_path, ssv_path, settings)

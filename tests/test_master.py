@@ -225,3 +225,32 @@ def test_explicit_execution_order_changes_gauss_seidel_sampling():
     np.testing.assert_allclose(late[1:], 1.0 + t[:-1], rtol=1e-12)
     with pytest.raises(SystemDescriptionError, match="every component once"):
         reversed_system.set_execution_order(["gain"])
+
+
+def test_a_diverging_member_fails_alone_and_the_others_run_on():
+    a = np.array([2.0, -300.0, 3.0])         # member 1: |1 - a h| = 4, grows until it overflows
+    system = System("batch")
+    system.add(Integrator("integ", batch=3, x0=1.0))
+    system.add(Gain("gain", batch=3, a=a))
+    system.connect("integ.x", "gain.x")
+    system.connect("gain.u", "integ.u")
+    h, n = 0.01, 800
+    with np.errstate(over="ignore", invalid="ignore"):
+        result = Master(system, MasterSettings(step=h, time_limit=n * h, check_every=1), ["integ.x"]).run()
+    assert result.success and "1 of 3 members diverged" in result.message
+    assert result.failed.tolist() == [False, True, False]
+    assert "not finite" in result.failures[1] and result.failures[0] is None
+    x = result.recording["integ.x"]
+    for b in (0, 2):
+        np.testing.assert_allclose(x[:, b], (1 - a[b] * h) ** np.arange(n + 1), rtol=1e-12)
+
+
+def test_limits_mark_a_runaway_as_diverged():
+    system = System("runaway")
+    integ = system.add(Integrator("integ", x0=0.0))
+    integ.set("u", 1.0)                        # x = t, leaves [-0.5, 0.5] m after 0.5 s
+    settings = MasterSettings(step=1e-3, time_limit=2.0, check_every=1, limits={"integ.x": (-0.5, 0.5005)})
+    result = Master(system, settings, ["integ.x"]).run()
+    assert not result.success
+    assert "integ.x = 0.501 is outside [-0.5, 0.5005]" in result.message
+    assert result.t_end == pytest.approx(0.501)
