@@ -226,7 +226,6 @@ def test_build_rejects_unknown_parameter_and_component(tmp_path):
         build_fmus(tmp_path, components=["Spindle"])
 
 
-@pytest.mark.skipif("NCKernel" not in COMPONENTS, reason="NC kernel not available yet")
 def test_setup_error_inside_pythonfmu_is_reported_at_setup(fmus):
     nck = FMUComponent(fmus["NCKernel"], name="nck")  # program_file left empty
     with pytest.raises(FMUError) as info:

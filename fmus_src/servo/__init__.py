@@ -6,9 +6,15 @@ Components
     Position P / velocity PI cascade of the X, Y, Z axes (Sim & Lee 2023, Section 2.3).
 :class:`DriveAxis`
     One feed-drive axis, ``Ms x'' = u - Ff - Fd`` with stick/slip Stribeck friction (Section 2.2).
+
+Both run numba-compiled kernels (:mod:`.control_numba`, :mod:`.stick_slip_numba`)
+by default; the numpy modules :mod:`.control` and :mod:`.stick_slip` are the
+reference they are tested against (``MCU.use_compiled = False``,
+``DriveAxis.use_compiled = False`` select them).
 """
 from __future__ import annotations
 
+from ._jit import NUMBA_AVAILABLE
 from .control import CascadeGains, CascadeState, position_loop, velocity_loop
 from .drive import DEFAULT_INTEGRATION_STEP, DriveAxis, stribeck_step_cap
 from .errors import ServoError
@@ -20,5 +26,5 @@ from .stick_slip import SlipState, advance
 __all__ = [
     "MCU", "DriveAxis", "ServoError", "DEFAULT_INTEGRATION_STEP", "stribeck_step_cap", "CascadeGains", "CascadeState",
     "position_loop", "velocity_loop", "StribeckParameters", "stribeck_force", "SlipState", "advance",
-    "mcu_parameters", "drive_parameters",
+    "mcu_parameters", "drive_parameters", "NUMBA_AVAILABLE",
 ]

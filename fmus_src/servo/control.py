@@ -68,10 +68,42 @@ class CascadeGains:
     accel_ff_current: np.ndarray
     peak_current: np.ndarray
 
+    def block(self) -> np.ndarray:
+        """The six gains stacked in the order :data:`GAIN_FIELDS`, shape ``(6, *shape)``, C-contiguous."""
+        arrays = [np.asarray(getattr(self, f), dtype=float) for f in GAIN_FIELDS]
+        shape = np.broadcast(*arrays).shape
+        return np.ascontiguousarray(np.stack([np.broadcast_to(a, shape) for a in arrays]))
 
-@dataclass
+
+#: Rows of the state block of :class:`CascadeState` (and of the compiled MCU kernel).
+STATE_FIELDS = ("integrator", "velocity_cmd", "current_ff", "ref_prev", "ref_prev2", "current_cmd")
+
+#: Rows of the packed gain block taken by the compiled MCU kernel (:func:`CascadeGains.block`).
+GAIN_FIELDS = ("position", "velocity_p", "velocity_i", "velocity_ff", "accel_ff_current", "peak_current")
+
+
+def _state_field(index: int, doc: str) -> property:
+    def get(self: "CascadeState") -> np.ndarray:
+        return self.block[index]
+
+    def put(self: "CascadeState", value: np.ndarray) -> None:
+        self.block[index][...] = value  # in place: the block is shared with the compiled kernel
+
+    return property(get, put, doc=doc)
+
+
 class CascadeState:
-    """Internal state of the cascade, arrays of one common shape.
+    """Internal state of the cascade, one float block of shape ``(6, *shape)``.
+
+    The six quantities are views of rows of :attr:`block` (order
+    :data:`STATE_FIELDS`); assigning to one copies **into** the block, so the
+    numpy reference (:func:`position_loop`, :func:`velocity_loop`) and the
+    compiled MCU kernel (which updates :attr:`block` in place) share one state.
+
+    Parameters
+    ----------
+    block : ndarray, shape (6, ...)
+        Float64, C-contiguous; used (not copied).
 
     Attributes
     ----------
@@ -87,19 +119,29 @@ class CascadeState:
         Last current command [A].
     """
 
-    integrator: np.ndarray
-    velocity_cmd: np.ndarray
-    current_ff: np.ndarray
-    ref_prev: np.ndarray
-    ref_prev2: np.ndarray
-    current_cmd: np.ndarray
+    __slots__ = ("block",)
+
+    integrator = _state_field(0, "Velocity-loop integral term I [A].")
+    velocity_cmd = _state_field(1, "Held velocity command [m/s].")
+    current_ff = _state_field(2, "Held acceleration feed-forward current [A].")
+    ref_prev = _state_field(3, "Reference sample of the previous position tick [m].")
+    ref_prev2 = _state_field(4, "Reference sample of the position tick before that [m].")
+    current_cmd = _state_field(5, "Last current command [A].")
+
+    def __init__(self, block: np.ndarray) -> None:
+        if block.shape[:1] != (len(STATE_FIELDS),) or block.dtype != np.float64 or not block.flags.c_contiguous:
+            raise ValueError(f"CascadeState block must be C-contiguous float64 of shape (6, ...), got "
+                             f"{block.dtype} {block.shape}")
+        self.block = block
 
     @classmethod
     def initial(cls, ref0: np.ndarray) -> "CascadeState":
         """State at rest with the reference history filled with ``ref0`` (zero feed-forward)."""
-        zero = np.zeros_like(ref0, dtype=float)
-        return cls(zero.copy(), zero.copy(), zero.copy(), ref0.astype(float).copy(),
-                   ref0.astype(float).copy(), zero.copy())
+        ref0 = np.asarray(ref0, dtype=float)
+        block = np.zeros((len(STATE_FIELDS),) + ref0.shape)
+        block[3] = ref0
+        block[4] = ref0
+        return cls(block)
 
 
 def position_loop(

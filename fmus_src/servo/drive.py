@@ -9,17 +9,27 @@ the cutting force on the workpiece in machine axes; positive ``Fd`` pushes
 the table towards negative positions) are held constant over each
 ``do_step``. Friction follows the stick/slip state machine of
 :mod:`fmus_src.servo.stick_slip`.
+
+By default ``do_step`` runs the compiled kernel
+:func:`fmus_src.servo.stick_slip_numba.advance_kernel` (net force, all
+substeps, crossings and friction of every member in one call, outputs written
+in place); ``DriveAxis.use_compiled = False`` (class or instance attribute,
+read at every step) selects the numpy reference
+:func:`fmus_src.servo.stick_slip.advance`. Both update the same state arrays.
 """
 from __future__ import annotations
 
 import math
+from typing import ClassVar
 
 import numpy as np
 
 from ..component import Component, Variable
+from ._jit import NUMBA_AVAILABLE
 from .errors import ServoError
 from .friction import StribeckParameters
 from .stick_slip import SlipState, advance, friction_force
+from .stick_slip_numba import OK, advance_kernel, pack_parameters, raise_reference_error
 
 #: Default internal step [s]. With the Table 1 parameters the fastest time
 #: scale of the table is the Stribeck growth rate (Fs - Fc) / (vs Ms) <= 530 1/s
@@ -92,6 +102,9 @@ class DriveAxis(Component):
         Variable("friction_force", "output", "N", 0.0, "friction force Ff (static reaction when stuck)"),
     )
 
+    #: Run the compiled kernel (True, default when numba is importable) or the numpy reference (False).
+    use_compiled: ClassVar[bool] = NUMBA_AVAILABLE
+
     # ------------------------------------------------------------------ helpers
     def _check_parameters(self) -> None:
         positive = ("mass", "torque_constant", "screw_lead", "stribeck_velocity_positive",
@@ -134,6 +147,7 @@ class DriveAxis(Component):
             velocity=np.zeros(self.batch),
             direction=np.zeros(self.batch, dtype=np.int8),
         )
+        self._params = pack_parameters(self._friction, self._mass, self._kf)
         self._publish(friction_force(self._state, self._net_force(), self._friction))
 
     def _publish(self, ff: np.ndarray) -> None:
@@ -142,8 +156,20 @@ class DriveAxis(Component):
         self.values["friction_force"][...] = ff
 
     def _do_step(self, t: float, h: float) -> None:
+        if self.use_compiled:
+            v, s = self.values, self._state
+            status = advance_kernel(v["current_cmd"], v["disturbance_force"], self._params, s.position, s.velocity,
+                                    s.direction, float(h), self._step, v["motor_force"], v["position"],
+                                    v["velocity"], v["friction_force"])
+            if status != OK:
+                raise_reference_error(s, self._net_force(), self._mass, self._friction, h, self._step, status,
+                                      self.name)
+            return
         force = self._net_force()
-        ff = advance(self._state, force, self._mass, self._friction, h, self._step)
+        try:
+            ff = advance(self._state, force, self._mass, self._friction, h, self._step)
+        except ServoError as err:
+            raise ServoError(f"{self.name}: {err}") from err
         self._publish(ff)
 
     def _reset(self) -> None:

@@ -7,6 +7,13 @@ on the ticks whose absolute index ``k = round((t - t0) / Tv)`` is a multiple
 of ``Tp / Tv``, so stepping at 250 us or at 1 ms gives identical results when
 the inputs are the same.
 
+Two implementations of one control law: by default ``do_step`` runs the
+compiled kernel :func:`fmus_src.servo.control_numba.mcu_kernel` (all ticks,
+axes and members in one call, outputs written in place); with
+``MCU.use_compiled = False`` (class or instance attribute, read at every step)
+it runs the numpy reference of :mod:`fmus_src.servo.control`. Both share the
+state block, so the switch may even be flipped between steps.
+
 Timing convention: all ticks inside one ``do_step`` use the inputs set before
 the call (values at ``t``). The outputs after the call are those of the last
 tick, i.e. the command a drive applies during the *next* communication
@@ -16,11 +23,14 @@ computation delay, as in a digital servo amplifier.
 from __future__ import annotations
 
 import math
+from typing import ClassVar
 
 import numpy as np
 
 from ..component import Component, Variable
+from ._jit import NUMBA_AVAILABLE
 from .control import CascadeGains, CascadeState, position_loop, velocity_loop
+from .control_numba import mcu_kernel
 from .errors import ServoError
 
 AXES = ("x", "y", "z")
@@ -84,6 +94,9 @@ class MCU(Component):
 
     variables = _declare()
 
+    #: Run the compiled kernel (True, default when numba is importable) or the numpy reference (False).
+    use_compiled: ClassVar[bool] = NUMBA_AVAILABLE
+
     def _stack(self, suffix: str) -> np.ndarray:
         return np.stack([np.asarray(self.values[f"{a}_{suffix}"], dtype=float) for a in AXES])
 
@@ -114,8 +127,17 @@ class MCU(Component):
             accel_ff_current=self._stack("acceleration_feedforward") * self._stack("mass") / force_per_amp,
             peak_current=self._stack("peak_current"),
         )
+        self._gain_block = self._gains.block()
         self._state = CascadeState.initial(self._stack("ref"))
+        v = self.values
+        self._kernel_io = (
+            *(v[f"{a}_ref"] for a in AXES), *(v[f"{a}_position"] for a in AXES), *(v[f"{a}_velocity"] for a in AXES),
+            v["in_position_width"], *(v[f"{a}_current_cmd"] for a in AXES), *(v[f"{a}_velocity_cmd"] for a in AXES),
+            v["in_position"],
+        )
         self._next_tick = 0
+        self._last_h: float | None = None
+        self._last_n = 0
         self._publish()
 
     def _publish(self) -> None:
@@ -125,25 +147,42 @@ class MCU(Component):
         deviation = np.abs(self._stack("ref") - self._stack("position"))
         self.values["in_position"][...] = np.all(deviation <= self.values["in_position_width"], axis=0)
 
-    def _do_step(self, t: float, h: float) -> None:
-        n = _integer_ratio(h, self._tv, "step size h", self.name)
-        if n < 1:
-            raise ServoError(f"{self.name}: step size h = {h!r} s is shorter than the velocity loop period {self._tv!r} s")
-        k0 = _integer_ratio(t - self.t0, self._tv, "t - t0", self.name)
-        if k0 != self._next_tick:
+    def _ticks(self, t: float, h: float) -> tuple[int, int]:
+        """(first tick index, number of ticks) of ``do_step(t, h)``; checks divisibility and contiguity.
+
+        Fast path for the usual case (same ``h`` as last time, ``t`` at the expected tick within
+        ``TICK_RTOL``); anything else goes through :func:`_integer_ratio` for the error message.
+        """
+        if h != self._last_h:
+            n = _integer_ratio(h, self._tv, "step size h", self.name)
+            if n < 1:
+                raise ServoError(
+                    f"{self.name}: step size h = {h!r} s is shorter than the velocity loop period {self._tv!r} s")
+            self._last_h, self._last_n = h, n
+        k0 = self._next_tick
+        elapsed = t - self.t0
+        if abs(k0 * self._tv - elapsed) > TICK_RTOL * max(abs(elapsed), self._tv):
+            k = _integer_ratio(elapsed, self._tv, "t - t0", self.name)
             raise ServoError(
-                f"{self.name}: do_step at t = {t!r} s (tick {k0}) but the controller is at tick {self._next_tick} "
-                f"(t = {self.t0 + self._next_tick * self._tv!r} s); steps must be contiguous"
+                f"{self.name}: do_step at t = {t!r} s (tick {k}) but the controller is at tick {k0} "
+                f"(t = {self.t0 + k0 * self._tv!r} s); steps must be contiguous"
             )
-        ref = self._stack("ref")
-        pos = self._stack("position")
-        vel = self._stack("velocity")
-        for k in range(k0, k0 + n):
-            if k % self._ratio == 0:
-                position_loop(self._state, self._gains, ref, pos, self._tp)
-            velocity_loop(self._state, self._gains, vel, self._tv)
+        return k0, self._last_n
+
+    def _do_step(self, t: float, h: float) -> None:
+        k0, n = self._ticks(t, h)
+        if self.use_compiled:
+            mcu_kernel(k0, n, self._ratio, self._tp, self._tv, self._gain_block, self._state.block, *self._kernel_io)
+        else:
+            ref = self._stack("ref")
+            pos = self._stack("position")
+            vel = self._stack("velocity")
+            for k in range(k0, k0 + n):
+                if k % self._ratio == 0:
+                    position_loop(self._state, self._gains, ref, pos, self._tp)
+                velocity_loop(self._state, self._gains, vel, self._tv)
+            self._publish()
         self._next_tick = k0 + n
-        self._publish()
 
     def _reset(self) -> None:
         self.__dict__.pop("_state", None)

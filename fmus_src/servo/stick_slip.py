@@ -24,6 +24,10 @@ Because friction is never evaluated across ``v = 0`` with a sign function,
 there is no chattering around zero velocity and no step-size-dependent
 friction: halving the substep changes results only by the Runge-Kutta
 truncation error (see the tests).
+
+This numpy module is the reference implementation; the components run its
+compiled, member-by-member transcription
+:func:`fmus_src.servo.stick_slip_numba.advance_kernel` by default.
 """
 from __future__ import annotations
 

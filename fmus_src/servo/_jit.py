@@ -1,0 +1,39 @@
+"""Optional numba compilation of the servo hot paths.
+
+``numba`` is a dependency of cnctwin, but ``fmus_src`` is also shipped inside
+FMUs, whose host interpreter might lack it. Without numba, :func:`njit`
+returns the plain Python function (importable, correct, slow) and
+:data:`NUMBA_AVAILABLE` is False, so the components fall back to the numpy
+reference implementation.
+
+Compiled code is cached next to the source (``__pycache__``); when no cache
+location is writable numba refuses ``cache=True`` at decoration time, and the
+function is then compiled without a cache (once per process).
+"""
+from __future__ import annotations
+
+from typing import Callable, TypeVar
+
+try:
+    import numba
+except ImportError:  # pragma: no cover - numba is a declared dependency
+    numba = None
+
+F = TypeVar("F", bound=Callable)
+
+#: True when the compiled kernels are available (``import numba`` works).
+NUMBA_AVAILABLE: bool = numba is not None
+
+
+def njit(fn: F) -> F:
+    """``numba.njit(cache=True)`` without fastmath (IEEE results equal to numpy's, operation by operation).
+
+    Falls back to an uncached compilation when no cache directory is usable,
+    and to the Python function itself when numba is missing.
+    """
+    if numba is None:  # pragma: no cover
+        return fn
+    try:
+        return numba.njit(cache=True)(fn)
+    except RuntimeError:  # "cannot cache function ...: no locator available" (read-only install)
+        return numba.njit(fn)
