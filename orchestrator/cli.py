@@ -45,7 +45,7 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
             args.system, out=args.out, native=not args.fmu, time_limit_s=args.time_limit, progress=bar
         )
     else:
-        options = TwinOptions(step=args.step * 1e-3)
+        options = TwinOptions(step=args.step * 1e-3, cutting_mode=args.cutting_mode)
         result = simulate(
             program=args.program, case=args.case, machine=args.machine, out=args.out,
             options=options, time_limit_s=args.time_limit or 3600.0, progress=bar,
@@ -83,6 +83,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, help="output folder")
     p.add_argument("--step", type=float, default=1.0, help="communication step, ms (default 1)")
     p.add_argument("--time-limit", type=float, default=None, help="simulated-time limit, s (default 3600)")
+    p.add_argument("--cutting-mode", choices=("zmap", "path"), default="zmap",
+                   help="zmap: exact material removal on a Z-map (default); path: engagement along the "
+                        "program's path computed once (faster; the axes must stay within 0.5 mm of the path)")
     p.add_argument("--system", help="run an SSP 1.0 system file (.ssd) instead of the default twin")
     p.add_argument("--fmu", action="store_true", help="with --system: load every element from its FMU")
     p.set_defaults(func=_cmd_simulate)

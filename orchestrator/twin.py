@@ -15,19 +15,21 @@ load step at the communication step and substep internally.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Mapping
+from typing import Literal, Mapping
 
 import numpy as np
 
 from fmus_src.cutting.component import CuttingLoad
+from fmus_src.cutting.path_component import PathCuttingLoad
+from fmus_src.cutting.table import EngagementTable
 from fmus_src.nck.component import NCKernel
 from fmus_src.servo.drive import DriveAxis
 from fmus_src.servo.mcu import MCU
 
 from .case import Case
-from .errors import CncTwinError
+from .errors import CncTwinError, SystemDescriptionError
 from .machine import AXES, Machine
 from .master import Probe
 from .system import System
@@ -48,11 +50,21 @@ class TwinOptions:
         Tool-tip start position, mm.
     cutting : bool
         Include the cutting-load component when the case has a stock.
+    cutting_mode : {"zmap", "path"}
+        ``"zmap"``: every batch member removes material from its own Z-map
+        stock (exact for any path). ``"path"``: the engagement along the
+        program's reference path is computed once (:func:`engagement_table`)
+        and every member reads it — for populations that differ only in F and
+        S (the optimiser); members must stay within 0.5 mm of that path.
+    engagement : EngagementTable, optional
+        A precomputed table for ``cutting_mode="path"`` (reuse it across calls).
     """
 
     step: float = 1e-3
     start_mm: tuple[float, float, float] = DEFAULT_START_MM
     cutting: bool = True
+    cutting_mode: Literal["zmap", "path"] = "zmap"
+    engagement: EngagementTable | None = field(default=None, compare=False, repr=False)
 
 
 def _declared(component_cls: type, mapping: Mapping[str, object]) -> dict[str, object]:
@@ -169,7 +181,13 @@ def build_twin(
 
     cutting = None
     if options.cutting and case.stock is not None:
-        cutting = CuttingLoad("cutting", batch=batch, **cutting_parameters(case))
+        if options.cutting_mode == "path":
+            cutting = PathCuttingLoad("cutting", batch=batch, **cutting_parameters(case))
+            cutting.attach_table(options.engagement or engagement_table(case, options))
+        elif options.cutting_mode == "zmap":
+            cutting = CuttingLoad("cutting", batch=batch, **cutting_parameters(case))
+        else:
+            raise SystemDescriptionError(f"cutting_mode must be 'zmap' or 'path', got {options.cutting_mode!r}")
         system.add(cutting, rate=1)
         for a in AXES:
             system.connect(f"{a}_drive.position", f"cutting.{a}_position")
@@ -244,3 +262,32 @@ def write_twin_ssp(case: Case, ssd_path: Path, ssv_path: Path | None = None, opt
     twin = build_twin(case, batch=1, options=options)
     settings = MasterSettings(step=twin.options.step, stop_when=twin.stop_when, limits=twin.limits or {})
     return system_to_ssp(twin.system, ssd_path, ssv_path, settings)
+
+
+def reference_path(case: Case, options: TwinOptions | None = None, program_text: str | None = None) -> np.ndarray:
+    """Tool-tip path of the nominal program (NC reference after acc/dec), m, shape (K, 3).
+
+    Samples closer than 1 µm to the previous kept one are dropped, so the
+    path is a polyline in travel order starting at the start position.
+    """
+    options = options or TwinOptions()
+    start = np.asarray(options.start_mm, dtype=float) * 1e-3
+    params = nck_parameters(case.machine)
+    params.update({f"{a}_initial": start[i] for i, a in enumerate(AXES)})
+    nck = NCKernel("nck", batch=1, program_file=str(case.program), **params)
+    if program_text is not None:
+        nck.set_program_text(program_text, str(case.program))
+    nck.setup(0.0)
+    samples = nck.plan_.position[0]
+    keep = [0]
+    for k in range(1, len(samples)):
+        if np.linalg.norm(samples[k] - samples[keep[-1]]) > 1e-6:
+            keep.append(k)
+    return samples[keep]
+
+
+def engagement_table(case: Case, options: TwinOptions | None = None, program_text: str | None = None) -> EngagementTable:
+    """Engagement along the nominal program's path, computed once (for ``cutting_mode="path"``)."""
+    if case.stock is None:
+        raise SystemDescriptionError(f"{case.program}: an engagement table needs a stock (the case has none)")
+    return EngagementTable.from_parameters(reference_path(case, options, program_text), cutting_parameters(case))

@@ -1,0 +1,171 @@
+"""``PathCuttingLoad``: the cutting load of a batch that follows one tool path, from an engagement table.
+
+Same inputs, outputs, units and mechanics as :class:`.component.CuttingLoad`,
+and the same parameters (so the twin can pass ``cutting_parameters(case)``
+unchanged) plus ``engagement_table`` and ``path_tolerance``. Instead of a
+Z-map per member, all members read one :class:`.table.EngagementTable`
+built once by a reference pass along the path (see :mod:`.table`); each
+member has its own position on the path (arc length), spindle angle, chip
+thickness (feed per tooth from its own displacement and spindle speed),
+flutes, ``Kt`` and ``Ke``. The whole batch advances in one compiled call
+(:func:`.path_kernel.path_step`).
+
+Valid when every member follows the reference path up to small deviations
+(following error, corner rounding): engagement is read at the member's
+projection on the path, so a lateral offset ``e`` changes the radial
+immersion by ``e`` that the table does not see. A member farther than
+``path_tolerance`` from the path where the table has material is an error.
+
+The table is handed over either as a Python object
+(:meth:`PathCuttingLoad.attach_table`, before ``setup``) or as an ``.npz``
+file named by the String parameter ``engagement_table`` (FMU use).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..component import Variable
+from . import path_kernel as pk
+from .component import MAX_SUBSTEPS, CuttingError, CuttingLoad
+from .table import EngagementTable
+
+#: Relative mismatch of tool radius / stock tolerated between parameters and table.
+MATCH_TOL = 1e-9
+
+_INPUTS = ("x_position", "y_position", "z_position", "spindle_speed")
+_OUTPUTS = ("fx", "fy", "fc", "fc_peak", "fx_mean", "fy_mean", "spindle_torque", "spindle_power", "mrr",
+            "spindle_angle", "axial_depth", "chip_thickness")
+
+
+class PathCuttingLoad(CuttingLoad):
+    """Cutting load of a batch on one tool path, from a shared engagement table (see module docstring).
+
+    Variables
+    ---------
+    Those of :class:`.component.CuttingLoad` plus the parameters
+    ``engagement_table`` (String, ``.npz`` path; empty when attached in Python)
+    and ``path_tolerance`` (m). ``stock_cell`` and the stock block are checked
+    against the table (they are the table's, not re-used).
+    """
+
+    variables = CuttingLoad.variables + (
+        Variable("engagement_table", "parameter", "1", "", "engagement table file (.npz) of the tool path", "String"),
+        Variable("path_tolerance", "parameter", "m", 5e-4,
+                 "largest distance of the tool from the reference path where the table has material"),
+    )
+
+    def __init__(self, name: str = "", batch: int = 1, **parameters: object) -> None:
+        self._table: EngagementTable | None = None
+        super().__init__(name, batch, **parameters)
+
+    # ------------------------------------------------------------------ packed storage
+    def _load_start_values(self) -> None:
+        """Start values, with inputs and real outputs as rows of two packed arrays (one kernel call)."""
+        super()._load_start_values()
+        self._inp = np.stack([np.asarray(self.values[n], dtype=np.float64) for n in _INPUTS])
+        self._out = np.stack([np.asarray(self.values[n], dtype=np.float64) for n in _OUTPUTS])
+        for i, n in enumerate(_INPUTS):
+            self.values[n] = self._inp[i]
+        for i, n in enumerate(_OUTPUTS):
+            self.values[n] = self._out[i]
+
+    # ------------------------------------------------------------------ table
+    def attach_table(self, table: EngagementTable) -> None:
+        """Use ``table`` (shared, not copied) for the next ``setup``; overrides ``engagement_table``."""
+        if self.state != "instantiated":
+            raise CuttingError(f"{self.name}: attach_table() must be called before setup()")
+        self._table = table
+
+    @property
+    def table(self) -> EngagementTable:
+        """The engagement table in use."""
+        if self._table is None:
+            raise CuttingError(f"{self.name}: no engagement table; call attach_table() or set engagement_table")
+        return self._table
+
+    def _check_table(self, table: EngagementTable) -> None:
+        v = self.values
+        radius = 0.5 * np.asarray(v["tool_diameter"], dtype=np.float64)
+        if not np.allclose(radius, table.radius, rtol=MATCH_TOL, atol=0.0):
+            raise CuttingError(
+                f"{self.name}.tool_diameter: {sorted(set((2 * radius).tolist()))} m; the engagement table was built "
+                f"for {2 * table.radius} m"
+            )
+        for k, a in enumerate("xyz"):
+            for side, ref in (("min", table.stock_lower[k]), ("max", table.stock_upper[k])):
+                name = f"stock_{a}_{side}"
+                got = np.asarray(v[name], dtype=np.float64)
+                if not np.allclose(got, ref, rtol=MATCH_TOL, atol=1e-12):
+                    raise CuttingError(
+                        f"{self.name}.{name}: {sorted(set(got.tolist()))} m; the engagement table was built for "
+                        f"{ref} m (rebuild the table for this stock)"
+                    )
+
+    # ------------------------------------------------------------------ lifecycle
+    def _setup(self, t0: float) -> None:
+        v = self.values
+        self._check_parameters()
+        tol = np.asarray(v["path_tolerance"], dtype=np.float64)
+        if not np.all(np.isfinite(tol) & (tol > 0)):
+            raise CuttingError(f"{self.name}.path_tolerance: {tol.tolist()}; expected a positive length in m")
+        if self._table is None:
+            fname = str(v["engagement_table"])
+            if not fname:
+                raise CuttingError(f"{self.name}: no engagement table; call attach_table() or set engagement_table "
+                                   "to an .npz written by EngagementTable.save")
+            self._table = EngagementTable.load(fname)
+        table = self._table
+        self._check_table(table)
+        position = self._position()
+        self._par = np.stack([
+            0.5 * np.asarray(v["tool_diameter"], dtype=np.float64),
+            np.asarray(v["flutes"], dtype=np.float64),
+            np.asarray(v["kt"], dtype=np.float64),
+            np.asarray(v["ke"], dtype=np.float64),
+            np.asarray(v["angle_steps_per_tooth"], dtype=np.float64),
+        ])
+        self._st = np.zeros((7, self.batch))
+        theta = np.mod(np.asarray(v["initial_spindle_angle"], dtype=np.float64), 2.0 * math.pi)
+        self._st[pk.ST_THETA] = theta
+        self._st[pk.ST_X:pk.ST_Z + 1] = position.T
+        for m in range(self.batch):  # global search once: nearest point, smallest s among ties
+            seg, s, dist = pk.locate(position[m, 0], position[m, 1], position[m, 2], 0, 0.0, math.inf,
+                                     table.vertices, table.vertex_s)
+            self._st[pk.ST_SEG, m] = seg
+            self._st[pk.ST_S, m] = s
+            self._st[pk.ST_DIST, m] = dist
+        self._tolerance = float(tol.min())
+        self._margin = max(4.0 * table.spacing, 1e-4)
+        self._out[...] = 0.0
+        self._out[pk.OUT_ANGLE] = theta
+        v["engaged_teeth"][...] = 0
+
+    def _reset(self) -> None:
+        self.__dict__.pop("_st", None)
+
+    # ------------------------------------------------------------------ step
+    def _do_step(self, t: float, h: float) -> None:
+        tb = self._table
+        code = pk.path_step(
+            h, self._inp, self._par, self._st, self._out, self.values["engaged_teeth"], tb.vertices, tb.vertex_s,
+            tb.spacing, tb.count, tb.alpha, tb.beta, tb.top, tb.z_floor, self._margin, self._tolerance, MAX_SUBSTEPS,
+        )
+        if code:
+            self._raise(code, h)
+
+    def _raise(self, code: int, h: float) -> None:
+        kind, m = divmod(int(code), pk.ERROR_BASE)
+        p = self._inp[:3, m].tolist()
+        if kind == pk.ERR_NONFINITE:
+            raise CuttingError(f"{self.name}: tool position/spindle speed of member {m} is {p}, "
+                               f"{self._inp[3, m]}; expected finite values")
+        if kind == pk.ERR_SUBSTEPS:
+            raise CuttingError(f"{self.name}: step of {h} s of member {m} needs more than {MAX_SUBSTEPS} substeps "
+                               f"(spindle speed {self._inp[3, m]:.4g} rad/s, position {p} m)")
+        raise CuttingError(
+            f"{self.name}: member {m} at {p} m is farther than path_tolerance = {self._tolerance} m from the "
+            f"engagement table's path (last projection at s = {self._st[pk.ST_S, m]:.6g} m); expected every member "
+            "to follow the reference path"
+        )

@@ -1,0 +1,443 @@
+"""Compiled (numba) step of the path mode: all members, one communication step.
+
+Used by :class:`.path_component.PathCuttingLoad`; the mechanics are those of
+:mod:`.force` and the time discretisation that of :mod:`.kernel`, with the
+engagement read from an :class:`.table.EngagementTable` instead of the Z-map.
+
+Per member and step ``[t, t + h]``:
+
+1. **Where on the path** — the new position is projected onto the reference
+   polyline, searching forward from the member's cursor (its current segment
+   and arc length ``s``) over an arc-length window ``2 |dp| + margin``;
+   ``s`` never decreases (a reversal on the same line is not mistaken for the
+   way back), among equally near candidates the smallest ``s`` wins.
+2. **Substeps** — as the Z-map mode, per member: the spindle turns at most
+   ``pitch / angle_steps_per_tooth`` (and at most ``pi / 2``) and the tool
+   moves at most ``R / 20`` per substep; ``s`` and the tip height are linear
+   in time over the step.
+3. **Means** — in each substep the table is read at the substep mid-point
+   (intervals linearly interpolated between stations when the two stations
+   have the same interval structure, else the nearest station); each tooth
+   sweeps ``[phi_a, phi_b]``; its intersection with every engagement interval
+   is integrated in closed form (chip thickness clipped at zero), so entry and
+   exit angles are exact to the table, with no sampling of the jumps.
+4. **Peak** — ``Fc`` at the ``n`` substep instants (table at each instant)
+   and at every entry/exit instant inside a substep (engaged side), as the
+   Z-map mode.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ._jit import njit
+from .kernel import OMEGA_FLOOR
+
+TWO_PI = 2.0 * math.pi
+#: An immersion angle within this of an interval end counts as inside, rad.
+INCLUSIVE_TOL = 1e-9
+#: Largest boundary change between stations that is still interpolated, rad.
+MAX_INTERP_JUMP = 0.5
+#: Tops closer than this are the same interval when interpolating, m.
+INTERP_TOP_TOL = 1e-7
+#: Distance margin below which two projection candidates tie (smallest s wins), m.
+TIE_TOL = 1e-9
+
+#: Error kinds returned by :func:`path_step` (``kind * ERROR_BASE + member``).
+ERR_NONFINITE, ERR_SUBSTEPS, ERR_OFF_PATH = 1, 2, 3
+ERROR_BASE = 1 << 32
+
+#: Rows of the output array of :func:`path_step`.
+OUT_FX, OUT_FY, OUT_FC, OUT_PEAK, OUT_FX_MEAN, OUT_FY_MEAN, OUT_TORQUE, OUT_POWER, OUT_MRR, OUT_ANGLE, \
+    OUT_DEPTH, OUT_CHIP = range(12)
+#: Rows of the state array: spindle angle, previous position (3), arc length, segment, last distance to path.
+ST_THETA, ST_X, ST_Y, ST_Z, ST_S, ST_SEG, ST_DIST = range(7)
+#: Rows of the parameter array.
+PAR_RADIUS, PAR_FLUTES, PAR_KT, PAR_KE, PAR_STEPS = range(5)
+
+
+@njit
+def _pair(
+    i: int, j: int, u: float, count: np.ndarray, alpha: np.ndarray, beta: np.ndarray, top: np.ndarray,
+    out_a: np.ndarray, out_b: np.ndarray, out_t: np.ndarray, write: bool,
+) -> int:
+    """Boundaries linear in ``u`` through stations ``i`` (u = 0) and ``j`` (u = 1), tops of station ``i``.
+
+    ``u`` outside ``[0, 1]`` extrapolates; intervals that close up are dropped. Returns -1 when the
+    two stations do not have the same interval structure (count, tops, boundaries within
+    :data:`MAX_INTERP_JUMP`).
+    """
+    c = count[i]
+    if count[j] != c:
+        return -1
+    for k in range(c):
+        if (abs(top[i, k] - top[j, k]) > INTERP_TOP_TOL or abs(alpha[i, k] - alpha[j, k]) > MAX_INTERP_JUMP
+                or abs(beta[i, k] - beta[j, k]) > MAX_INTERP_JUMP):
+            return -1
+    n = 0
+    prev_b = -math.inf
+    first_a = math.inf
+    for k in range(c):
+        a = alpha[i, k] + u * (alpha[j, k] - alpha[i, k])
+        b = beta[i, k] + u * (beta[j, k] - beta[i, k])
+        if b > a:
+            if a < prev_b:  # extrapolated intervals overlap: not usable
+                return -1
+            prev_b = b
+            first_a = min(first_a, a)
+            if write:
+                out_a[n] = a
+                out_b[n] = b
+                out_t[n] = top[i, k] + min(max(u, 0.0), 1.0) * (top[j, k] - top[i, k])
+            n += 1
+    if n > 1 and prev_b > first_a + TWO_PI:
+        return -1
+    return n
+
+
+@njit
+def table_at(
+    s: float, ds: float, count: np.ndarray, alpha: np.ndarray, beta: np.ndarray, top: np.ndarray,
+    out_a: np.ndarray, out_b: np.ndarray, out_t: np.ndarray,
+) -> int:
+    """Engagement intervals at arc length ``s`` into ``out_*``; returns their number.
+
+    Between stations ``i`` and ``i + 1`` with the same interval structure the
+    boundaries are interpolated linearly. Where the structure changes between
+    them (an interval appears, vanishes or splits) one side is extrapolated
+    linearly from its outer neighbour: the side that keeps more intervals open
+    at ``s`` (so an interval that opens or closes between two stations does so
+    at the extrapolated place), the nearer one on a tie; the nearest station is
+    used when neither side is consistent (different structure, or
+    extrapolated intervals that would overlap).
+    """
+    last = count.shape[0] - 1
+    x = s / ds
+    i = int(math.floor(x))
+    if i < 0:
+        i = 0
+        x = 0.0
+    if i >= last:
+        i = last
+        u = 0.0
+    else:
+        u = x - i
+    if u > 0.0:
+        n = _pair(i, i + 1, u, count, alpha, beta, top, out_a, out_b, out_t, True)
+        if n >= 0:
+            return n
+        # structure changes between the stations: extrapolate the side that keeps more intervals open
+        n_lo = _pair(i, i - 1, -u, count, alpha, beta, top, out_a, out_b, out_t, False) if i >= 1 else -1
+        n_hi = _pair(i + 1, i + 2, u - 1.0, count, alpha, beta, top, out_a, out_b, out_t, False) \
+            if i + 2 <= last else -1
+        use_lo = n_lo > n_hi or (n_lo == n_hi and u < 0.5)
+        if use_lo and n_lo >= 0:
+            return _pair(i, i - 1, -u, count, alpha, beta, top, out_a, out_b, out_t, True)
+        if not use_lo and n_hi >= 0:
+            return _pair(i + 1, i + 2, u - 1.0, count, alpha, beta, top, out_a, out_b, out_t, True)
+        if u >= 0.5:
+            i = i + 1
+    c = count[i]
+    for k in range(c):
+        out_a[k] = alpha[i, k]
+        out_b[k] = beta[i, k]
+        out_t[k] = top[i, k]
+    return c
+
+
+@njit
+def locate(
+    px: float, py: float, pz: float, seg0: int, s_cur: float, reach: float, verts: np.ndarray, vs: np.ndarray,
+) -> tuple[int, float, float]:
+    """Nearest point of the polyline at arc length in ``[s_cur, s_cur + reach]`` (see module docstring).
+
+    Returns
+    -------
+    seg : int
+        Segment of the nearest point.
+    s : float
+        Its arc length, m.
+    dist : float
+        Distance from ``p`` to it, m.
+    """
+    nv = verts.shape[0]
+    if nv == 1:
+        return 0, 0.0, math.sqrt((px - verts[0, 0]) ** 2 + (py - verts[0, 1]) ** 2 + (pz - verts[0, 2]) ** 2)
+    best_d = math.inf
+    best_s = s_cur
+    best_seg = seg0
+    seg = seg0
+    while seg < nv - 1:
+        s_a = vs[seg]
+        if s_a > s_cur + reach:
+            break
+        length = vs[seg + 1] - s_a
+        ax, ay, az = verts[seg, 0], verts[seg, 1], verts[seg, 2]
+        dx, dy, dz = verts[seg + 1, 0] - ax, verts[seg + 1, 1] - ay, verts[seg + 1, 2] - az
+        u = ((px - ax) * dx + (py - ay) * dy + (pz - az) * dz) / (length * length)
+        u_min = max((s_cur - s_a) / length, 0.0)
+        u = min(max(u, u_min), 1.0)
+        d = math.sqrt((px - ax - u * dx) ** 2 + (py - ay - u * dy) ** 2 + (pz - az - u * dz) ** 2)
+        if d < best_d - TIE_TOL:
+            best_d = d
+            best_s = s_a + u * length
+            best_seg = seg
+        seg += 1
+    return best_seg, best_s, best_d
+
+
+@njit
+def _add_integral(
+    kt: float, ke: float, depth: float, dx: float, dy: float, pa: float, pb: float, radius: float, omega: float,
+    scale: float, acc: np.ndarray,
+) -> None:
+    """``acc += scale * integral over [pa, pb] of (Fx, Fy, torque, MRR) d phi`` (as :func:`.force.interval_mean_quantities`)."""
+    h_a = dx * math.sin(pa) + dy * math.cos(pa)
+    h_b = dx * math.sin(pb) + dy * math.cos(pb)
+    if h_a < 0.0 and h_b < 0.0:
+        return
+    psi = math.atan2(dy, dx)
+    zero = pa + ((-psi - pa) % math.pi)
+    lo = pa if (h_a >= 0.0 or h_b < 0.0) else min(zero, pb)
+    if h_b >= 0.0:
+        hi = pb
+    elif h_a > 0.0:
+        hi = min(zero, pb)
+    else:
+        hi = pa
+    if hi <= lo:
+        return
+    s_lo, c_lo, s_hi, c_hi = math.sin(lo), math.cos(lo), math.sin(hi), math.cos(hi)
+    s2_lo, s2_hi = 2.0 * s_lo * c_lo, 2.0 * s_hi * c_hi
+    i_hcos = dx * 0.5 * (s_hi * s_hi - s_lo * s_lo) + dy * (0.5 * (hi - lo) + 0.25 * (s2_hi - s2_lo))
+    i_hsin = dx * (0.5 * (hi - lo) - 0.25 * (s2_hi - s2_lo)) + dy * 0.5 * (s_hi * s_hi - s_lo * s_lo)
+    i_h = -dx * (c_hi - c_lo) + dy * (s_hi - s_lo)
+    k = scale * kt * depth
+    acc[0] += -k * (i_hcos + ke * i_hsin)
+    acc[1] += k * (i_hsin - ke * i_hcos)
+    acc[2] += k * radius * i_h
+    acc[3] += scale * depth * radius * omega * i_h
+
+
+@njit
+def _depth_at(phi: float, ia: np.ndarray, ib: np.ndarray, it: np.ndarray, cnt: int, bottom: float) -> float:
+    """Axial depth at immersion angle ``phi`` in ``[0, 2 pi)`` (0 in air); interval ends inclusive."""
+    best = 0.0
+    for k in range(cnt):
+        a = ia[k]
+        b = ib[k]
+        inside = (a - INCLUSIVE_TOL <= phi <= b + INCLUSIVE_TOL) or (phi + TWO_PI <= b + INCLUSIVE_TOL) \
+            or (phi - TWO_PI >= a - INCLUSIVE_TOL)
+        if inside:
+            d = it[k] - bottom
+            if d > best:
+                best = d
+    return best
+
+
+@njit
+def force_at(
+    phi0: float, flutes: int, pitch: float, ia: np.ndarray, ib: np.ndarray, it: np.ndarray, cnt: int, bottom: float,
+    fxt: float, fyt: float, kt: float, ke: float,
+) -> tuple[float, float, float, float, int]:
+    """Force on the tool at one instant (tooth 0 at ``phi0``).
+
+    Returns
+    -------
+    fx, fy : float
+        Force on the tool, N.
+    depth, chip : float
+        Largest axial depth and chip thickness over engaged teeth, m.
+    engaged : int
+        Teeth in material with a positive chip.
+    """
+    fx = 0.0
+    fy = 0.0
+    dmax = 0.0
+    hmax = 0.0
+    n_in = 0
+    if cnt == 0:
+        return fx, fy, dmax, hmax, n_in
+    for j in range(flutes):
+        phi = phi0 + j * pitch
+        phi = phi - math.floor(phi / TWO_PI) * TWO_PI
+        s = math.sin(phi)
+        c = math.cos(phi)
+        hc = fxt * s + fyt * c
+        if not hc > 0.0:
+            continue
+        d = _depth_at(phi, ia, ib, it, cnt, bottom)
+        if d > 0.0:
+            ft = kt * d * hc
+            fr = ke * ft
+            fx += -ft * c - fr * s
+            fy += ft * s - fr * c
+            dmax = max(dmax, d)
+            hmax = max(hmax, hc)
+            n_in += 1
+    return fx, fy, dmax, hmax, n_in
+
+
+@njit
+def path_step(
+    h: float, inp: np.ndarray, par: np.ndarray, st: np.ndarray, out: np.ndarray, engaged: np.ndarray,
+    verts: np.ndarray, vs: np.ndarray, ds: float, count: np.ndarray, alpha: np.ndarray, beta: np.ndarray,
+    top: np.ndarray, z_floor: float, reach_margin: float, tolerance: float, max_substeps: int,
+) -> int:
+    """Advance every member by one step ``h`` (see module docstring); write outputs and state in place.
+
+    Parameters
+    ----------
+    h : float
+        Step, s.
+    inp : ndarray, shape (4, B)
+        Tool-tip x, y, z at ``t + h`` (m) and spindle speed (rad/s).
+    par : ndarray, shape (5, B)
+        Radius (m), flutes, Kt (N/m2), Ke, angle steps per tooth.
+    st : ndarray, shape (7, B)
+        State (rows ``ST_*``), updated.
+    out : ndarray, shape (12, B)
+        Outputs (rows ``OUT_*``; forces on the **workpiece**), written.
+    engaged : ndarray of int64, shape (B,)
+        Engaged teeth at ``t + h``, written.
+    verts, vs, ds, count, alpha, beta, top, z_floor
+        The :class:`.table.EngagementTable` arrays.
+    reach_margin : float
+        Arc-length margin of the forward search, m.
+    tolerance : float
+        Largest distance to the path where the table has material, m.
+    max_substeps : int
+        Refuse steps needing more substeps.
+
+    Returns
+    -------
+    int
+        0, or ``kind * ERROR_BASE + member`` for the first failing member
+        (kinds ``ERR_*``); members after it are not advanced.
+    """
+    batch = inp.shape[1]
+    kmax = alpha.shape[1]
+    ia = np.empty(kmax)
+    ib = np.empty(kmax)
+    it = np.empty(kmax)
+    ja = np.empty(kmax)
+    jb = np.empty(kmax)
+    jt = np.empty(kmax)
+    acc = np.zeros(4)
+    for m in range(batch):
+        x1, y1, z1 = inp[0, m], inp[1, m], inp[2, m]
+        om = max(inp[3, m], 0.0)
+        if not (math.isfinite(x1) and math.isfinite(y1) and math.isfinite(z1) and math.isfinite(om)):
+            return ERR_NONFINITE * ERROR_BASE + m
+        radius = par[PAR_RADIUS, m]
+        flutes = int(par[PAR_FLUTES, m])
+        kt = par[PAR_KT, m]
+        ke = par[PAR_KE, m]
+        steps = par[PAR_STEPS, m]
+        x0, y0, z0 = st[ST_X, m], st[ST_Y, m], st[ST_Z, m]
+        ddx, ddy, ddz = x1 - x0, y1 - y0, z1 - z0
+        move = math.sqrt(ddx * ddx + ddy * ddy)
+        s0 = st[ST_S, m]
+        reach = 2.0 * math.sqrt(move * move + ddz * ddz) + reach_margin
+        seg, s1, dist = locate(x1, y1, z1, int(st[ST_SEG, m]), s0, reach, verts, vs)
+        pitch = TWO_PI / flutes
+        n_angle = math.ceil(om * h / min(pitch / steps, 0.5 * math.pi) - 1e-9)
+        n_move = math.ceil(move / (0.05 * radius) - 1e-9)
+        n = int(max(1.0, n_angle, n_move))
+        if n > max_substeps:
+            return ERR_SUBSTEPS * ERROR_BASE + m
+        period = TWO_PI / (flutes * max(om, OMEGA_FLOOR))
+        fxt = ddx / h * period
+        fyt = ddy / h * period
+        theta0 = st[ST_THETA, m]
+        span = om * h / n
+        acc[:] = 0.0
+        peak = 0.0
+        f_end_x = 0.0
+        f_end_y = 0.0
+        d_end = 0.0
+        h_end = 0.0
+        n_end = 0
+        any_material = False
+        for k in range(n):
+            f_mid = (k + 0.5) / n
+            s_mid = s0 + f_mid * (s1 - s0)
+            bottom = max(z0 + f_mid * ddz, z_floor)
+            cm = table_at(s_mid, ds, count, alpha, beta, top, ia, ib, it)
+            if cm > 0:
+                any_material = True
+                phi_k = theta0 + om * h * k / n
+                if span < 1e-9:
+                    for j in range(flutes):
+                        phi = phi_k + 0.5 * span + j * pitch
+                        phi = phi - math.floor(phi / TWO_PI) * TWO_PI
+                        d = _depth_at(phi, ia, ib, it, cm, bottom)
+                        hc = fxt * math.sin(phi) + fyt * math.cos(phi)
+                        if d > 0.0 and hc > 0.0:
+                            ft = kt * d * hc
+                            acc[0] += -ft * math.cos(phi) - ke * ft * math.sin(phi)
+                            acc[1] += ft * math.sin(phi) - ke * ft * math.cos(phi)
+                            acc[2] += ft * radius
+                            acc[3] += hc * d * radius * om
+                else:
+                    for j in range(flutes):
+                        pa = phi_k + j * pitch
+                        pa = pa - math.floor(pa / TWO_PI) * TWO_PI
+                        pb = pa + span
+                        for q in range(cm):
+                            depth = it[q] - bottom
+                            if not depth > 0.0:
+                                continue
+                            for shift in (-TWO_PI, 0.0, TWO_PI):
+                                lo = max(pa, ia[q] + shift)
+                                hi = min(pb, ib[q] + shift)
+                                if not hi > lo:
+                                    continue
+                                _add_integral(kt, ke, depth, fxt, fyt, lo, hi, radius, om, 1.0 / span, acc)
+                                # both ends of the engaged stretch (engaged side): entry/exit instants,
+                                # and boundaries that move past a substep end between two frozen tables
+                                # (not the step start t: it belongs to the previous step)
+                                for edge in (lo, hi):
+                                    if edge == pa and k == 0:
+                                        continue
+                                    if fxt * math.sin(edge) + fyt * math.cos(edge) > 0.0:
+                                        fx, fy, _, _, _ = force_at(edge - j * pitch, flutes, pitch, ia, ib, it, cm,
+                                                                   bottom, fxt, fyt, kt, ke)
+                                        peak = max(peak, math.sqrt(fx * fx + fy * fy))
+            # the instant t + (k + 1) h / n
+            f1 = (k + 1.0) / n
+            cj = table_at(s0 + f1 * (s1 - s0), ds, count, alpha, beta, top, ja, jb, jt)
+            if cj > 0:
+                any_material = True
+                fx, fy, dm, hm, ne = force_at(theta0 + om * h * f1, flutes, pitch, ja, jb, jt, cj,
+                                              max(z0 + f1 * ddz, z_floor), fxt, fyt, kt, ke)
+            else:
+                fx, fy, dm, hm, ne = 0.0, 0.0, 0.0, 0.0, 0
+            peak = max(peak, math.sqrt(fx * fx + fy * fy))
+            if k == n - 1:
+                f_end_x, f_end_y, d_end, h_end, n_end = fx, fy, dm, hm, ne
+        if any_material and dist > tolerance:
+            return ERR_OFF_PATH * ERROR_BASE + m
+        out[OUT_FX, m] = -f_end_x
+        out[OUT_FY, m] = -f_end_y
+        out[OUT_FC, m] = math.sqrt(f_end_x * f_end_x + f_end_y * f_end_y)
+        out[OUT_PEAK, m] = peak
+        out[OUT_FX_MEAN, m] = -acc[0] / n
+        out[OUT_FY_MEAN, m] = -acc[1] / n
+        out[OUT_TORQUE, m] = acc[2] / n
+        out[OUT_POWER, m] = acc[2] / n * om
+        out[OUT_MRR, m] = acc[3] / n
+        out[OUT_DEPTH, m] = d_end
+        out[OUT_CHIP, m] = h_end
+        engaged[m] = n_end
+        theta = (theta0 + om * h) % TWO_PI
+        out[OUT_ANGLE, m] = theta
+        st[ST_THETA, m] = theta
+        st[ST_X, m] = x1
+        st[ST_Y, m] = y1
+        st[ST_Z, m] = z1
+        st[ST_S, m] = s1
+        st[ST_SEG, m] = seg
+        st[ST_DIST, m] = dist
+    return 0

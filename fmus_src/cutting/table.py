@@ -1,0 +1,451 @@
+"""Engagement table: the cutter–workpiece engagement along a tool path, computed once.
+
+A GA population runs ONE program with different F and S per line: every
+member follows the same tool path, only the timing differs. The engagement
+geometry met by a tooth at immersion angle ``phi`` when the tool centre is at
+arc length ``s`` on the path does not depend on the timing, so it is computed
+once, in a *reference pass*, and shared by all members
+(:class:`~.path_component.PathCuttingLoad`).
+
+Reference pass
+--------------
+The tool is moved along the path through stations ``s_i = i ds`` (uniform
+3D arc length, ``ds`` about 0.01-0.05 mm). At each station the material is
+exactly what :class:`~.component.CuttingLoad` sees when its tool is there:
+the Z-map (:class:`.stock.ZMapStock`) minus the committed old path, minus the
+recent path kept exactly as a polyline (:class:`.engagement.SweptPath`, same
+spacing and lag, same rim tolerance). The top of material ``top(phi)`` at the
+periphery point ``C + R (sin phi, cos phi)`` is sampled at ``angle_samples``
+angles per revolution; runs of samples in material (``top`` above the tool
+tip) with the same top (within :data:`TOP_TOL`) form *engagement intervals*
+``[alpha, beta]`` with one material top each; the boundaries are refined by
+bisection to :data:`BISECTION_STEPS` halvings of the sample spacing
+(1e-11 rad at 360 samples). Slivers narrower than the sample spacing between
+two samples in air are not seen.
+
+Representation
+--------------
+Per station at most ``max_intervals`` intervals (more are merged across the
+smallest gaps, top length-weighted), sorted by ``alpha``, with
+``0 <= alpha < 2 pi`` and ``alpha < beta <= alpha + 2 pi``. A member's axial
+depth is ``top - max(z_tip, z_min)`` with its own tip height, so small z
+deviations from the reference pass are honoured.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Mapping
+
+import numpy as np
+
+from ._jit import njit
+from .component import PATH_SPACING, CuttingError, CuttingLoad
+from .engagement import RIM_TOL, SweptPath
+from .stock import ZMapStock
+
+#: Tops closer than this are one interval, m.
+TOP_TOL = 1e-7
+#: Bisection halvings of the sample spacing when locating an interval boundary.
+BISECTION_STEPS = 32
+#: Consecutive path points closer than this are merged, m.
+DUPLICATE_TOL = 1e-12
+TWO_PI = 2.0 * math.pi
+
+
+# ---------------------------------------------------------------------------- geometry kernels
+@njit
+def zmap_top(heights: np.ndarray, x0: float, y0: float, dx: float, dy: float, px: float, py: float) -> float:
+    """Height of the Z-map cell containing ``(px, py)``, m (``-inf`` outside), as ``ZMapStock.sample``."""
+    fx = math.floor((px - x0) / dx)
+    fy = math.floor((py - y0) / dy)
+    if fx < 0 or fy < 0 or fx >= heights.shape[0] or fy >= heights.shape[1]:
+        return -math.inf
+    return float(heights[int(fx), int(fy)])
+
+
+@njit
+def sweep_cover_z(
+    px: float, py: float, ax: float, ay: float, az: float, bx: float, by: float, bz: float, radius: float, tol: float
+) -> float:
+    """Lowest tip height of a disc swept from A to B over ``(px, py)``, m; ``inf`` if not covered.
+
+    Scalar transcription of :func:`.stock.disc_sweep_cover`.
+    """
+    dx = bx - ax
+    dy = by - ay
+    wx = ax - px
+    wy = ay - py
+    qa = dx * dx + dy * dy
+    qb = 2.0 * (wx * dx + wy * dy)
+    qc = wx * wx + wy * wy - radius * radius
+    length = math.sqrt(qa)
+    if length > max(tol, 1e-15):
+        disc = qb * qb - 4.0 * qa * qc
+        if not disc > 0.0:
+            return math.inf
+        root = math.sqrt(disc)
+        s_lo = min(max((-qb - root) / (2.0 * qa), 0.0), 1.0)
+        s_hi = min(max((-qb + root) / (2.0 * qa), 0.0), 1.0)
+        if (s_hi - s_lo) * length > tol:
+            dz = bz - az
+            return min(az + s_lo * dz, az + s_hi * dz)
+        return math.inf
+    covered = qc < -2.0 * radius * tol if tol > 0.0 else qc < 0.0
+    return min(az, bz) if covered else math.inf
+
+
+@njit
+def material_top(
+    heights: np.ndarray, grid: np.ndarray, seg_a: np.ndarray, seg_b: np.ndarray, nseg: int,
+    tail: np.ndarray, cx: float, cy: float, cz: float, radius: float, bottom: float, phi: float,
+) -> float:
+    """Top of material at the periphery point of angle ``phi``, m (as :func:`.engagement.tooth_depth`).
+
+    ``grid = (x0, y0, dx, dy)``; the near field is ``nseg`` segments
+    ``seg_a -> seg_b`` plus the open segment ``tail -> C``. Returns the Z-map
+    height where it is not above ``bottom`` (no material), otherwise the
+    minimum of the Z-map height and the near-field sweep.
+    """
+    px = cx + radius * math.sin(phi)
+    py = cy + radius * math.cos(phi)
+    top = zmap_top(heights, grid[0], grid[1], grid[2], grid[3], px, py)
+    if not top > bottom:
+        return top
+    for k in range(nseg):
+        z = sweep_cover_z(px, py, seg_a[k, 0], seg_a[k, 1], seg_a[k, 2], seg_b[k, 0], seg_b[k, 1], seg_b[k, 2],
+                          radius, RIM_TOL)
+        if z < top:
+            top = z
+    z = sweep_cover_z(px, py, tail[0], tail[1], tail[2], cx, cy, cz, radius, RIM_TOL)
+    return min(top, z)
+
+
+@njit
+def _same(top_a: float, top_b: float, bottom: float) -> bool:
+    """Same engagement state: both in air, or both in material with equal tops (TOP_TOL)."""
+    in_a = top_a > bottom
+    in_b = top_b > bottom
+    if in_a != in_b:
+        return False
+    return (not in_a) or abs(top_a - top_b) <= TOP_TOL
+
+
+@njit
+def station_intervals(
+    heights: np.ndarray, grid: np.ndarray, seg_a: np.ndarray, seg_b: np.ndarray, nseg: int, tail: np.ndarray,
+    cx: float, cy: float, cz: float, radius: float, bottom: float, samples: int,
+    out_alpha: np.ndarray, out_beta: np.ndarray, out_top: np.ndarray,
+) -> int:
+    """Engagement intervals of one station (unsorted, unmerged); returns how many were written.
+
+    ``out_*`` must hold at least ``samples`` entries.
+    """
+    step = TWO_PI / samples
+    tops = np.empty(samples)
+    any_in = False
+    for m in range(samples):
+        tops[m] = material_top(heights, grid, seg_a, seg_b, nseg, tail, cx, cy, cz, radius, bottom, m * step)
+        if tops[m] > bottom:
+            any_in = True
+    if not any_in:
+        return 0
+    # first sample that starts a new run (a state change from the previous sample, cyclically)
+    m0 = -1
+    for m in range(samples):
+        if not _same(tops[m - 1], tops[m], bottom):  # tops[-1] is the last sample
+            m0 = m
+            break
+    if m0 < 0:  # one state all round: full circle
+        acc = 0.0
+        for m in range(samples):
+            acc += tops[m]
+        out_alpha[0] = 0.0
+        out_beta[0] = TWO_PI
+        out_top[0] = acc / samples
+        return 1
+    count = 0
+    start_angle = 0.0
+    run_sum = 0.0
+    run_n = 0
+    for i in range(samples + 1):
+        m = (m0 + i) % samples
+        prev = (m0 + i - 1) % samples
+        if i > 0 and i < samples and _same(tops[prev], tops[m], bottom):
+            run_sum += tops[m]
+            run_n += 1
+            continue
+        # boundary between prev and m (angles unwrapped from the start of the sweep)
+        lo = (m0 + i - 1) * step
+        hi = lo + step
+        ref = tops[prev]
+        for _ in range(BISECTION_STEPS):
+            mid = 0.5 * (lo + hi)
+            t_mid = material_top(heights, grid, seg_a, seg_b, nseg, tail, cx, cy, cz, radius, bottom, mid)
+            if _same(ref, t_mid, bottom):
+                lo = mid
+            else:
+                hi = mid
+        edge = 0.5 * (lo + hi)
+        if i > 0 and run_n > 0 and tops[prev] > bottom:  # close the run that ended at prev
+            a = start_angle % TWO_PI
+            out_alpha[count] = a
+            out_beta[count] = a + (edge - start_angle)
+            out_top[count] = run_sum / run_n
+            count += 1
+        start_angle = edge
+        run_sum = tops[m]
+        run_n = 1
+    return count
+
+
+def _merge(alpha: np.ndarray, beta: np.ndarray, top: np.ndarray, limit: int) -> tuple[np.ndarray, ...]:
+    """Sort intervals by alpha; merge across the smallest gaps until at most ``limit`` remain."""
+    order = np.argsort(alpha, kind="stable")
+    a, b, t = list(alpha[order]), list(beta[order]), list(top[order])
+    while len(a) > limit:
+        gaps = [a[i + 1] - b[i] for i in range(len(a) - 1)]
+        i = int(np.argmin(gaps))
+        la, lb = b[i] - a[i], b[i + 1] - a[i + 1]
+        t[i] = (t[i] * la + t[i + 1] * lb) / (la + lb)
+        b[i] = b[i + 1]
+        del a[i + 1], b[i + 1], t[i + 1]
+    return np.array(a), np.array(b), np.array(t)
+
+
+# ---------------------------------------------------------------------------- the table
+@dataclass(frozen=True)
+class EngagementTable:
+    """Engagement intervals along a tool path (see module docstring).
+
+    Attributes
+    ----------
+    vertices : ndarray, shape (V, 3)
+        Reference tool-tip path (consecutive duplicates removed), work coordinates, m.
+    vertex_s : ndarray, shape (V,)
+        3D arc length at each vertex, m (``vertex_s[0] = 0``).
+    spacing : float
+        Station spacing ``ds``, m (stations at ``s_i = i ds``, the last one at the path end).
+    count : ndarray of int, shape (S,)
+        Engagement intervals per station.
+    alpha, beta : ndarray, shape (S, K)
+        Interval start and end angles, rad (``phi`` clockwise from +y, see :mod:`.engagement`).
+    top : ndarray, shape (S, K)
+        Top of material over each interval, m.
+    radius : float
+        Tool radius the table was built for, m.
+    z_floor : float
+        Stock ``z_min``, m (axial depth is measured from ``max(z_tip, z_floor)``).
+    stock_lower, stock_upper : ndarray, shape (3,)
+        Stock block, m.
+    stock_cell : float
+        Z-map cell edge of the reference pass, m.
+    """
+
+    vertices: np.ndarray
+    vertex_s: np.ndarray
+    spacing: float
+    count: np.ndarray
+    alpha: np.ndarray
+    beta: np.ndarray
+    top: np.ndarray
+    radius: float
+    z_floor: float
+    stock_lower: np.ndarray
+    stock_upper: np.ndarray
+    stock_cell: float
+
+    @property
+    def length(self) -> float:
+        """Path length, m."""
+        return float(self.vertex_s[-1])
+
+    @property
+    def stations(self) -> int:
+        """Number of stations."""
+        return int(self.count.shape[0])
+
+    @property
+    def nbytes(self) -> int:
+        """Memory held by the table arrays, bytes."""
+        return int(sum(a.nbytes for a in (self.vertices, self.vertex_s, self.count, self.alpha, self.beta, self.top)))
+
+    def save(self, path: str | Path) -> None:
+        """Write the table to a ``.npz`` file."""
+        np.savez_compressed(
+            path, vertices=self.vertices, vertex_s=self.vertex_s, spacing=self.spacing, count=self.count,
+            alpha=self.alpha, beta=self.beta, top=self.top, radius=self.radius, z_floor=self.z_floor,
+            stock_lower=self.stock_lower, stock_upper=self.stock_upper, stock_cell=self.stock_cell,
+        )
+
+    @classmethod
+    def load(cls, path: str | Path) -> "EngagementTable":
+        """Read a table written by :meth:`save`.
+
+        Raises
+        ------
+        CuttingError
+            If the file is missing or lacks a field.
+        """
+        try:
+            with np.load(path) as z:
+                f = {k: z[k] for k in z.files}
+        except OSError as exc:
+            raise CuttingError(f"engagement table {path}: cannot read ({exc}); expected an .npz from "
+                               "EngagementTable.save") from None
+        names = ("vertices", "vertex_s", "spacing", "count", "alpha", "beta", "top", "radius", "z_floor",
+                 "stock_lower", "stock_upper", "stock_cell")
+        missing = [n for n in names if n not in f]
+        if missing:
+            raise CuttingError(f"engagement table {path}: missing {missing}; expected an .npz from EngagementTable.save")
+        return cls(
+            vertices=f["vertices"], vertex_s=f["vertex_s"], spacing=float(f["spacing"]),
+            count=f["count"].astype(np.int64), alpha=f["alpha"], beta=f["beta"], top=f["top"],
+            radius=float(f["radius"]), z_floor=float(f["z_floor"]), stock_lower=f["stock_lower"],
+            stock_upper=f["stock_upper"], stock_cell=float(f["stock_cell"]),
+        )
+
+    @classmethod
+    def from_parameters(
+        cls, path: np.ndarray, parameters: Mapping[str, object], spacing: float = 2e-5, angle_samples: int = 360,
+        max_intervals: int = 8,
+    ) -> "EngagementTable":
+        """Build a table from the path and a CuttingLoad parameter mapping (SI, scalar values).
+
+        Uses ``tool_diameter``, ``stock_{x,y,z}_{min,max}`` and ``stock_cell``
+        (defaults of :class:`~.component.CuttingLoad` where absent), e.g. the
+        dictionary ``cutting_parameters(case)`` of the twin.
+        """
+        default = {v.name: v.start for v in CuttingLoad.variables if v.causality == "parameter"}
+
+        def get(name: str) -> float:
+            value = np.asarray(parameters.get(name, default[name]), dtype=float)
+            if value.size != 1 and not np.all(value == value.flat[0]):
+                raise CuttingError(f"engagement table: parameter {name} differs between members ({value}); "
+                                   "expected one value (the table is shared by the batch)")
+            return float(value.flat[0])
+
+        lower = [get(f"stock_{a}_min") for a in "xyz"]
+        upper = [get(f"stock_{a}_max") for a in "xyz"]
+        return build_engagement_table(path, get("tool_diameter"), lower, upper, get("stock_cell"), spacing,
+                                      angle_samples, max_intervals)
+
+
+def _clean_path(path: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Drop consecutive duplicates; return vertices (V, 3) and cumulative 3D arc length (V,)."""
+    p = np.asarray(path, dtype=np.float64)
+    if p.ndim != 2 or p.shape[1] != 3 or p.shape[0] < 1:
+        raise CuttingError(f"engagement table: path must have shape (K, 3) with K >= 1, got {p.shape}")
+    if not np.all(np.isfinite(p)):
+        bad = int(np.flatnonzero(~np.isfinite(p).all(axis=1))[0])
+        raise CuttingError(f"engagement table: path point {bad} is {p[bad].tolist()}; expected finite m")
+    step = np.linalg.norm(np.diff(p, axis=0), axis=1)
+    keep = np.concatenate([[True], step > DUPLICATE_TOL])
+    v = p[keep]
+    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(v, axis=0), axis=1))])
+    return v, s
+
+
+def _points_at(vertices: np.ndarray, vertex_s: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """Points at arc lengths ``s`` on the polyline, shape (len(s), 3)."""
+    if vertices.shape[0] == 1:
+        return np.repeat(vertices, s.size, axis=0)
+    seg = np.clip(np.searchsorted(vertex_s, s, side="right") - 1, 0, vertices.shape[0] - 2)
+    u = (s - vertex_s[seg]) / (vertex_s[seg + 1] - vertex_s[seg])
+    return vertices[seg] + u[:, None] * (vertices[seg + 1] - vertices[seg])
+
+
+def build_engagement_table(
+    path: np.ndarray, tool_diameter: float, stock_lower: np.ndarray, stock_upper: np.ndarray, stock_cell: float,
+    spacing: float = 2e-5, angle_samples: int = 360, max_intervals: int = 8,
+) -> EngagementTable:
+    """Reference pass: engagement intervals along ``path`` (see module docstring).
+
+    Parameters
+    ----------
+    path : ndarray, shape (K, 3)
+        Tool-tip path in work coordinates (the coordinates of the component's
+        position inputs), m, in the order it is travelled: e.g. the programmed
+        geometry finely discretised, the NC reference positions or the actual
+        positions of a nominal run.
+    tool_diameter : float
+        Flat end mill diameter, m.
+    stock_lower, stock_upper : array_like, shape (3,)
+        Stock block corners, m.
+    stock_cell : float
+        Z-map cell edge (upper bound), m.
+    spacing : float
+        Station spacing along the path, m (upper bound; the stations divide the path exactly).
+    angle_samples : int
+        Samples of the immersion angle per revolution before bisection.
+    max_intervals : int
+        Intervals kept per station.
+
+    Returns
+    -------
+    EngagementTable
+
+    Raises
+    ------
+    CuttingError
+        On a malformed path or non-positive spacing, diameter or sample counts.
+    """
+    vertices, vertex_s = _clean_path(path)
+    for name, value in (("tool_diameter", tool_diameter), ("spacing", spacing)):
+        if not (math.isfinite(value) and value > 0.0):
+            raise CuttingError(f"engagement table: {name} = {value!r}; expected a positive length in m")
+    if angle_samples < 8 or max_intervals < 1:
+        raise CuttingError(f"engagement table: angle_samples = {angle_samples}, max_intervals = {max_intervals}; "
+                           "expected >= 8 and >= 1")
+    radius = 0.5 * float(tool_diameter)
+    lower = np.asarray(stock_lower, dtype=np.float64).reshape(1, 3)
+    upper = np.asarray(stock_upper, dtype=np.float64).reshape(1, 3)
+    stock = ZMapStock(lower, upper, np.array([float(stock_cell)]))
+    length = float(vertex_s[-1])
+    n_st = int(math.ceil(length / spacing - 1e-9)) if length > 0.0 else 0
+    ds = length / n_st if n_st > 0 else float(spacing)
+    s_st = np.arange(n_st + 1) * ds
+    centres = _points_at(vertices, vertex_s, s_st)
+
+    r_arr = np.array([radius])
+    lag = r_arr + 2.0 * np.maximum(stock.dx, stock.dy)
+    capacity = int(np.ceil(np.max(lag / (PATH_SPACING * r_arr)))) + 4
+    swept = SweptPath(centres[:1], PATH_SPACING * r_arr, lag, capacity)
+    heights = stock.heights[0]
+    grid = np.array([stock.lower[0, 0], stock.lower[0, 1], stock.dx[0], stock.dy[0]])
+    solid = bool(stock.nx[0] > 0 and stock.ny[0] > 0)
+    z_floor = float(lower[0, 2])
+    reach = radius + float(stock.rho[0])
+
+    count = np.zeros(n_st + 1, dtype=np.int64)
+    alpha = np.zeros((n_st + 1, max_intervals))
+    beta = np.zeros((n_st + 1, max_intervals))
+    top = np.zeros((n_st + 1, max_intervals))
+    buf = [np.zeros(angle_samples) for _ in range(3)]
+    for i in range(n_st + 1):
+        c = centres[i]
+        near_block = solid and (
+            lower[0, 0] - reach <= c[0] <= upper[0, 0] + reach and lower[0, 1] - reach <= c[1] <= upper[0, 1] + reach
+            and c[2] < upper[0, 2]
+        )
+        if near_block:
+            nf = swept.near_field()
+            nseg = int(nf.valid[0].sum())
+            k = station_intervals(heights, grid, nf.start[0], nf.end[0], nseg, nf.tail[0], c[0], c[1], c[2], radius,
+                                  max(c[2], z_floor), angle_samples, buf[0], buf[1], buf[2])
+            if k:
+                a, b, t = _merge(buf[0][:k], buf[1][:k], buf[2][:k], max_intervals)
+                count[i] = a.size
+                alpha[i, :a.size], beta[i, :a.size], top[i, :a.size] = a, b, t
+        swept.advance(c[None, :])
+        while True:
+            start, end, mask = swept.pop_ready(force_room=True)
+            if not np.any(mask):
+                break
+            stock.remove_sweep(start, end, r_arr, mask)
+    return EngagementTable(
+        vertices=vertices, vertex_s=vertex_s, spacing=ds, count=count, alpha=alpha, beta=beta, top=top,
+        radius=radius, z_floor=z_floor, stock_lower=lower[0].copy(), stock_upper=upper[0].copy(),
+        stock_cell=float(stock_cell),
+    )
