@@ -100,6 +100,9 @@ def build_parser() -> argparse.ArgumentParser:
     from .cli_fmu import add_parsers as add_fmu_parsers
 
     add_fmu_parsers(sub)
+    from .cli_bench import add_parsers as add_bench_parsers
+
+    add_bench_parsers(sub)
     return parser
 
 

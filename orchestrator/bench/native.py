@@ -1,0 +1,76 @@
+"""Timing of the native twin (all four components, Python master) and of the fused reference."""
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ..case import Case
+from ..master import Master, MasterSettings
+from ..simulate import resolve_case
+from ..twin import TwinOptions, build_twin
+
+#: The benchmark program: the paper-like part without the tool change (cutting from about 1.5 s).
+BENCH_PROGRAM = Path(__file__).resolve().parent / "bench_part.nc"
+#: Its case (stock, tool, material, machine).
+BENCH_CASE = Path(__file__).resolve().parents[2] / "models" / "examples" / "paper_part"
+
+
+def bench_case() -> Case:
+    """The benchmark case: ``paper_part``'s stock, tool and machine with :data:`BENCH_PROGRAM`."""
+    return resolve_case(program=BENCH_PROGRAM, case=BENCH_CASE)
+
+
+def time_twin(case: Case, batch: int, seconds: float, cutting: bool = True, step: float = 1e-3) -> dict:
+    """Run the native twin for ``seconds`` of simulated time and time it.
+
+    Parameters
+    ----------
+    case : Case
+        What to run (the program may end earlier: then its own length counts).
+    batch : int
+        Identical members ``B`` in one batched run.
+    seconds : float
+        Simulated time limit, s.
+    cutting : bool
+        Include the cutting load.
+    step : float
+        Communication step, s.
+
+    Returns
+    -------
+    dict
+        ``batch``, ``sim_s`` (simulated time per member), ``steps``, ``build_s`` (assembly),
+        ``wall_s`` (run incl. set-up), ``rt_factor`` (``B · sim_s / wall_s``, aggregate),
+        ``us_per_step`` (wall per communication step of the batch), ``us_per_member_step``.
+    """
+    t_build = time.perf_counter()
+    twin = build_twin(case, batch=batch, options=TwinOptions(step=step, cutting=cutting))
+    build = time.perf_counter() - t_build
+    settings = MasterSettings(step=step, time_limit=seconds, stop_when=twin.stop_when, limits=twin.limits or {})
+    t0 = time.perf_counter()
+    run = Master(twin.system, settings, twin.probes).run()
+    wall = time.perf_counter() - t0
+    sim = run.t_end - settings.t0
+    return {
+        "batch": batch, "cutting": twin.cutting is not None, "sim_s": sim, "steps": run.steps,
+        "build_s": build, "wall_s": wall, "rt_factor": batch * sim / wall,
+        "us_per_step": wall / max(run.steps, 1) * 1e6, "us_per_member_step": wall / max(run.steps, 1) / batch * 1e6,
+        "success": run.success, "message": run.message,
+    }
+
+
+def time_fused(problem, repeats: int = 1) -> dict:  # problem: FusedProblem
+    """Time :meth:`FusedProblem.run` (best of ``repeats``; compiled before timing)."""
+    best = np.inf
+    for _ in range(max(1, repeats)):
+        t0 = time.perf_counter()
+        problem.run()
+        best = min(best, time.perf_counter() - t0)
+    sim = problem.n_steps * problem.step
+    return {
+        "batch": problem.batch, "sim_s": sim, "steps": problem.n_steps, "wall_s": best,
+        "rt_factor": problem.batch * sim / best, "us_per_step": best / problem.n_steps * 1e6,
+        "us_per_member_step": best / problem.n_steps / problem.batch * 1e6,
+    }

@@ -1,0 +1,66 @@
+"""``cnctwin bench`` in a very short configuration: it runs end to end and returns every key (no timing asserts)."""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+
+import pytest
+
+from orchestrator.bench import BenchSettings, format_table, run_bench
+from orchestrator.cli_bench import add_parsers
+from orchestrator.fmu.fast_loop import compiler
+
+pytestmark = pytest.mark.skipif(compiler() is None, reason="no C compiler")
+
+
+@pytest.fixture(scope="module")
+def result(tmp_path_factory):
+    settings = BenchSettings.quick()
+    settings.twin_seconds = 0.3
+    settings.batch_seconds = 0.05
+    settings.length_seconds = (0.05, 0.1)
+    settings.population_sizes = (1, 10)
+    settings.population_seconds = 0.05
+    settings.ring_steps = 200
+    settings.servo_steps = 5
+    settings.fused_seconds = 0.3
+    settings.fmu_dir = str(tmp_path_factory.mktemp("bench_fmus"))
+    return run_bench(settings)
+
+
+def test_keys(result):
+    assert {"machine", "settings", "native_twin", "fused", "c_fmu", "native_ring", "pythonfmu", "scaling",
+            "master_us_per_step", "ratios", "targets", "bench_wall_s"} <= set(result)
+    assert result["machine"]["nproc"] >= 1 and result["machine"]["cpu"]
+    assert set(result["native_twin"]) == {"single", "single_air", "batch_10", "batch_100"}
+    assert set(result["fused"]) == {"single", "batch_10", "batch_100"}
+    for path in ("master", "fast_loop", "plain_fmpy"):
+        assert path in result["c_fmu"] and path in result["pythonfmu"]
+    assert {"native_twin_single", "fused_single", "native_ring_master", "c_fmu_master", "c_fmu_fast_loop",
+            "c_fmu_plain_fmpy", "pythonfmu_master", "pythonfmu_fast_loop", "pythonfmu_plain_fmpy",
+            "native_twin_batch_100", "fused_batch_100"} <= set(result["master_us_per_step"])
+    assert {"native_single_rt_factor", "native_population_100_rt_factor", "c_fmu_fast_loop_us_per_step"} <= set(
+        result["targets"])
+
+
+def test_values_are_consistent(result):
+    twin = result["native_twin"]
+    assert twin["batch_100"]["batch"] == 100 and twin["single"]["steps"] == 300
+    for group in (result["native_twin"], result["fused"]):
+        for r in group.values():
+            # real-time factor and cost per step describe the same run
+            assert r["rt_factor"] == pytest.approx(r["batch"] * r["sim_s"] / r["wall_s"])
+            assert r["us_per_step"] == pytest.approx(r["wall_s"] / r["steps"] * 1e6)
+    for value in result["master_us_per_step"].values():
+        assert math.isfinite(value) and value >= 0.0
+    assert [p["batch"] for p in result["scaling"]["population"]] == [1, 10]
+    json.dumps(result)  # plain JSON
+    assert "native twin single" in format_table(result)
+
+
+def test_cli_parser():
+    parser = argparse.ArgumentParser(prog="cnctwin")
+    add_parsers(parser.add_subparsers(dest="command"))
+    args = parser.parse_args(["bench", "--quick", "--json", "out.json"])
+    assert args.quick and args.json == "out.json" and callable(args.func)
