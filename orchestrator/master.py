@@ -204,6 +204,9 @@ class Master:
     progress : callable, optional
         ``progress(t, t_final_estimate)`` called about every 1 % of the time limit
         or of ``expected_duration``.
+    expected_duration : float, optional
+        Expected simulated time, s: sizes the recorder's first allocation and
+        the progress scale (the run still ends on its stop signals).
     """
 
     def __init__(
@@ -222,14 +225,8 @@ class Master:
             raise SystemDescriptionError(f"{system.name}: the system has no components")
         self.order = system.execution_order()
         self.probes = [p if isinstance(p, Probe) else Probe(p, p) for p in probes]
-        for probe in self.probes:
-            comp, var = split_reference(probe.reference)
-            system.component(comp).variable(var)
-        for reference in self.settings.limits:
-            comp, var = split_reference(reference)
-            system.component(comp).variable(var)
         self._stop_refs = self.settings.stop_signals()
-        for reference in self._stop_refs:
+        for reference in [p.reference for p in self.probes] + list(self.settings.limits) + list(self._stop_refs):
             comp, var = split_reference(reference)
             system.component(comp).variable(var)
         self._wires: dict[str, list[_Wire]] = {name: [] for name in system.components}
