@@ -103,6 +103,9 @@ def build_parser() -> argparse.ArgumentParser:
     from .cli_bench import add_parsers as add_bench_parsers
 
     add_bench_parsers(sub)
+    from .cli_identify import add_parsers as add_identify_parsers
+
+    add_identify_parsers(sub)
     return parser
 
 

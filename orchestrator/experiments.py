@@ -25,7 +25,6 @@ fx, fy) into ``recording.csv`` next to ``case.toml`` and runs
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
@@ -92,7 +91,9 @@ def plan_runs(
     runs = []
     for f in speeds_mm_min:
         if not 0.0 < f <= fmax:
-            raise ExperimentError(f"speed {f} mm/min is outside (0, {fmax}] mm/min (max cutting feed of {machine.path})")
+            raise ExperimentError(
+                f"speed {f} mm/min is outside (0, {fmax}] mm/min (max cutting feed of {machine.path})"
+            )
         v = f / 60.0
         ramp = _ramp_distance(v, machine)
         plateau = plateau_s
@@ -157,8 +158,8 @@ def cutting_program(
         y_slot = 1.5 * tool_diameter_mm + i * 2.0 * tool_diameter_mm
         x_slot = length_mm - 1.5 * tool_diameter_mm - i * 2.0 * tool_diameter_mm
         lines.append(f"(FEED {f:g} MM/MIN: FULL SLOT ALONG X)")
-        lines += [f"G0 X{_fmt(-r - 2.0)} Y{_fmt(y_slot)} Z2.", f"G1 Z{_fmt(z)} F200", f"X{_fmt(length_mm * 0.5)} F{f:g}",
-                  "G0 Z2."]
+        lines += [f"G0 X{_fmt(-r - 2.0)} Y{_fmt(y_slot)} Z2.", f"G1 Z{_fmt(z)} F200",
+                  f"X{_fmt(length_mm * 0.5)} F{f:g}", "G0 Z2."]
         for frac, label in ((0.5, "HALF"), (0.25, "QUARTER")):
             yc = back - (frac * tool_diameter_mm - r)
             back -= frac * tool_diameter_mm
@@ -262,12 +263,3 @@ def write_experiment(
         "program": atomic_write_text(out / "program.nc", program),
         "case": atomic_write_text(out / "case.toml", _case_toml(kind, machine_ref, stock, (6.0, 2))),
     }
-
-
-def expected_duration_s(program_runs: Sequence[Run], dwell_s: float) -> float:
-    """Rough run time of reciprocating runs (plateau + ramps + dwells), s."""
-    total = 0.0
-    for r in program_runs:
-        v = r.speed_mm_min / 60.0
-        total += 2.0 * (r.stroke_mm / v + dwell_s)
-    return math.ceil(total)

@@ -10,10 +10,11 @@ Timing follows the twin (:mod:`orchestrator.twin`, Gauss-Seidel master):
   ``t0 + k Tv`` with ``t0`` the first sample of the recording; the MCU steps
   first (feedback from the drive at ``t_k``), then the drives (current
   command of this tick);
-* the NC kernel steps before the MCU in each 1 ms communication step, so the
-  position loop at ``t`` sees the reference **valid at t + 1 ms**; the replay
-  reproduces this with ``ref_lead = position loop period`` (linear
-  interpolation of the recorded reference between samples);
+* the position loop at ``t`` samples the NC command of the current
+  interpolation period, i.e. the reference recorded at ``t`` (the twin steps
+  MCU and drives before the NC kernel, as a real controller does); a
+  different convention of a foreign logger is absorbed by ``ref_lead``
+  (linear interpolation of the recorded reference between samples);
 * outputs are sampled after each tick and interpolated linearly to the
   requested times (the recording's).
 """
@@ -71,7 +72,7 @@ def replay(
     drive_values: Mapping[str, Mapping[str, np.ndarray | float]] | None = None,
     initial_position: Mapping[str, np.ndarray | float] | None = None,
     t_out: np.ndarray | None = None,
-    ref_lead: float | None = None,
+    ref_lead: float = 0.0,
 ) -> ReplayResult:
     """Simulate the servo loops of some axes driven by recorded reference positions.
 
@@ -94,9 +95,9 @@ def replay(
         Table position at ``t_ref[0]`` [m]; default the reference there.
     t_out : ndarray, optional
         Output times (default ``t_ref``), within ``[t_ref[0], t_ref[-1]]``.
-    ref_lead : float, optional
-        The position loop at ``t`` uses the reference at ``t + ref_lead``;
-        default the position-loop period (the twin's convention).
+    ref_lead : float
+        The position loop at ``t`` uses the reference recorded at
+        ``t + ref_lead``, s (default 0, the twin's convention).
 
     Returns
     -------
@@ -106,8 +107,7 @@ def replay(
     t_out = t_ref if t_out is None else np.asarray(t_out, dtype=float)
     servo = machine.si("servo")
     tv = float(servo["velocity_loop_period"])
-    tp = float(servo["position_loop_period"])
-    lead = tp if ref_lead is None else float(ref_lead)
+    lead = float(ref_lead)
     axes = [a for a in "xyz" if a in refs]
     if not axes:
         raise IdentificationError("replay needs the reference of at least one axis")

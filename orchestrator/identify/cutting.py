@@ -12,8 +12,13 @@ The force is linear in ``Kt`` and in ``Kt Ke``::
 
 so one batched run gives ``A`` and ``B`` for every candidate. The spindle
 angle at the start of the recording is unknown (no encoder phase is logged):
-it is estimated by a scan over one tooth pitch (``phases`` members) and a
-parabolic refinement, then a final run at that phase.
+it is estimated by a coarse scan over one tooth pitch (``phases``
+members), a fine scan with a parabolic fit, and (with fx, fy) Gauss-Newton
+steps using the force derivative with respect to the phase, then a final run
+at that phase. Samples taken within
+2 degrees of a tooth entering or leaving the material are not used: the
+force jumps there, and a micrometre of position error (encoder quantisation
+at a wall) or a small phase error swaps full force for zero.
 
 ``"default"``
     With ``fx_N`` and ``fy_N``: linear least squares for ``(Kt, Kt Ke)``
@@ -30,7 +35,7 @@ import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Iterable, Sequence
+from typing import Iterable
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -49,6 +54,10 @@ from .ga import paper_objective, run_ga
 KT_UNIT = 1.0e9
 PAPER_GENERATIONS = 500
 PAPER_FITNESS_LIMIT = 1.0
+#: Spindle-angle margin around tooth entry/exit within which samples are not used, rad (2 degrees).
+BOUNDARY_PHASE = math.radians(2.0)
+#: Gauss-Newton refinements of the spindle phase after the scans (fx, fy recordings).
+PHASE_REFINEMENTS = 2
 
 
 @dataclass
@@ -88,6 +97,8 @@ class CuttingFit:
     wall_time_ : float
     traces_ : list of dict
         Per case: ``t``, measured and simulated ``fc`` (for plots).
+    notes_ : list of str
+        Warnings (e.g. Kt, Ke not separately identifiable from ``fc`` alone).
     """
 
     kt_: float
@@ -103,11 +114,12 @@ class CuttingFit:
     wall_time_: float
     cases: list[str] = field(default_factory=list)
     traces_: list[dict] = field(default_factory=list, repr=False)
+    notes_: list[str] = field(default_factory=list)
 
     def report(self) -> dict:
         """JSON-ready report."""
         return {"kind": "cutting", "method": self.method, "cases": self.cases, "material": self.material,
-                "kt_N_per_m2": self.kt_, "ke": self.ke_, "fitness_J_N2": self.fitness_,
+                "notes": self.notes_, "kt_N_per_m2": self.kt_, "ke": self.ke_, "fitness_J_N2": self.fitness_,
                 "residual_rms_N": self.rms_, "spindle_phase_rad": self.spindle_phase_,
                 "iterations": self.iterations_, "wall_time_s": self.wall_time_}
 
@@ -149,12 +161,18 @@ def _columns(d: CaseData) -> tuple[str, list[str]]:
     return spindle, forces
 
 
-def basis_forces(d: CaseData, phases: np.ndarray, smooth_s: float) -> tuple[np.ndarray, np.ndarray]:
-    """Forces of the unit runs at spindle phases ``phases``: ``A``, ``B`` of shape (n, P, 2) [N at Kt = KT_UNIT]."""
+def basis_forces(d: CaseData, phases: np.ndarray, smooth_s: float,
+                 position_lag_s: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """Forces of the unit runs at spindle phases ``phases``: ``A``, ``B`` of shape (n, P, 2) [N at Kt = KT_UNIT].
+
+    ``position_lag_s``: the component at sample ``t`` gets the recorded position at ``t - position_lag_s``.
+    """
     rec = d.recording
     spindle, _ = _columns(d)
     t = np.asarray(rec.t, dtype=float)
     pos = np.stack([smooth_positions(t, np.asarray(rec[f"{a}_mm"], dtype=float), smooth_s) * 1e-3 for a in "xyz"], 1)
+    if position_lag_s > 0.0:
+        pos = np.stack([np.interp(t - position_lag_s, t, pos[:, i]) for i in range(3)], 1)
     omega = np.maximum(np.asarray(rec[spindle], dtype=float), 0.0) * (2.0 * math.pi / 60.0)
     p = phases.size
     params = cutting_parameters(d.case)
@@ -178,7 +196,9 @@ def basis_forces(d: CaseData, phases: np.ndarray, smooth_s: float) -> tuple[np.n
     return f[:, :, 0, :], f[:, :, 1, :] - f[:, :, 0, :]
 
 
-def _linear_fit(meas: dict[str, np.ndarray], a: np.ndarray, b: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, float]:
+def _linear_fit(
+    meas: dict[str, np.ndarray], a: np.ndarray, b: np.ndarray, mask: np.ndarray
+) -> tuple[np.ndarray, float]:
     """(Kt/KT_UNIT, Kt Ke/KT_UNIT) and the SSE: least squares on fx, fy, or on fc with Ke from a 1-D scan."""
     if "fx" in meas:
         y = np.concatenate([meas["fx"][mask], meas["fy"][mask]])
@@ -198,29 +218,90 @@ def _linear_fit(meas: dict[str, np.ndarray], a: np.ndarray, b: np.ndarray, mask:
     return best
 
 
-def _prepare(d: CaseData, phases: int, smooth_s: float) -> _Prepared:
+def _scan(meas: dict[str, np.ndarray], a: np.ndarray, b: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """Trimmed SSE (largest 5 % of squared residuals dropped: entry/exit samples) per phase column."""
+    out = []
+    for j in range(a.shape[1]):
+        c, _ = _linear_fit(meas, a[:, j], b[:, j], mask)
+        if "fx" in meas:
+            r = np.concatenate([meas["fx"][mask] - a[mask, j, 0] * c[0] - b[mask, j, 0] * c[1],
+                                meas["fy"][mask] - a[mask, j, 1] * c[0] - b[mask, j, 1] * c[1]])
+        else:
+            ke = c[1] / c[0] if c[0] else 0.0
+            g = np.hypot(a[mask, j, 0] + ke * b[mask, j, 0], a[mask, j, 1] + ke * b[mask, j, 1])
+            r = meas["fc"][mask] - c[0] * g
+        r2 = np.sort(r * r)
+        out.append(float(r2[: max(1, int(0.95 * r2.size))].sum()))
+    return np.array(out)
+
+
+def _parabola_min(x: np.ndarray, y: np.ndarray) -> float:
+    """Abscissa of the minimum of the parabola through the lowest sample and its neighbours (x equally spaced)."""
+    j = int(np.argmin(y))
+    if j == 0 or j == y.size - 1:
+        return float(x[j])
+    denom = y[j - 1] - 2.0 * y[j] + y[j + 1]
+    shift = 0.5 * (y[j - 1] - y[j + 1]) / denom if denom > 0 else 0.0
+    return float(x[j] + np.clip(shift, -1.0, 1.0) * (x[1] - x[0]))
+
+
+def _prepare(d: CaseData, phases: int, smooth_s: float, position_lag_s: float) -> _Prepared:
     rec = d.recording
     _, forces = _columns(d)
     meas = {"fx": np.asarray(rec["fx_N"], float), "fy": np.asarray(rec["fy_N"], float)} if "fx_N" in forces \
         else {"fc": np.asarray(rec["fc_N"], float)}
+    lag = position_lag_s
     flutes = int(d.case.tool.flutes)
     pitch = 2.0 * math.pi / flutes
-    grid = np.arange(phases) * (pitch / phases)
-    a, b = basis_forces(d, grid, smooth_s)
+    step = pitch / phases
+    grid = np.arange(-1, phases + 1) * step  # coarse scan, wrapped by one step on each side
+    a, b = basis_forces(d, grid[1:-1], smooth_s, lag)
     engaged = np.any(np.abs(a).sum(axis=2) > 0.0, axis=1)
     if int(engaged.sum()) < 10:
         raise IdentificationError(
             f"{d.source}: the recorded tool path cuts the stock of {d.case.source} in {int(engaged.sum())} samples; "
             "expected a cut (check that positions are in work coordinates and [stock] matches the block)"
         )
-    sse = np.array([_linear_fit(meas, a[:, j], b[:, j], engaged)[1] for j in range(phases)])
-    j = int(np.argmin(sse))
-    s_m, s_0, s_p = sse[(j - 1) % phases], sse[j], sse[(j + 1) % phases]
-    denom = s_m - 2.0 * s_0 + s_p
-    shift = 0.5 * (s_m - s_p) / denom if denom > 0 else 0.0
-    phase = float(np.mod(grid[j] + np.clip(shift, -1.0, 1.0) * pitch / phases, pitch))
-    a1, b1 = basis_forces(d, np.array([phase]), smooth_s)
-    return _Prepared(d, np.asarray(rec.t, float), meas, a1[:, 0], b1[:, 0], engaged, phase)
+    sse = _scan(meas, a, b, engaged)
+    centre = grid[1 + int(np.argmin(sse))]
+    fine = centre + np.linspace(-step, step, 9)  # fine scan around the best coarse phase
+    a, b = basis_forces(d, fine, smooth_s, lag)
+    phase = float(np.mod(_parabola_min(fine, _scan(meas, a, b, engaged)), pitch))
+    # final run at the phase and at +-BOUNDARY_PHASE: a sample whose engagement changes within that margin
+    # sits on a tooth entry/exit (a force jump) and is dropped; a few microns of position error or a
+    # slightly wrong phase would otherwise swap full force and zero there
+    margins = np.array([0.0, -BOUNDARY_PHASE, BOUNDARY_PHASE])
+    for refine in range(PHASE_REFINEMENTS + 1):
+        a3, b3 = basis_forces(d, phase + margins, smooth_s, lag)
+        inside = np.abs(a3).sum(axis=2) > 0.0
+        robust = inside.all(axis=1)
+        if int(robust.sum()) < 10:
+            robust = inside[:, 0]
+        if refine == PHASE_REFINEMENTS or "fx" not in meas:
+            break
+        # Gauss-Newton step on the phase: F(phi + d) ~ Kt (A + d A') + Kt Ke (B + d B'), linear in
+        # (Kt, Kt Ke, Kt d, Kt Ke d) with A', B' from the +-margin runs (Ke is sensitive to the phase:
+        # one degree of error moves it by about 5 %)
+        da = (a3[:, 2] - a3[:, 1]) / (2.0 * BOUNDARY_PHASE)
+        db = (b3[:, 2] - b3[:, 1]) / (2.0 * BOUNDARY_PHASE)
+        m = robust
+        y = np.concatenate([meas["fx"][m], meas["fy"][m]])
+        x = np.column_stack([np.concatenate([q[m, 0], q[m, 1]]) for q in (a3[:, 0], b3[:, 0], da, db)])
+        c, *_ = np.linalg.lstsq(x, y, rcond=None)
+        if c[0] == 0.0:
+            break
+        # the phase and Ke are nearly collinear in a single cut geometry: take the step only when it is
+        # statistically significant (|Kt d| > 3 standard errors), else noise would move Ke through it
+        r = y - x @ c
+        dof = max(y.size - 4, 1)
+        cov = np.linalg.pinv(x.T @ x) * float(r @ r) / dof
+        if abs(c[2]) <= 3.0 * math.sqrt(max(cov[2, 2], 0.0)):
+            break
+        delta = float(np.clip(c[2] / c[0], -0.5 * step, 0.5 * step))
+        phase = float(np.mod(phase + delta, pitch))
+        if abs(delta) < 1e-5:
+            break
+    return _Prepared(d, np.asarray(rec.t, float), meas, a3[:, 0], b3[:, 0], robust, phase)
 
 
 def identify_cutting(
@@ -229,6 +310,7 @@ def identify_cutting(
     seed: int = 0,
     phases: int = 12,
     smooth_s: float = 0.021,
+    position_lag_s: float = 0.0,
 ) -> CuttingFit:
     """Identify the cutting coefficients Kt, Ke of the case's material.
 
@@ -246,6 +328,10 @@ def identify_cutting(
         Spindle-phase candidates over one tooth pitch.
     smooth_s : float
         Savitzky-Golay window on the recorded positions, s (0 = none).
+    position_lag_s : float
+        Age of the position the recorded force belongs to, s (default 0: the
+        twin's convention, cutting load stepped after the drives). It only
+        matters at tooth entry/exit (a few µm of path).
 
     Returns
     -------
@@ -253,7 +339,7 @@ def identify_cutting(
     """
     start = time.perf_counter()
     data = load_inputs(cases)
-    prepared = [_prepare(d, phases, smooth_s) for d in data]
+    prepared = [_prepare(d, phases, smooth_s, position_lag_s) for d in data]
     use_xy = all("fx" in p.measured for p in prepared)
 
     def stack(fn) -> np.ndarray:
@@ -276,12 +362,29 @@ def identify_cutting(
         return np.abs(kt)[..., None] * np.hypot(a_all[:, 0] + ke[..., None] * b_all[:, 0],
                                                 a_all[:, 1] + ke[..., None] * b_all[:, 1])
 
+    notes: list[str] = []
     if method == "default":
         kt, ke = float(c[0]), float(c[1] / c[0]) if c[0] != 0 else 0.0
         if not use_xy:
             sol = least_squares(lambda z: fc_meas - fc_model(np.array(z[0]), np.array(z[1])), [kt, ke],
                                 method="trf", x_scale=[max(abs(kt), 1e-3), 0.1])
             kt, ke, iterations = float(sol.x[0]), float(sol.x[1]), int(sol.nfev)
+            # with at most one tooth in the cut |Ft + Fr| = Kt d h sqrt(1 + Ke^2): only that product is
+            # identifiable from Fc; detect it from the conditioning of the scaled Jacobian
+            jac = sol.jac * np.array([abs(kt), max(abs(ke), 0.1)])
+            sv = np.linalg.svd(jac, compute_uv=False)
+            if sv[-1] < 1e-3 * sv[0]:
+                ke_prior = float(data[0].case.machine.si(f"material.{data[0].case.material}")["ke"]) \
+                    if data[0].case.material else 0.5
+                g = fc_model(np.array(1.0), np.array(ke_prior))
+                kt_fixed = float(g @ fc_meas / (g @ g))
+                notes.append(
+                    f"Kt and Ke are not separately identifiable from fc alone here (at most one tooth in the cut: "
+                    f"Fc = Kt d h sqrt(1 + Ke^2)); Ke kept at the machine-file value {ke_prior:g}, Kt fitted "
+                    f"(Kt sqrt(1 + Ke^2) = {kt * np.hypot(1.0, ke) * KT_UNIT:.4g} N/m2 is what the data fix). "
+                    "Record fx and fy to identify both."
+                )
+                kt, ke = kt_fixed, ke_prior
     elif method == "paper-ga":
         res = run_ga(lambda x: paper_objective(fc_meas[None, :] - fc_model(x[:, 0], x[:, 1])),
                      np.array([0.1, 0.0]), np.array([10.0, 2.0]), PAPER_GENERATIONS, PAPER_FITNESS_LIMIT, seed=seed)
@@ -306,5 +409,8 @@ def identify_cutting(
                         "engagement of the twin's CuttingLoad on the recorded path, Eq. 14-16)", names)
     fitted, extra = fitted_machine(data[0].case.machine, {f"material.{material}": {
         "kt_N_per_m2": kt * KT_UNIT, "ke": ke}}, source, "cutting")
+    if method == "paper-ga":
+        notes.append("the GA fits Fc (Eq. 16); with at most one tooth in the cut only Kt sqrt(1 + Ke^2) is "
+                     "determined by Fc, so Kt and Ke individually may be far off")
     return CuttingFit(kt * KT_UNIT, ke, float(paper_objective(e)), rms, [p.phase for p in prepared], iterations,
-                      fitted, extra, material, method, time.perf_counter() - start, names, traces)
+                      fitted, extra, material, method, time.perf_counter() - start, names, traces, notes)

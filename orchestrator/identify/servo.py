@@ -159,7 +159,8 @@ def _prepare(data: Sequence[CaseData], axes: Sequence[str] | None) -> tuple[list
         used += [a for a in moving if a not in used]
     if not series:
         raise IdentificationError(
-            f"{', '.join(d.source for d in data)}: no axis moves; expected reciprocating runs (`cnctwin experiment servo`)"
+            f"{', '.join(d.source for d in data)}: no axis moves; expected reciprocating runs "
+            "(`cnctwin experiment servo`)"
         )
     return series, used
 
@@ -174,9 +175,8 @@ def _simulate(machine: Machine, series: _Series, scales: dict[str, np.ndarray]) 
 
 
 def _initial_spp(machine: Machine, series: list[_Series], axis: str) -> float:
-    """``Spp`` from steady following error: ``e = v / (Pp Spp) - v lead`` on constant-velocity windows."""
+    """``Spp`` from steady following error ``e = v / (Pp Spp)`` on constant-velocity windows."""
     pp = float(machine.si(f"axis.{axis}")["position_gain"])
-    lead = float(machine.si("servo")["position_loop_period"])
     gains = []
     for s in series:
         if axis not in s.ref:
@@ -185,9 +185,8 @@ def _initial_spp(machine: Machine, series: list[_Series], axis: str) -> float:
         for seg in find_segments(rec, axis, 1.0, SegmentSettings(settle_s=0.1)):
             sel = (s.t >= seg.t_start) & (s.t <= seg.t_end)
             e = float(np.mean(s.e[axis][sel])) * 1e-6
-            denom = e + seg.velocity * lead
-            if abs(seg.velocity) > 1e-5 and denom * seg.velocity > 0:
-                gains.append(seg.velocity / denom / pp)
+            if abs(seg.velocity) > 1e-5 and e * seg.velocity > 0:
+                gains.append(seg.velocity / e / pp)
     return float(np.clip(np.median(gains), *BOUNDS)) if gains else 1.0
 
 
@@ -316,11 +315,10 @@ def _fit_least_squares(base, series, used, residuals, max_iterations) -> tuple[d
 
 def _fit_ga(used, residuals, seed) -> tuple[dict[str, np.ndarray], int]:
     bounds = [(np.full(3, BOUNDS[0]), np.full(3, BOUNDS[1])) for _ in used]
-    best_so_far = {a: np.ones(3) for a in used}
-
     def evaluate(xs: list[np.ndarray]) -> list[np.ndarray]:
+        # an axis whose GA has stopped gets filler members (factors 1), evaluated and ignored
         p = max(x.shape[0] for x in xs)
-        scales = {a: (np.vstack([x, np.tile(best_so_far[a], (p - x.shape[0], 1))]) if x.shape[0] < p else x)
+        scales = {a: (np.vstack([x, np.ones((p - x.shape[0], 3))]) if x.shape[0] < p else x)
                   for a, x in zip(used, xs)}
         r = residuals(scales, summed=True)
         return [paper_objective(r[a])[: x.shape[0]] for a, x in zip(used, xs)]

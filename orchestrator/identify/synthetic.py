@@ -80,3 +80,55 @@ def degrade(recording: Recording, imperfections: Imperfections | None = None, se
             channels["fc_N"] = np.abs(channels["fc_N"] + rng.normal(0.0, imp.force_noise_N, n))
     return Recording.from_channels(channels, recording.units, recording.success, recording.message,
                                    f"{recording.source} (degraded, seed {seed})")
+
+
+def synthetic_case(
+    case_dir,
+    machine,
+    imperfections: Imperfections | None = None,
+    seed: int = 0,
+    time_limit_s: float = 600.0,
+) -> tuple[Recording, Recording]:
+    """Run a case's program on the twin with a known machine and write a degraded ``recording.csv``.
+
+    A self-check of an identification: generate the experiment
+    (:func:`orchestrator.experiments.write_experiment`), simulate it here with
+    parameters you chose, identify them back.
+
+    Parameters
+    ----------
+    case_dir : str or Path
+        Case folder (``case.toml`` naming ``recording = "recording.csv"``).
+    machine : str, Path or Machine
+        The "true" machine parameter set.
+    imperfections : Imperfections, optional
+        Default :class:`Imperfections` (pass ``Imperfections(0, 0, 0, 0, 0, 0)`` for a clean file).
+    seed : int
+        Noise seed.
+    time_limit_s : float
+        Simulated-time limit, s.
+
+    Returns
+    -------
+    clean, degraded : Recording
+        The simulated recording and the one written to the case's recording file.
+    """
+    from pathlib import Path
+
+    from ..case import load_case
+    from ..machine import Machine
+    from ..simulate import simulate
+    from .errors import IdentificationError
+
+    case = load_case(case_dir)
+    if isinstance(machine, Machine):
+        case.machine = machine
+    else:
+        case = load_case(case_dir, machine_override=machine)
+    result = simulate(case=case, plot=False, time_limit_s=time_limit_s)
+    if not result.success:
+        raise IdentificationError(f"{case_dir}: simulation of the experiment failed: {result.message}")
+    degraded = degrade(result.recording, imperfections, seed)
+    target = case.recording or Path(case.folder) / "recording.csv"
+    degraded.write_csv(target)
+    return result.recording, degraded
