@@ -105,7 +105,10 @@ def load_case(path: str | Path, machine_override: str | Path | None = None) -> C
     toml_path = path / "case.toml" if path.is_dir() else path
     if not toml_path.is_file():
         raise CaseError(f"{toml_path}: case file not found (a case folder holds case.toml, program and recording)")
-    text = toml_path.read_text(encoding="utf-8")
+    try:
+        text = toml_path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as exc:
+        raise CaseError(f"{toml_path}: not a UTF-8 text file (byte offset {exc.start}); expected a TOML case file") from None
     try:
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:

@@ -258,7 +258,10 @@ def load_machine(name_or_path: str | Path = "default", relative_to: Path | None 
         File missing, not TOML, unknown key, missing key, non-numeric value.
     """
     path = resolve_machine_path(name_or_path, relative_to)
-    text = path.read_text(encoding="utf-8")
+    try:
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as exc:
+        raise MachineFileError(f"{path}: not a UTF-8 text file (byte offset {exc.start}); expected a TOML machine file") from None
     try:
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:

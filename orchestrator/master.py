@@ -376,8 +376,15 @@ class Master:
                         break
                 if k >= max_steps:
                     if self._stop_refs:
-                        success = False
+                        waiting = np.flatnonzero(np.isnan(stopped_at) & ~self._failed)
+                        for b in waiting:
+                            self._failures[b] = (f"did not reach {' and '.join(self._stop_refs)} "
+                                                 f"by the time limit of {s.time_limit:g} s")
+                        self._failed[waiting] = True
+                        success = bool(batch > 1 and not self._failed.all())
                         message = f"time limit of {s.time_limit:g} s reached before {' and '.join(self._stop_refs)}"
+                        if success:
+                            message += f" for {waiting.size} of {batch} members"
                     else:
                         message = f"time limit of {s.time_limit:g} s reached"
                     break

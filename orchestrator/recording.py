@@ -267,7 +267,7 @@ class Recording:
                 k = int(np.flatnonzero(steps <= 0)[0]) + 1
                 what = "repeats" if steps[k - 1] == 0 else "goes back"
                 raise RecordingError(
-                    f"{path}:{body[k][0]}: t_s {what} ({t[k - 1]!r} then {t[k]!r}); rows must be in strictly increasing time"
+                    f"{path}:{body[k][0]}: t_s {what} ({float(t[k - 1])!r} then {float(t[k])!r}); rows must be in strictly increasing time"
                 )
         order = [it] + [j for j in range(len(header)) if j != it]
         channels = {header[j]: values[:, j] for j in order}

@@ -4,6 +4,8 @@ Public API
 ----------
 interpret, InterpreterSettings, Program and the typed blocks
     G-code text → typed blocks (SI, machine coordinates).
+read_program
+    Read a program file (UTF-8, BOM dropped) or raise GCodeError naming the file.
 rewrite_program
     Re-emit a program with new F/S words on given lines, every other byte untouched.
 NCKernel
@@ -21,10 +23,11 @@ from .errors import GCodeError, NCParameterError
 from .interpreter import InterpreterSettings, interpret
 from .params import NCParams
 from .planner import BatchPlan, MemberPlan, build_schedule, plan_batch, plan_member
+from .source import read_program
 from .writer import rewrite_program
 
 __all__ = [
     "Arc", "BatchPlan", "Block", "Coolant", "Dwell", "GCodeError", "InterpreterSettings", "Linear", "MemberPlan",
     "NCKernel", "NCParameterError", "NCParams", "Program", "ProgramEnd", "Rapid", "SpindleSpeed", "SpindleStop",
-    "ToolChange", "build_schedule", "interpret", "plan_batch", "plan_member", "rewrite_program",
+    "ToolChange", "build_schedule", "interpret", "plan_batch", "plan_member", "read_program", "rewrite_program",
 ]

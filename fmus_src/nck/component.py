@@ -22,6 +22,7 @@ from .interpreter import InterpreterSettings, interpret
 from .overrides import insert_spindle_commands, resolve_values
 from .params import NCParams
 from .planner import BatchPlan, build_schedule, plan_batch
+from .source import read_program
 
 #: Number of tool length offset parameters ``tool_length_1 .. tool_length_N`` (H1..HN).
 N_TOOL_LENGTHS = 20
@@ -156,10 +157,9 @@ class NCKernel(Component):
         path = str(self.values["program_file"])
         if not path:
             raise ComponentError(f"{self.name}: no program: set program_file or give program_text")
-        p = Path(path)
-        if not p.is_file():
+        if not Path(path).is_file():
             raise ComponentError(f"{self.name}: program_file {path!r} not found")
-        return p.read_text(encoding="utf-8", errors="strict"), path
+        return read_program(path), path
 
     def _member_params(self, b: int) -> NCParams:
         kw = {}
@@ -183,7 +183,7 @@ class NCKernel(Component):
         feeds, speeds = resolve_values(blocks, self.batch, self._feed_over, self._spindle_over)
         self._uniform("interpolation_period")
         params = [self._member_params(b) for b in range(self.batch)]
-        schedule = build_schedule(blocks, settings.initial)
+        schedule = build_schedule(blocks, settings.initial, file)
         self.plan_: BatchPlan = plan_batch(schedule, params, feeds, speeds)
         self.duration_ = self.plan_.duration.astype(float)
         self._rows = np.arange(self.batch)

@@ -4,6 +4,10 @@ from __future__ import annotations
 from ..errors import CncTwinError
 
 
+#: Longest block text quoted in a message, characters.
+_QUOTE_LIMIT = 120
+
+
 class GCodeError(CncTwinError):
     """A G-code program cannot be interpreted (or rewritten).
 
@@ -40,6 +44,8 @@ class GCodeError(CncTwinError):
         self.problem = problem
         self.block = block
         where = f"{file}:{line}" if line else file
+        if len(block) > _QUOTE_LIMIT:  # a 1 MB line must not become a 1 MB message
+            block = f"{block[:_QUOTE_LIMIT]}... ({len(block)} characters)"
         quoted = f" '{block}':" if block else ""
         super().__init__(f"{where}:{quoted} {problem}; expected {expected}")
 

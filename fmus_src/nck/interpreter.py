@@ -21,6 +21,12 @@ Conventions
   in G91 (as FANUC).
 * Block delete ``/``: honoured when ``block_delete=True`` (the block is not
   executed), otherwise the block is executed (switch off, the default).
+* Input ranges (FANUC IS-B, 8 digits): X Y Z I J K R within +-99999.999 mm
+  (G21) or +-9999.9999 in (G20); dwell at most 99999.999 s; T at most
+  99999999; a number has at most 32 characters (ASCII digits only). Beyond
+  them: :class:`GCodeError` (a 1e400 would otherwise become ``inf``).
+* Lines end at LF, CRLF or CR only (form feed, U+2028 etc. stay in the line
+  and are rejected as unexpected characters), so line numbers match editors.
 * Execution stops at M30/M2 or at a second ``%``; lines after it are not
   read. End of file without M30/M2 also ends the program (``ProgramEnd`` with
   reason ``"end of file"``).
@@ -36,7 +42,7 @@ from .blocks import (
     ToolChange, Vec3,
 )
 from .errors import GCodeError
-from .lexer import LexError, Word, lex_line
+from .lexer import LexError, Word, lex_line, split_lines
 
 MM = 1e-3
 INCH = 25.4e-3
@@ -45,6 +51,12 @@ RPM = 2.0 * math.pi / 60.0
 ARC_RADIUS_TOLERANCE = 0.002e-3
 #: End points closer than this are the same point (full circle), m.
 SAME_POINT = 1e-9
+#: Input range of X Y Z I J K R words (FANUC IS-B, 8 digits): mm under G21, inch under G20.
+MAX_COORDINATE = {"mm": 99999.999, "in": 9999.9999}
+#: Longest dwell, s (FANUC: 8 digits of P in ms).
+MAX_DWELL = 99999.999
+#: Largest tool number (FANUC: 8 digits).
+MAX_TOOL = 99999999
 
 # G code -> modal group
 _G_GROUP: dict[int, str] = {
@@ -160,7 +172,7 @@ def interpret(text: str, file: str = "<text>", settings: InterpreterSettings | N
     out: list[Block] = []
     seen_percent = False
     last_line = 0
-    for number, raw in enumerate(text.splitlines(), start=1):
+    for number, raw in enumerate(split_lines(text), start=1):
         last_line = number
         try:
             lexed = lex_line(raw)
@@ -243,8 +255,8 @@ def _block(st: _State, words: tuple[Word, ...], line: int, text: str, file: str,
         st.speed_line = line
     if "T" in vals:
         t = vals["T"]
-        if t.has_point or t.value < 0:
-            raise err("T" + t.text, f"tool number T{t.text} is not a non-negative integer", "T0, T1, T2, ...")
+        if t.has_point or t.value < 0 or t.value > MAX_TOOL:
+            raise err("T" + t.text, f"tool number T{t.text} is not an integer in 0..{MAX_TOOL}", "T0, T1, T2, ...")
         st.tool_selected = int(t.value)
     for letter in ("N", "O"):
         if letter in vals and (vals[letter].has_point or vals[letter].value < 0):
@@ -308,10 +320,18 @@ def _block(st: _State, words: tuple[Word, ...], line: int, text: str, file: str,
         seconds = w.value if w.has_point else w.value * 1e-3
         if seconds < 0:
             raise err(w.letter + w.text, "negative dwell time", "a time >= 0")
+        if seconds > MAX_DWELL:
+            raise err(w.letter + w.text, f"dwell of {_fmt(seconds)} s is beyond the input range",
+                      f"a dwell of at most {MAX_DWELL} s")
         out.append(Dwell(line, seconds))
     elif "P" in vals:
         raise err("P" + vals["P"].text, "word P outside a G4 dwell block", "P only with G4")
     else:
+        limit = MAX_COORDINATE[unit_name]
+        for a in "XYZIJKR":
+            if a in vals and abs(vals[a].value) > limit:
+                raise err(a + vals[a].text, f"{a}{vals[a].text} is beyond the input range of {limit} {unit_name}",
+                          f"|{a}| <= {limit} {unit_name}")
         if "motion" in gs:
             st.motion = gs["motion"][0]
         _motion(st, vals, "motion" in gs, line, err, unit_name, out)

@@ -16,8 +16,14 @@ import re
 from dataclasses import dataclass
 
 _COMMENT = re.compile(r"\([^()]*\)")
-_TOKEN = re.compile(r"([A-Za-z])[ \t]*([^A-Za-z \t(;/]*)|([ \t]+)|(.)")
-_NUMBER = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)\Z")
+_TOKEN = re.compile(r"([A-Za-z])[ \t]*([^A-Za-z \t(;/]*)|([ \t]+)|(.)", re.ASCII | re.DOTALL)
+# ASCII digits only (``\d`` would accept e.g. Arabic-Indic digits); unambiguous, so a long run of
+# digits followed by a bad character fails in linear time (``\d+\.?\d*`` backtracks quadratically)
+_NUMBER = re.compile(r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)\Z", re.ASCII)
+#: Line endings of a program: LF, CRLF, CR (nothing else, unlike :meth:`str.splitlines`).
+_EOL = re.compile(r"\r\n|\r|\n")
+#: Longest number accepted in a word, characters (FANUC accepts at most 8 digits plus sign and point).
+MAX_NUMBER_CHARS = 32
 
 
 @dataclass(frozen=True, slots=True)
@@ -80,6 +86,13 @@ class LexError(ValueError):
         self.expected = expected
 
 
+def clip(text: str, limit: int = 60) -> str:
+    """``text`` cut to ``limit`` characters (with ``...`` and the total length) for messages."""
+    if len(text) <= limit:
+        return text
+    return f"{text[:limit]}... ({len(text)} characters)"
+
+
 def lex_line(raw: str) -> LexedLine:
     """Split one source line (without its line ending) into words.
 
@@ -129,7 +142,40 @@ def lex_line(raw: str) -> LexedLine:
         if not num:
             raise LexError(letter.upper(), f"word {letter.upper()!r} has no value", f"a number after {letter.upper()}")
         if not _NUMBER.match(num):
-            raise LexError(letter.upper() + num, f"malformed number {num!r} in word {letter.upper()}{num}",
-                           "a number like 12, -3.5 or .25")
+            word = clip(letter.upper() + num)
+            raise LexError(word, f"malformed number {clip(num)!r} in word {word}", "a number like 12, -3.5 or .25")
+        if len(num) > MAX_NUMBER_CHARS:
+            raise LexError(clip(letter.upper() + num), f"number in word {letter.upper()} has {len(num)} characters",
+                           f"at most {MAX_NUMBER_CHARS} characters (FANUC accepts at most 8 digits)")
         words.append(Word(letter.upper(), num, float(num), m.start(), m.end(2)))
     return LexedLine(tuple(words), False, block_delete, text)
+
+
+def split_lines(text: str, keepends: bool = False) -> list[str]:
+    """Split a program into source lines at LF, CRLF or CR only.
+
+    :meth:`str.splitlines` also splits at form feed, vertical tab, NEL,
+    U+2028 etc.; editors and the NC count only LF/CRLF/CR, so line numbers
+    in messages would disagree with the file. Such characters stay inside a
+    line (and are then reported as unexpected characters).
+
+    Parameters
+    ----------
+    text : str
+        Program source.
+    keepends : bool
+        Keep the line endings (as :meth:`str.splitlines`).
+
+    Returns
+    -------
+    list of str
+        Lines; a final line ending does not start an empty line (as :meth:`str.splitlines`).
+    """
+    out: list[str] = []
+    pos = 0
+    for m in _EOL.finditer(text):
+        out.append(text[pos : m.end() if keepends else m.start()])
+        pos = m.end()
+    if pos < len(text):
+        out.append(text[pos:])
+    return out

@@ -18,6 +18,13 @@ kernel plans everything at setup, sampled at the interpolation period Ts:
    of feed blocks, ``tool_change_time`` for M6.
 
 Every spindle command and tool change stops the path (the chain ends at rest).
+
+The whole reference is held in memory, so a plan is limited to
+:data:`MAX_PLAN_SAMPLES` interpolation periods. Before each item is sampled, a
+lower bound of its duration (length / programmed feed, slowest-axis rapid
+time, dwell, tool change time) is checked against the limit, and a program
+that would exceed it (a tiny F, a huge dwell) raises :class:`GCodeError`
+naming the block instead of exhausting memory.
 """
 from __future__ import annotations
 
@@ -30,6 +37,7 @@ import numpy as np
 from .blocks import (
     Arc, Block, Coolant, Dwell, Linear, Program, ProgramEnd, Rapid, SpindleSpeed, SpindleStop, ToolChange,
 )
+from .errors import GCodeError
 from .filters import apply_fir, box_lengths, filter_extension
 from .geometry import ChainGeometry, chain_geometry
 from .interpolator import Segment, interpolate_chain, interpolate_rapid
@@ -40,6 +48,9 @@ from .spindle import arrival_time, sample_spindle, speed_after
 
 #: Feed blocks shorter than this are treated as zero-length (no motion, no time), m.
 MIN_LENGTH = 1e-12
+#: Most interpolation periods a plan may hold (the whole reference is kept in memory: about
+#: 100 bytes per period and member; 1e7 periods are 2.8 h of program at Ts = 1 ms).
+MAX_PLAN_SAMPLES = 10_000_000
 
 
 @dataclass(frozen=True)
@@ -59,9 +70,10 @@ class Schedule:
     blocks: tuple[Block, ...]
     items: tuple[Item, ...]
     initial: np.ndarray
+    file: str = "<text>"
 
 
-def build_schedule(blocks: Sequence[Block], initial: Sequence[float]) -> Schedule:
+def build_schedule(blocks: Sequence[Block], initial: Sequence[float], file: str = "<text>") -> Schedule:
     """Cut a block list into items.
 
     Parameters
@@ -69,6 +81,8 @@ def build_schedule(blocks: Sequence[Block], initial: Sequence[float]) -> Schedul
     blocks : sequence of Block
         Ending with :class:`ProgramEnd`.
     initial : (3,) machine position before the program (m).
+    file : str
+        Program name for error messages.
     """
     items: list[Item] = []
     chain: list[int] = []
@@ -94,7 +108,7 @@ def build_schedule(blocks: Sequence[Block], initial: Sequence[float]) -> Schedul
     flush()
     # coolant items inside a chain were appended before the chain: order by first block index
     items.sort(key=lambda it: it.blocks[0])
-    return Schedule(tuple(blocks), tuple(items), np.asarray(initial, dtype=float))
+    return Schedule(tuple(blocks), tuple(items), np.asarray(initial, dtype=float), file)
 
 
 def _length(b: Block) -> float:
@@ -149,6 +163,39 @@ def _ceil_periods(seconds: float, period: float) -> int:
     return max(int(math.ceil(seconds / period - 1e-9)), 0)
 
 
+def _item_min_seconds(item: Item, blocks: Sequence[Block], params: NCParams, feeds: np.ndarray) -> float:
+    """A lower bound of the time an item takes (s), computed before anything is allocated."""
+    b = blocks[item.blocks[0]]
+    if item.kind == "chain":
+        total = 0.0
+        for i in item.blocks:
+            speed = min(float(feeds[i]), params.max_cutting_feed)
+            total += _length(blocks[i]) / speed if speed > 0.0 else math.inf
+        return total
+    if item.kind == "rapid":
+        d = np.abs(np.asarray(b.end) - np.asarray(b.start))  # type: ignore[union-attr]
+        return float(max(d[a] / params.rapid_feed[a] for a in range(3)))
+    if item.kind == "dwell":
+        return float(b.seconds)  # type: ignore[union-attr]
+    if item.kind == "tool":
+        return params.tool_change_time
+    return 0.0
+
+
+def _check_length(schedule: Schedule, item: Item, k: int, params: NCParams, feeds: np.ndarray) -> None:
+    """Raise GCodeError (naming the block) when the plan would exceed :data:`MAX_PLAN_SAMPLES`."""
+    ts = params.interpolation_period
+    seconds = _item_min_seconds(item, schedule.blocks, params, feeds)
+    if k + seconds / ts <= MAX_PLAN_SAMPLES:
+        return
+    b = schedule.blocks[item.blocks[0]]
+    limit = MAX_PLAN_SAMPLES * ts
+    raise GCodeError(
+        schedule.file, b.line, "", f"a program that runs at most {limit:.6g} s (the planning limit)",
+        f"the program would run longer than {limit:.6g} s: this block alone takes at least {seconds:.6g} s "
+        f"after {k * ts:.6g} s (a tiny feed rate or a huge dwell?)")
+
+
 def plan_member(schedule: Schedule, params: NCParams, feeds: np.ndarray, speeds: np.ndarray) -> MemberPlan:
     """Plan one batch member.
 
@@ -193,6 +240,7 @@ def plan_member(schedule: Schedule, params: NCParams, feeds: np.ndarray, speeds:
 
     for item in schedule.items:
         b = blocks[item.blocks[0]]
+        _check_length(schedule, item, max(k, ready), params, feeds)
         if item.kind == "chain":
             line_cp.append((k, b.line))
             k0 = max(k, ready)

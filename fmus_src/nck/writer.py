@@ -22,7 +22,7 @@ import math
 from typing import Mapping
 
 from .errors import GCodeError
-from .lexer import LexError, LexedLine, Word, lex_line
+from .lexer import LexError, LexedLine, Word, lex_line, split_lines
 
 
 def _format(value: float, decimals: int, point: bool) -> str:
@@ -59,7 +59,7 @@ def rewrite_program(text: str, feed_by_line: Mapping[int, float] | None = None,
     spindle_by_line = dict(spindle_by_line or {})
     if not feed_by_line and not spindle_by_line:
         return text
-    lines = text.splitlines(keepends=True)
+    lines = split_lines(text, keepends=True)
     targets = sorted(set(feed_by_line) | set(spindle_by_line))
     inch_at = _inch_mode(lines, targets, file) if feed_by_line else {}
     for number in targets:

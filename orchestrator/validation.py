@@ -1,0 +1,241 @@
+"""Plausibility checks of recordings and cases beyond what the readers check.
+
+:meth:`Recording.read_csv` and :func:`load_case` check the *format* (columns,
+numbers, time order, TOML fields). The checks here catch files that are well
+formed but cannot be what they claim to be:
+
+* a value outside any physically plausible range for its unit (a position of
+  1e9 mm, a spindle at -5e6 rpm, a current of 1e5 A, a negative cutting load);
+* a ``line`` that is not a whole number, not a line of the program, or a line
+  that holds no block (a comment, a blank line);
+* ``line`` going back in time (the supported dialect has no loops or
+  sub-programs, so a run executes its lines in increasing order);
+* a recording much longer than the program runs (the wrong recording for
+  this program);
+* a case whose program or recording file is missing or whose stock lies
+  beyond any machine's reach.
+
+Every problem raises the reader's own error type (:class:`RecordingError`,
+:class:`CaseError`) naming the file, the row/time and the field.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Mapping
+
+import numpy as np
+
+from fmus_src.nck import GCodeError, NCKernel
+from fmus_src.nck.lexer import LexError, lex_line, split_lines
+
+from .case import Case, CaseError
+from .recording import Recording, RecordingError
+
+
+@dataclass(frozen=True)
+class Range:
+    """Closed plausible interval ``[low, high]`` of a channel, in the channel's unit, and why."""
+
+    low: float
+    high: float
+    reason: str
+
+
+#: Plausible range by channel unit (any machining center, with a wide margin).
+PLAUSIBLE_BY_UNIT: dict[str, Range] = {
+    "mm": Range(-10_000.0, 10_000.0, "no machining-center axis travels 10 m"),
+    "rpm": Range(-100_000.0, 100_000.0, "no machining-center spindle turns 100,000 rpm"),
+    "A": Range(-2_000.0, 2_000.0, "no feed-axis servo amplifier delivers 2 kA"),
+    "N": Range(-1e6, 1e6, "1 MN is far beyond any milling force"),
+}
+#: Channel-specific ranges (they win over the unit's).
+PLAUSIBLE_BY_CHANNEL: dict[str, Range] = {
+    "fc_N": Range(0.0, 1e6, "the cutting load sqrt(fx^2 + fy^2) is not negative"),
+}
+#: A recording may last at most this factor times the planned program time (plus :data:`DURATION_SLACK_S`).
+MAX_DURATION_RATIO = 2.0
+#: Seconds a logger may run before and after the program in addition to the ratio.
+DURATION_SLACK_S = 60.0
+
+
+def plausible_range(channel: str, unit: str) -> Range | None:
+    """The plausible range of a channel, or None when nothing is known about it."""
+    return PLAUSIBLE_BY_CHANNEL.get(channel) or PLAUSIBLE_BY_UNIT.get(unit)
+
+
+def block_lines(text: str) -> set[int]:
+    """1-based numbers of the lines of a program that hold a block (at least one word).
+
+    Lines that do not lex (they would fail in the interpreter) count as blocks:
+    this function only tells lines that *can* execute from comments and blanks.
+    """
+    out: set[int] = set()
+    for number, raw in enumerate(split_lines(text), start=1):
+        try:
+            if lex_line(raw).words:
+                out.add(number)
+        except LexError:
+            out.add(number)
+    return out
+
+
+def _row(recording: Recording, k: int) -> str:
+    return f"row {k + 1} (t_s = {float(recording.t[k]):.6g})"
+
+
+def _check_ranges(recording: Recording, ranges: Mapping[str, Range] | None) -> None:
+    src = recording.source
+    for name in recording.channels:
+        if name in ("t_s", "line"):
+            continue
+        rng = (ranges or {}).get(name) or plausible_range(name, recording.units.get(name, "1"))
+        if rng is None:
+            continue
+        col = np.asarray(recording[name], dtype=float)
+        with np.errstate(invalid="ignore"):
+            bad = np.flatnonzero(np.isinf(col) | (col < rng.low) | (col > rng.high))
+        if bad.size:
+            k = int(bad[0]) if col.ndim == 1 else int(bad[0] // col.shape[1])
+            value = col.reshape(len(recording), -1)[k]
+            shown = float(value[0]) if value.size == 1 else value.tolist()
+            raise RecordingError(
+                f"{src}: column {name!r}, {_row(recording, k)}: {shown!r} is outside the plausible range "
+                f"[{rng.low:g}, {rng.high:g}] {recording.units.get(name, '')} ({rng.reason}); "
+                f"{bad.size} value(s) out of range: wrong unit or wrong column?"
+            )
+
+
+def _program_text(program: str | Path) -> tuple[str, str]:
+    from fmus_src.nck import read_program
+
+    path = Path(program)
+    try:
+        return read_program(path), str(path)
+    except GCodeError as exc:
+        raise RecordingError(f"cannot check the recording against the program: {exc}") from None
+
+
+def _check_lines(recording: Recording, text: str, program_name: str) -> None:
+    src = recording.source
+    line = np.asarray(recording["line"], dtype=float)
+    known = ~np.isnan(line)
+    whole = known & (np.floor(line) == line) & (line >= 1)
+    if (known & ~whole).any():
+        k = int(np.flatnonzero(known & ~whole)[0])
+        raise RecordingError(f"{src}: column 'line', {_row(recording, k)}: {float(line[k])!r} is not a line number; "
+                             f"expected whole numbers >= 1 (1-based lines of {program_name})")
+    n_lines = len(split_lines(text))
+    blocks = block_lines(text)
+    for k in np.flatnonzero(known):
+        value = int(line[k])
+        if value > n_lines:
+            raise RecordingError(
+                f"{src}: column 'line', {_row(recording, int(k))}: line {value} does not exist, {program_name} has "
+                f"{n_lines} lines: is this the recording of another program?")
+        if value not in blocks:
+            raise RecordingError(
+                f"{src}: column 'line', {_row(recording, int(k))}: line {value} of {program_name} holds no block "
+                f"(a comment or blank line cannot execute): is this the recording of another program?")
+    seq = line[known]
+    back = np.flatnonzero(np.diff(seq) < 0)
+    if back.size:
+        k = int(np.flatnonzero(known)[back[0] + 1])
+        raise RecordingError(
+            f"{src}: column 'line', {_row(recording, k)}: the line goes back from {int(seq[back[0]])} to "
+            f"{int(seq[back[0] + 1])}; {program_name} has no loops, so a run executes its lines in increasing order")
+
+
+def _check_duration(recording: Recording, text: str, program_name: str, nc_parameters: Mapping[str, object]) -> None:
+    if len(recording) < 2:
+        return
+    kernel = NCKernel("nck", program_text=text, **nc_parameters)
+    kernel.set_program_text(text, program_name)
+    try:
+        kernel.setup(0.0)
+    except GCodeError as exc:
+        raise RecordingError(f"cannot check the recording against the program: {exc}") from None
+    planned = float(kernel.duration_[0])
+    span = float(recording.t[-1] - recording.t[0])
+    allowed = MAX_DURATION_RATIO * planned + DURATION_SLACK_S
+    if span > allowed:
+        raise RecordingError(
+            f"{recording.source}: column 't_s': the recording lasts {span:.6g} s but {program_name} runs "
+            f"{planned:.6g} s (planned with the given NC parameters); expected at most {allowed:.6g} s "
+            f"({MAX_DURATION_RATIO:g} x the program + {DURATION_SLACK_S:g} s): is this the recording of another program?")
+
+
+def validate_recording(
+    recording: Recording,
+    program: str | Path | None = None,
+    *,
+    program_text: str | None = None,
+    nc_parameters: Mapping[str, object] | None = None,
+    ranges: Mapping[str, Range] | None = None,
+) -> None:
+    """Check that a (well-formed) recording is plausible, and that it belongs to ``program``.
+
+    Parameters
+    ----------
+    recording : Recording
+        A single-member recording, e.g. from :meth:`Recording.read_csv`.
+    program : str or Path, optional
+        The program file that was run; enables the ``line`` and duration checks.
+    program_text : str, optional
+        The program as text instead of a file (``program`` then only names it).
+    nc_parameters : mapping, optional
+        NC kernel parameters (SI, e.g. :func:`orchestrator.twin.nck_parameters`) used to plan the
+        program for the duration check; default: the NC kernel's defaults (the default machine).
+    ranges : mapping channel -> Range, optional
+        Plausible ranges that replace the built-in ones for some channels.
+
+    Raises
+    ------
+    RecordingError
+        The first problem found, naming the recording, the column, the row and its time.
+    """
+    if any(recording.data.dtype[n].shape for n in recording.channels):
+        raise RecordingError(f"{recording.source}: validate one member at a time (use recording.member(b))")
+    t = recording.t
+    if len(t) and not np.isfinite(t).all():
+        k = int(np.flatnonzero(~np.isfinite(t))[0])
+        raise RecordingError(f"{recording.source}: column 't_s', row {k + 1}: {float(t[k])!r}; every row needs a finite time")
+    if len(t) > 1 and (np.diff(t) <= 0).any():
+        k = int(np.flatnonzero(np.diff(t) <= 0)[0]) + 1
+        raise RecordingError(f"{recording.source}: column 't_s', {_row(recording, k)}: time does not increase "
+                             f"({float(t[k - 1])!r} then {float(t[k])!r})")
+    _check_ranges(recording, ranges)
+    if program is None and program_text is None:
+        return
+    if program_text is not None:
+        text, name = program_text, str(program) if program is not None else "<text>"
+    else:
+        text, name = _program_text(program)  # type: ignore[arg-type]
+    if "line" in recording:
+        _check_lines(recording, text, name)
+    _check_duration(recording, text, name, dict(nc_parameters or {}))
+
+
+#: Stock coordinates beyond this (mm, work coordinates) are out of any machining center's reach.
+MAX_STOCK_COORDINATE_MM = 10_000.0
+
+
+def validate_case(case: Case) -> None:
+    """Check that a loaded case is complete and plausible (files exist, stock within reach).
+
+    Raises
+    ------
+    CaseError
+        Naming ``case.toml`` (or the folder) and the field.
+    """
+    where = str(case.source or case.folder)
+    if not Path(case.program).is_file():
+        raise CaseError(f"{where}: program: file {case.program} not found")
+    if case.recording is not None and not Path(case.recording).is_file():
+        raise CaseError(f"{where}: recording: file {case.recording} not found")
+    if case.stock is not None:
+        for key, vec in (("min", case.stock.min_mm), ("max", case.stock.max_mm)):
+            if not all(math.isfinite(v) and abs(v) <= MAX_STOCK_COORDINATE_MM for v in vec):
+                raise CaseError(f"{where}: [stock] {key} = {list(vec)} mm lies beyond "
+                                f"+-{MAX_STOCK_COORDINATE_MM:g} mm; expected work coordinates in mm")
