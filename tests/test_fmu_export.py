@@ -74,7 +74,12 @@ import fmpy
 r = fmpy.simulate_fmu(sys.argv[1], stop_time=0.02, output_interval=1e-3, start_values=json.loads(sys.argv[2]))
 import fmus_src.component
 print(json.dumps({"origin": fmus_src.component.__file__, "time": r["time"].tolist(),
-                  "last": {n: float(r[n][-1]) for n in r.dtype.names}}))
+                  "last": {n: float(r[n][-1]) for n in r.dtype.names}}), flush=True)
+# skip interpreter finalisation: pythonfmu 0.7.0's embedded-interpreter state can corrupt the heap
+# when the process tears down after its binary was unloaded (seen once in CI as "corrupted
+# double-linked list"); simulate_fmu above has already returned its results
+import os
+os._exit(0)
 """
 
 
