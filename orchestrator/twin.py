@@ -234,17 +234,35 @@ TWIN_CHANNELS: tuple[tuple[str, str, str], ...] = (
 )
 
 
+#: Where to find a channel's signal when its usual source is a foreign component with other names:
+#: the output wired into this input.
+_CONSUMER_OF: dict[str, str] = {
+    **{f"{a}_drive.position": f"mcu.{a}_position" for a in AXES},
+    **{f"mcu.{a}_current_cmd": f"{a}_drive.current_cmd" for a in AXES},
+    **{f"nck.{a}_ref": f"mcu.{a}_ref" for a in AXES},
+}
+
+
 def twin_probes(system: System) -> list[Probe]:
-    """The twin's recording channels that ``system`` can provide (components and variables present)."""
+    """The twin's recording channels that ``system`` can provide.
+
+    A channel whose usual variable is missing (a foreign FMU with other
+    names) is taken from the output wired into the input that consumes it,
+    e.g. ``x_mm`` from whatever feeds ``mcu.x_position``, converted to mm.
+    """
+    feeds = {c.target: c.source for c in system.connections}
     probes = []
     for channel, reference, unit in TWIN_CHANNELS:
         comp, var = reference.split(".")
-        if comp in system.components:
-            try:
-                system.components[comp].variable(var)
-            except CncTwinError:
+        if comp not in system.components:
+            continue
+        try:
+            system.components[comp].variable(var)
+        except CncTwinError:
+            reference = feeds.get(_CONSUMER_OF.get(reference, ""), "")
+            if not reference:
                 continue
-            probes.append(Probe(channel, reference, unit))
+        probes.append(Probe(channel, reference, unit))
     return probes
 
 

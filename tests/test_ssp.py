@@ -114,3 +114,47 @@ def test_twin_from_ssd_equals_twin_from_case(tmp_path):
     assert from_ssd.channels == from_case.channels
     for name in from_case.channels:
         np.testing.assert_array_equal(from_ssd[name], from_case[name])
+
+
+def test_foreign_drive_replaces_the_x_axis_through_the_system_file(tmp_path):
+    """A vendor's drive FMU (C, other names, mm at its interface) swapped in by editing the SSD only."""
+    import re
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent / "fixtures" / "fmu"))
+    import cfmu
+    from orchestrator.simulate import simulate_system_file
+
+    if cfmu.compiler() is None:
+        raise AssertionError("the test machine needs a C compiler (gcc) for the foreign FMU fixture")
+    root = Path(__file__).resolve().parent.parent
+    foreign = cfmu.build_c_fmu(cfmu.HERE / "foreign_drive", tmp_path / "fmu")
+    program = tmp_path / "move.nc"
+    program.write_text("%\nO0002\nG21 G90 G94\nG1 X5. F3000\nX-3.\nM30\n%\n")    # in the air above the stock
+
+    ssv = (root / "models" / "cnctwin.ssv").read_text()
+    ssv = re.sub(r'\s*<ssv:Parameter name="x_drive\.[^"]+">.*?</ssv:Parameter>', "", ssv, flags=re.S)
+    ssv = re.sub(r'(<ssv:Parameter name="nck.program_file">\s*<ssv:String value=")[^"]*"', rf'\g<1>{program}"', ssv)
+    (tmp_path / "cnctwin.ssv").write_text(ssv)
+    native_ssd = root / "models" / "cnctwin.ssd"
+    (tmp_path / "native.ssd").write_text(native_ssd.read_text())
+
+    ssd = native_ssd.read_text()
+    x_element = re.search(r'<ssd:Component name="x_drive".*?</ssd:Component>', ssd, flags=re.S).group(0)
+    ssd = ssd.replace(x_element, (
+        f'<ssd:Component name="x_drive" type="application/x-fmu-sharedlibrary" source="{foreign}">'
+        '<ssc:Annotations><ssc:Annotation type="org.cnctwin"><cnctwin:Component rate="4"/></ssc:Annotation>'
+        '</ssc:Annotations></ssd:Component>'))   # stepped at the 250 us velocity-loop period, no native class
+    for ours, theirs in (("position", "pos"), ("velocity", "vel"), ("current_cmd", "Iq"), ("disturbance_force", "F_load")):
+        ssd = re.sub(rf'(Element="x_drive" (?:start|end)Connector=")({ours})"', rf'\g<1>{theirs}"', ssd)
+    (tmp_path / "foreign.ssd").write_text(ssd)
+
+    reference = simulate_system_file(tmp_path / "native.ssd", plot=False)
+    swapped = simulate_system_file(tmp_path / "foreign.ssd", plot=False)
+    assert reference.success and swapped.success, swapped.message
+    assert swapped.summary["cycle_time_s"] == pytest.approx(reference.summary["cycle_time_s"], abs=2e-3)
+    n = min(len(reference.recording), len(swapped.recording))
+    # mm at the foreign interface, m inside the twin: a wrong factor would be off by 1000x
+    np.testing.assert_allclose(swapped.recording["x_mm"][:n], reference.recording["x_mm"][:n], atol=1e-4)
+    assert reference.recording["x_ref_mm"].max() == pytest.approx(5.0, abs=1e-9)
+    assert 4.0 < swapped.recording["x_mm"].max() < 5.0        # the servo lag turns back short of X5
