@@ -156,5 +156,6 @@ def test_foreign_drive_replaces_the_x_axis_through_the_system_file(tmp_path):
     n = min(len(reference.recording), len(swapped.recording))
     # mm at the foreign interface, m inside the twin: a wrong factor would be off by 1000x
     np.testing.assert_allclose(swapped.recording["x_mm"][:n], reference.recording["x_mm"][:n], atol=1e-4)
-    assert reference.recording["x_ref_mm"].max() == pytest.approx(5.0, abs=1e-9)
-    assert 4.0 < swapped.recording["x_mm"].max() < 5.0        # the servo lag turns back short of X5
+    # the 16 ms moving average after interpolation rounds the reversal at X5, the servo lag more so
+    assert 4.9 < reference.recording["x_ref_mm"].max() <= 5.0 + 1e-9
+    assert 4.0 < swapped.recording["x_mm"].max() < reference.recording["x_ref_mm"].max()
