@@ -106,6 +106,9 @@ def build_parser() -> argparse.ArgumentParser:
     from .cli_identify import add_parsers as add_identify_parsers
 
     add_identify_parsers(sub)
+    from .cli_diagnose import add_parsers as add_diagnose_parsers
+
+    add_diagnose_parsers(sub)
     return parser
 
 

@@ -35,6 +35,13 @@ _AXIS_KEYS = {
     "velocity_feedforward", "acceleration_feedforward",
 }
 _FRICTION_KEYS = {"coulomb_N", "static_N", "stribeck_velocity_m_per_s", "viscous_Ns_per_m"}
+#: Effects the twin leaves out in the paper's baseline (all 0 = off); written by `cnctwin diagnose`.
+_EFFECT_KEYS = {
+    "gravity_force_N", "gravity_spring_N_per_mm", "reversal_friction_peak_N", "reversal_friction_decay_mm",
+    "ripple_amplitude_N", "ripple_period_mm", "screw_stiffness_N_per_um", "backlash_width_um",
+    "pitch_slope_um_per_m", "pitch_amplitude_um", "pitch_period_mm", "thermal_drift_rate_um_per_min",
+    "servo_delay_ms",
+}
 
 #: Allowed keys per section. Section names are dotted paths; ``*`` matches any name.
 SCHEMA: dict[str, set[str]] = {
@@ -50,6 +57,7 @@ SCHEMA: dict[str, set[str]] = {
     "servo": {"position_loop_period_ms", "velocity_loop_period_ms"},
     **{f"axis.{a}": set(_AXIS_KEYS) for a in AXES},
     **{f"axis.{a}.friction.{d}": set(_FRICTION_KEYS) for a in AXES for d in ("positive", "negative")},
+    **{f"axis.{a}.effects": set(_EFFECT_KEYS) for a in AXES},
     "material.*": {"kt_N_per_m2", "ke"},
     "cost": {
         "tool_price_KRW", "tool_change_time_s", "labor_KRW_per_s", "depreciation_KRW_per_s",
@@ -58,7 +66,7 @@ SCHEMA: dict[str, set[str]] = {
 }
 
 #: Keys that may be left out of a machine file (the component default is used).
-OPTIONAL_SECTIONS: set[str] = {"machine", "material.*"}
+OPTIONAL_SECTIONS: set[str] = {"machine", "material.*", *(f"axis.{a}.effects" for a in AXES)}
 
 
 class MachineFileError(CncTwinError):
@@ -123,6 +131,15 @@ class Machine:
                 raise MachineFileError(f"[{section}] has no key {key!r}; expected one of {sorted(allowed)}")
             node[key] = value
         return new
+
+    def has_section(self, section: str) -> bool:
+        """Whether the dotted section exists in this file."""
+        node: Any = self.values
+        for part in section.split("."):
+            if not isinstance(node, dict) or part not in node:
+                return False
+            node = node[part]
+        return isinstance(node, dict)
 
     def materials(self) -> list[str]:
         """Names of the materials defined in the file."""

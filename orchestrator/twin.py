@@ -88,7 +88,14 @@ def mcu_parameters(machine: Machine) -> dict[str, object]:
     params["in_position_width"] = machine.si("nck")["in_position_width"]
     for a in AXES:
         params.update({f"{a}_{k}": v for k, v in machine.si(f"axis.{a}").items()})
+        params.update({f"{a}_{k}": v for k, v in _effects(machine, a).items()})
     return _declared(MCU, params)
+
+
+def _effects(machine: Machine, axis: str) -> dict[str, float | str]:
+    """The optional ``[axis.<a>.effects]`` section in SI (empty for the paper's baseline)."""
+    section = f"axis.{axis}.effects"
+    return machine.si(section) if machine.has_section(section) else {}
 
 
 def drive_parameters(machine: Machine, axis: str) -> dict[str, object]:
@@ -96,6 +103,7 @@ def drive_parameters(machine: Machine, axis: str) -> dict[str, object]:
     params: dict[str, object] = dict(machine.si(f"axis.{axis}"))
     for direction in ("positive", "negative"):
         params.update({f"{k}_{direction}": v for k, v in machine.si(f"axis.{axis}.friction.{direction}").items()})
+    params.update(_effects(machine, axis))
     return _declared(DriveAxis, params)
 
 
@@ -190,7 +198,7 @@ def build_twin(
             raise SystemDescriptionError(f"cutting_mode must be 'zmap' or 'path', got {options.cutting_mode!r}")
         system.add(cutting, rate=1)
         for a in AXES:
-            system.connect(f"{a}_drive.position", f"cutting.{a}_position")
+            system.connect(f"{a}_drive.table_position", f"cutting.{a}_position")   # tool vs workpiece
         system.connect("nck.spindle_speed", "cutting.spindle_speed")
         # step-mean forces: instantaneous samples at 1 ms would alias the tooth frequency
         system.connect("cutting.fx_mean", "x_drive.disturbance_force")
@@ -219,7 +227,7 @@ def build_twin(
 TWIN_CHANNELS: tuple[tuple[str, str, str], ...] = (
     ("line", "nck.line", "1"),
     *((f"{a}_ref_mm", f"nck.{a}_ref", "mm") for a in AXES),
-    *((f"{a}_mm", f"{a}_drive.position", "mm") for a in AXES),
+    *((f"{a}_mm", f"{a}_drive.table_position", "mm") for a in AXES),   # = motor-side position without effects
     *((f"{a}_tcmd_A", f"mcu.{a}_current_cmd", "A") for a in AXES),
     ("spindle_ref_rpm", "nck.spindle_ref", "rpm"),
     ("spindle_rpm", "nck.spindle_speed", "rpm"),
@@ -237,7 +245,7 @@ TWIN_CHANNELS: tuple[tuple[str, str, str], ...] = (
 #: Where to find a channel's signal when its usual source is a foreign component with other names:
 #: the output wired into this input.
 _CONSUMER_OF: dict[str, str] = {
-    **{f"{a}_drive.position": f"mcu.{a}_position" for a in AXES},
+    **{f"{a}_drive.table_position": f"mcu.{a}_position" for a in AXES},
     **{f"mcu.{a}_current_cmd": f"{a}_drive.current_cmd" for a in AXES},
     **{f"nck.{a}_ref": f"mcu.{a}_ref" for a in AXES},
 }

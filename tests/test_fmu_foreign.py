@@ -139,7 +139,8 @@ def test_foreign_drive_stands_in_for_the_x_axis_of_the_twin(foreign, tmp_path):
             system.components["x_drive"] = FMUComponent(foreign, name="x_drive", role="drive", mapping=MAPPING,
                                                         parameters=params)
         settings = MasterSettings(step=twin.options.step, time_limit=5.0, stop_when=twin.stop_when)
-        return Master(system, settings, twin.probes).run()
+        # channels follow the wiring: a drive without table_position is recorded from what feeds mcu.x_position
+        return Master(system, settings, twin_mod.twin_probes(system)).run()
 
     native, swapped = run(False), run(True)
     assert native.success and swapped.success

@@ -145,7 +145,8 @@ def test_foreign_drive_replaces_the_x_axis_through_the_system_file(tmp_path):
         f'<ssd:Component name="x_drive" type="application/x-fmu-sharedlibrary" source="{foreign}">'
         '<ssc:Annotations><ssc:Annotation type="org.cnctwin"><cnctwin:Component rate="4"/></ssc:Annotation>'
         '</ssc:Annotations></ssd:Component>'))   # stepped at the 250 us velocity-loop period, no native class
-    for ours, theirs in (("position", "pos"), ("velocity", "vel"), ("current_cmd", "Iq"), ("disturbance_force", "F_load")):
+    for ours, theirs in (("table_position", "pos"), ("position", "pos"), ("velocity", "vel"), ("current_cmd", "Iq"),
+                         ("disturbance_force", "F_load")):
         ssd = re.sub(rf'(Element="x_drive" (?:start|end)Connector=")({ours})"', rf'\g<1>{theirs}"', ssd)
     (tmp_path / "foreign.ssd").write_text(ssd)
 

@@ -20,11 +20,12 @@ from .drive import DEFAULT_INTEGRATION_STEP, DriveAxis, stribeck_step_cap
 from .errors import ServoError
 from .friction import StribeckParameters, stribeck_force
 from .mcu import MCU
-from .params import drive_parameters, mcu_parameters
+from .params import DRIVE_EFFECT_KEYS, MCU_EFFECT_KEYS, drive_parameters, effect_parameters, mcu_parameters
 from .stick_slip import SlipState, advance
 
 __all__ = [
     "MCU", "DriveAxis", "ServoError", "DEFAULT_INTEGRATION_STEP", "stribeck_step_cap", "CascadeGains", "CascadeState",
     "position_loop", "velocity_loop", "StribeckParameters", "stribeck_force", "SlipState", "advance",
-    "mcu_parameters", "drive_parameters", "NUMBA_AVAILABLE",
+    "mcu_parameters", "drive_parameters", "effect_parameters", "DRIVE_EFFECT_KEYS", "MCU_EFFECT_KEYS",
+    "NUMBA_AVAILABLE",
 ]

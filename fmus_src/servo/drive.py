@@ -26,6 +26,7 @@ import numpy as np
 
 from ..component import Component, Variable
 from ._jit import NUMBA_AVAILABLE
+from .effects import TableState, axis_load, reversal_friction, table_position, update_travel
 from .errors import ServoError
 from .friction import StribeckParameters
 from .stick_slip import SlipState, advance, friction_force
@@ -94,13 +95,34 @@ class DriveAxis(Component):
         _p("initial_position", "m", 0.0, "table position at t0 (at rest, in stick)"),
         _p("integration_step", "s", DEFAULT_INTEGRATION_STEP,
            "largest internal RK4 substep (further capped by the Stribeck growth rate)"),
+        # effect terms (diagnosis); 0 = off = the paper's baseline, see fmus_src.servo.effects
+        _p("gravity_force", "N", 0.0, "unbalanced weight Fg of a vertical axis (> 0 pulls towards negative positions)"),
+        _p("gravity_spring", "N/m", 0.0, "counterbalance spring rate: load Fg + k_g x"),
+        _p("reversal_friction_peak", "N", 0.0, "extra Coulomb/static friction right after a reversal"),
+        _p("reversal_friction_decay", "m", 0.0, "travel over which the reversal friction decays (0 = off)"),
+        _p("ripple_amplitude", "N", 0.0, "torque ripple (cogging) amplitude as a force"),
+        _p("ripple_period", "m", 0.0, "torque ripple period in motor travel (0 = off)"),
+        _p("screw_stiffness", "N/m", 0.0, "axial stiffness of screw, nut and bearings (0 = rigid)"),
+        _p("backlash_width", "m", 0.0, "backlash (lost motion) between motor and table"),
+        _p("pitch_slope", "1", 0.0, "linear lead error of the screw (m per m)"),
+        _p("pitch_amplitude", "m", 0.0, "periodic lead error amplitude"),
+        _p("pitch_period", "m", 0.0, "periodic lead error period (0 = off)"),
+        _p("thermal_drift_rate", "m/s", 0.0, "growth rate of the table position error (thermal drift)"),
         Variable("current_cmd", "input", "A", 0.0, "torque (current) command Atc from the MCU"),
         Variable("disturbance_force", "input", "N", 0.0, "disturbance Fd resisting positive motion (cutting force)"),
         Variable("position", "output", "m", 0.0, "table position x"),
         Variable("velocity", "output", "m/s", 0.0, "table velocity dx/dt"),
         Variable("motor_force", "output", "N", 0.0, "driving force u = Atc kt 2 pi / Lb"),
         Variable("friction_force", "output", "N", 0.0, "friction force Ff (static reaction when stuck)"),
+        Variable("table_position", "output", "m", 0.0,
+                 "table position (motor position + lead error - screw deflection, backlash, drift); "
+                 "equals position when the effects are off"),
     )
+
+    #: Parameters of the load terms (gravity, ripple) and of the motor-to-table terms.
+    LOAD_PARAMETERS = ("gravity_force", "gravity_spring", "ripple_amplitude")
+    TABLE_PARAMETERS = ("screw_stiffness", "backlash_width", "pitch_slope", "pitch_amplitude",
+                        "thermal_drift_rate")
 
     #: Run the compiled kernel (True, default when numba is importable) or the numpy reference (False).
     use_compiled: ClassVar[bool] = NUMBA_AVAILABLE
@@ -110,11 +132,15 @@ class DriveAxis(Component):
         positive = ("mass", "torque_constant", "screw_lead", "stribeck_velocity_positive",
                     "stribeck_velocity_negative", "integration_step")
         non_negative = ("coulomb_positive", "static_positive", "viscous_positive",
-                        "coulomb_negative", "static_negative", "viscous_negative")
+                        "coulomb_negative", "static_negative", "viscous_negative", "reversal_friction_decay",
+                        "ripple_period", "screw_stiffness", "backlash_width", "pitch_period")
         for name in positive:
             arr = self.values[name]
             if not np.all(np.isfinite(arr) & (arr > 0.0)):
                 raise ServoError(f"{self.name}.{name} must be finite and > 0, got {arr!r}")
+        for name in self.LOAD_PARAMETERS + self.TABLE_PARAMETERS + ("reversal_friction_peak", "pitch_period"):
+            if not np.all(np.isfinite(self.values[name])):
+                raise ServoError(f"{self.name}.{name} must be finite, got {self.values[name]!r}")
         for name in non_negative:
             arr = self.values[name]
             if not np.all(np.isfinite(arr) & (arr >= 0.0)):
@@ -124,10 +150,50 @@ class DriveAxis(Component):
         """kt 2 pi / Lb [N/A], shape (B,)."""
         return self.values["torque_constant"] * (2.0 * math.pi) / self.values["screw_lead"]
 
-    def _net_force(self) -> np.ndarray:
+    def _disturbance(self) -> np.ndarray:
+        """``Fd`` plus the load terms (gravity, spring, ripple) at the current position [N]."""
+        fd = self.values["disturbance_force"]
+        if not self._load_on:
+            return fd
+        v = self.values
+        return fd + axis_load(self._state.position, v["gravity_force"], v["gravity_spring"],
+                              v["ripple_amplitude"], v["ripple_period"])
+
+    def _net_force(self, disturbance: np.ndarray | None = None) -> np.ndarray:
         u = self.values["current_cmd"] * self._kf
         self.values["motor_force"][...] = u
-        return u - self.values["disturbance_force"]
+        return u - (self._disturbance() if disturbance is None else disturbance)
+
+    def _step_friction(self) -> tuple[StribeckParameters, np.ndarray]:
+        """Friction of this step (reversal friction added) and its packed kernel block."""
+        if not self._reversal_on:
+            return self._friction, self._params
+        extra = reversal_friction(self._table.travel, self.values["reversal_friction_peak"],
+                                  self.values["reversal_friction_decay"])
+        f = self._friction
+        friction = StribeckParameters(
+            coulomb_pos=f.coulomb_pos + extra, static_pos=f.static_pos + extra,
+            stribeck_velocity_pos=f.stribeck_velocity_pos, viscous_pos=f.viscous_pos,
+            coulomb_neg=f.coulomb_neg + extra, static_neg=f.static_neg + extra,
+            stribeck_velocity_neg=f.stribeck_velocity_neg, viscous_neg=f.viscous_neg,
+        )
+        params = self._params.copy()
+        for row in (2, 6, 7, 11):  # coulomb_pos, static_pos, coulomb_neg, static_neg; delta unchanged
+            params[row] += extra
+        return friction, params
+
+    def _update_table(self, old_position: np.ndarray, elapsed: float) -> None:
+        """Travel since reversal and the ``table_position`` output after a step."""
+        v = self.values
+        if self._reversal_on:
+            update_travel(self._table, old_position, self._state.position, self._state.velocity)
+        if self._table_on:
+            v["table_position"][...] = table_position(
+                self._table, self._state.position, v["motor_force"], elapsed, v["pitch_slope"],
+                v["pitch_amplitude"], v["pitch_period"], v["screw_stiffness"], v["backlash_width"],
+                v["thermal_drift_rate"])
+        else:
+            v["table_position"][...] = self._state.position
 
     # ------------------------------------------------------------------ protocol
     def _setup(self, t0: float) -> None:
@@ -148,7 +214,19 @@ class DriveAxis(Component):
             direction=np.zeros(self.batch, dtype=np.int8),
         )
         self._params = pack_parameters(self._friction, self._mass, self._kf)
+        self._load_on = any(bool(np.any(v[n] != 0.0)) for n in self.LOAD_PARAMETERS)
+        self._reversal_on = bool(np.any((v["reversal_friction_peak"] != 0.0) & (v["reversal_friction_decay"] > 0.0)))
+        self._table_on = any(bool(np.any(v[n] != 0.0)) for n in self.TABLE_PARAMETERS)
+        self._table = TableState(table=self._state.position.copy(), travel=np.zeros(self.batch),
+                                 last_direction=np.zeros(self.batch))
         self._publish(friction_force(self._state, self._net_force(), self._friction))
+        if self._table_on:  # the play starts centred on the nut position (no backlash, no drift at t0)
+            zero = np.zeros(self.batch)
+            self._table.table[...] = table_position(
+                TableState(self._table.table.copy(), zero.copy(), zero.copy()), self._state.position,
+                v["motor_force"], 0.0, v["pitch_slope"], v["pitch_amplitude"], v["pitch_period"],
+                v["screw_stiffness"], zero, zero)
+        self._update_table(self._state.position.copy(), 0.0)
 
     def _publish(self, ff: np.ndarray) -> None:
         self.values["position"][...] = self._state.position
@@ -156,21 +234,25 @@ class DriveAxis(Component):
         self.values["friction_force"][...] = ff
 
     def _do_step(self, t: float, h: float) -> None:
+        old_position = self._state.position.copy() if self._reversal_on else self._state.position
+        disturbance = self._disturbance()
+        friction, params = self._step_friction()
         if self.use_compiled:
             v, s = self.values, self._state
-            status = advance_kernel(v["current_cmd"], v["disturbance_force"], self._params, s.position, s.velocity,
+            status = advance_kernel(v["current_cmd"], disturbance, params, s.position, s.velocity,
                                     s.direction, float(h), self._step, v["motor_force"], v["position"],
                                     v["velocity"], v["friction_force"])
             if status != OK:
-                raise_reference_error(s, self._net_force(), self._mass, self._friction, h, self._step, status,
+                raise_reference_error(s, self._net_force(disturbance), self._mass, friction, h, self._step, status,
                                       self.name)
-            return
-        force = self._net_force()
-        try:
-            ff = advance(self._state, force, self._mass, self._friction, h, self._step)
-        except ServoError as err:
-            raise ServoError(f"{self.name}: {err}") from err
-        self._publish(ff)
+        else:
+            force = self._net_force(disturbance)
+            try:
+                ff = advance(self._state, force, self._mass, friction, h, self._step)
+            except ServoError as err:
+                raise ServoError(f"{self.name}: {err}") from err
+            self._publish(ff)
+        self._update_table(old_position, (t + h) - self.t0)
 
     def _reset(self) -> None:
         self.__dict__.pop("_state", None)

@@ -31,6 +31,7 @@ from ..component import Component, Variable
 from ._jit import NUMBA_AVAILABLE
 from .control import CascadeGains, CascadeState, position_loop, velocity_loop
 from .control_numba import mcu_kernel
+from .effects import DelayLine
 from .errors import ServoError
 
 AXES = ("x", "y", "z")
@@ -52,6 +53,8 @@ _AXIS_PARAMETERS: tuple[tuple[str, str, dict[str, float], str], ...] = (
     ("mass", "kg", {"x": 600.0, "y": 800.0, "z": 500.0}, "moving mass Ms (acceleration feed-forward)"),
     ("torque_constant", "N.m/A", {"x": 1.0, "y": 1.0, "z": 1.0}, "motor torque constant kt (acceleration feed-forward)"),
     ("screw_lead", "m", {"x": 0.012, "y": 0.012, "z": 0.012}, "ball-screw lead Lb (acceleration feed-forward)"),
+    ("servo_delay", "s", {"x": 0.0, "y": 0.0, "z": 0.0},
+     "extra pure delay of the current command inside the loop (diagnosis effect; 0 = off)"),
 )
 
 
@@ -138,6 +141,15 @@ class MCU(Component):
         self._next_tick = 0
         self._last_h: float | None = None
         self._last_n = 0
+        delay = self._stack("servo_delay")
+        if not np.all(np.isfinite(delay) & (delay >= 0.0)):
+            raise ServoError(f"{self.name}: {{x,y,z}}_servo_delay must be finite and >= 0, got {delay!r}")
+        self._delay = delay
+        self._delay_line: DelayLine | None = None
+        if np.any(delay > 0.0):
+            capacity = int(math.ceil(float(np.max(delay)) / self._tv)) + 3
+            self._delay_line = DelayLine(delay.shape, capacity, self._state.current_cmd)
+            self._delay_line.push(t0, self._state.current_cmd)
         self._publish()
 
     def _publish(self) -> None:
@@ -169,7 +181,21 @@ class MCU(Component):
             )
         return k0, self._last_n
 
+    def _apply_delay(self, t_end: float) -> None:
+        """Publish the current command of ``t_end - servo_delay`` (the delay line holds step-end commands)."""
+        line = self._delay_line
+        if line is None:
+            return
+        line.push(t_end, self._state.current_cmd)
+        delayed = line.read(t_end, self._delay)
+        for i, a in enumerate(AXES):
+            self.values[f"{a}_current_cmd"][...] = delayed[i]
+
     def _do_step(self, t: float, h: float) -> None:
+        self._step_ticks(t, h)
+        self._apply_delay(self.t0 + self._next_tick * self._tv)
+
+    def _step_ticks(self, t: float, h: float) -> None:
         k0, n = self._ticks(t, h)
         if self.use_compiled:
             mcu_kernel(k0, n, self._ratio, self._tp, self._tv, self._gain_block, self._state.block, *self._kernel_io)

@@ -63,3 +63,46 @@ def drive_parameters(
         out[f"{key}_positive"] = abs(float(positive[key]))
         out[f"{key}_negative"] = abs(float(negative[key]))
     return out
+
+
+#: DriveAxis effect parameters (the stripped keys of ``[axis.<a>.effects]``, SI).
+DRIVE_EFFECT_KEYS = (
+    "gravity_force", "gravity_spring", "reversal_friction_peak", "reversal_friction_decay", "ripple_amplitude",
+    "ripple_period", "screw_stiffness", "backlash_width", "pitch_slope", "pitch_amplitude", "pitch_period",
+    "thermal_drift_rate",
+)
+#: MCU effect parameters per axis (``{a}_<key>``).
+MCU_EFFECT_KEYS = ("servo_delay",)
+
+
+def effect_parameters(axis: str, effects: Mapping[str, float | str]) -> tuple[dict[str, float], dict[str, float]]:
+    """Split an SI ``[axis.<a>.effects]`` section into DriveAxis and MCU parameters.
+
+    Parameters
+    ----------
+    axis : str
+        ``"x"``, ``"y"`` or ``"z"``.
+    effects : mapping
+        Stripped SI keys (``{"gravity_force": 600.0, "servo_delay": 0.0005, ...}``).
+
+    Returns
+    -------
+    drive, mcu : dict
+        ``{"gravity_force": ...}`` for ``DriveAxis`` and ``{"z_servo_delay": ...}`` for ``MCU``.
+
+    Raises
+    ------
+    KeyError
+        For a key that is neither a drive nor an MCU effect parameter.
+    """
+    drive: dict[str, float] = {}
+    mcu: dict[str, float] = {}
+    for key, value in effects.items():
+        if key in DRIVE_EFFECT_KEYS:
+            drive[key] = float(value)
+        elif key in MCU_EFFECT_KEYS:
+            mcu[f"{axis}_{key}"] = float(value)
+        else:
+            raise KeyError(f"[axis.{axis}.effects] has no parameter {key!r}; expected one of "
+                           f"{sorted(DRIVE_EFFECT_KEYS + MCU_EFFECT_KEYS)}")
+    return drive, mcu

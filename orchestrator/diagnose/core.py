@@ -1,0 +1,513 @@
+"""``diagnose``: locate the mismatch between a recording and the twin, name the missing physics, refit it.
+
+Pipeline (each step its own module):
+
+1. :mod:`.prepare` / :mod:`.align` — the twin's NC run of the program, the
+   logger time offset (block transitions, then the servo-clock phase from the
+   current ripple), commanded positions (recorded, else the twin's), measured
+   following error and current;
+2. :mod:`.columns` — baseline replay of the servo loop and drives on the
+   commands, noise floors, and the library of effect columns (one batched
+   replay + kinematics);
+3. :mod:`.select` — sparse regression with BIC and minimum gains, per axis;
+4. :mod:`.refit` — the chosen effects and the identified scale factors
+   refitted together by batched closed-loop replay;
+5. :mod:`.locate` — where each effect and any unexplained residual sit
+   (time windows, lines, events, frequencies); RMS before / after, also on a
+   held-out case.
+"""
+from __future__ import annotations
+
+import datetime as _dt
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+from ..case import Case, load_case
+from ..machine import Machine, load_machine
+from ..recording import Recording, RecordingError
+from .columns import AxisColumns, build
+from .errors import DiagnosisError
+from .library import machine_keys
+from .locate import Locator, residual_windows
+from .model import Model, Simulated, simulate
+from .prepare import Prepared, prepare
+from .refit import Parameter, RefitResult, artefact_values, projectors, refit, residuals
+from .select import MIN_GAIN, Choice, Selection, select
+
+#: Residual RMS (noise floors) above which a channel's remaining residual is looked at for `unexplained`.
+UNEXPLAINED_SIGMA = 3.0
+#: Model entries that are not effects (identified parameters, timing).
+PSEUDO_EFFECTS = ("servo_scales", "command_shift")
+#: NC-kernel difference (recorded minus twin command) reported as unexplained above this RMS, mm.
+NC_DIFFERENCE_MM = 0.005
+
+
+@dataclass
+class CaseResult:
+    """One case replayed with the baseline and with the diagnosed model."""
+
+    name: str
+    prep: Prepared
+    cols: dict[str, AxisColumns]
+    sim: Simulated
+    rms_before: dict[str, float]
+    rms_after: dict[str, float]
+
+
+@dataclass
+class Diagnosis:
+    """Result of :func:`diagnose`; :meth:`to_json` is ``diagnosis.json`` (shared/spec/diagnosis.md).
+
+    Attributes
+    ----------
+    alignment : dict
+    effects : list of dict
+    unexplained : list of dict
+    rms_before, rms_after : dict
+    machine : Machine
+        The parameter set extended with the effects found and refitted.
+    provenance : dict
+        Dotted key -> source text of the changed values.
+    holdout : dict or None
+        ``{"case": ..., "rms_before": ..., "rms_after": ...}`` of a held-out case.
+    log : list of str
+        Selection and refit log.
+    """
+
+    alignment: dict[str, Any]
+    effects: list[dict[str, Any]]
+    unexplained: list[dict[str, Any]]
+    rms_before: dict[str, float]
+    rms_after: dict[str, float]
+    machine: Machine
+    provenance: dict[str, str]
+    model_text: str = "extended parameter set written to DIR/machine.toml"
+    holdout: dict[str, Any] | None = None
+    log: list[str] = field(default_factory=list)
+    noise: dict[str, float] = field(default_factory=dict)
+    results: list[CaseResult] = field(default_factory=list, repr=False)
+    final_model: Model = field(default_factory=dict)
+    case_name: str = ""
+
+    def to_json(self) -> dict[str, Any]:
+        """The ``diagnosis.json`` object, exactly the layout of the spec."""
+        return {
+            "alignment": self.alignment,
+            "effects": self.effects,
+            "unexplained": self.unexplained,
+            "rms_before": self.rms_before,
+            "rms_after": self.rms_after,
+            "model": self.model_text,
+        }
+
+    def write(self, out: str | Path, plots: bool = True) -> dict[str, Path]:
+        """Write ``diagnosis.json``, ``machine.toml``, ``report.md`` (and ``holdout.json``) and plots."""
+        from .report import write_outputs
+
+        return write_outputs(self, Path(out), plots=plots)
+
+
+def _r(x: float, digits: int = 6) -> float:
+    return float(f"{x:.{digits}g}")
+
+
+def as_case(item: str | Path | Case) -> Case:
+    """A :class:`Case` from a folder, a ``case.toml`` path or a Case."""
+    return item if isinstance(item, Case) else load_case(item)
+
+
+def _read(case: Case) -> Recording:
+    if case.recording is None or not Path(case.recording).is_file():
+        raise DiagnosisError(f"{case.source or case.folder}: the case needs a recording (recording = \"...\" in "
+                             "case.toml, columns per shared/spec/recording.md)")
+    try:
+        return Recording.read_csv(case.recording)
+    except RecordingError as exc:
+        raise DiagnosisError(str(exc)) from None
+
+
+def _lead_mm(machine: Machine, axis: str) -> float:
+    return float(machine.si(f"axis.{axis}")["screw_lead"]) * 1e3
+
+
+def _start_model(choices: dict[str, list[Choice]]) -> tuple[Model, list[Parameter]]:
+    """Start values and free parameters of the refit from the selection's linear coefficients."""
+    model: Model = {}
+    free: list[Parameter] = []
+    for a, chosen in choices.items():
+        am = model.setdefault(a, {})
+        for ch in chosen:
+            e, c, fixed = ch.variant.effect, ch.coefficients, dict(ch.variant.fixed)
+            if e == "screw_compliance":
+                comp = max(c["compliance_um_per_N"], 1e-6)
+                am[e] = {"stiffness_N_per_um": 1.0 / comp}
+                free.append(Parameter(a, e, "stiffness_N_per_um"))
+                continue
+            if e == "current_saturation":
+                am[e] = {"limit_A": fixed["limit_A"]}
+                free.append(Parameter(a, e, "limit_A"))
+                continue
+            params = {**{k: v for k, v in fixed.items()}, **c}
+            am[e] = params
+            for k in c:
+                free.append(Parameter(a, e, k))
+            if e == "reversal_friction":
+                free.append(Parameter(a, e, "decay_mm"))
+    return model, free
+
+
+def _scale_parameters(machine: Machine, axes: list[str], model: Model) -> list[Parameter]:
+    free = []
+    for a in axes:
+        sec = machine.si(f"axis.{a}")
+        model.setdefault(a, {})["servo_scales"] = {
+            "Spp": float(sec["position_scale"]), "Svp": float(sec["velocity_p_scale"]),
+            "Svi": float(sec["velocity_i_scale"])}
+        free += [Parameter(a, "servo_scales", s) for s in ("Spp", "Svp", "Svi")]
+    return free
+
+
+def _rms(prep: Prepared, cols: dict[str, AxisColumns], sim: Simulated, member: int) -> dict[str, float]:
+    """RMS per channel after removing the artefacts fitted for this member."""
+    art = artefact_values(prep, cols, sim, member)
+    out: dict[str, float] = {}
+    for a, c in cols.items():
+        fe = prep.fe[a][c.rows_fe] - sim.fe[a][c.rows_fe, member]
+        tc = (prep.current[a][c.rows_tc] - sim.current[a][c.rows_tc, member]) if c.rows_tc.size else None
+        fe_art, tc_art = _artefact_signal(c, art[a])
+        out[f"{a}_fe_um"] = _r(float(np.sqrt(np.mean((fe - fe_art) ** 2))), 4)
+        if tc is not None:
+            out[f"{a}_tcmd_A"] = _r(float(np.sqrt(np.mean((tc - tc_art) ** 2))), 4)
+    return out
+
+
+def _artefact_signal(c: AxisColumns, values: dict[str, float]) -> tuple[np.ndarray, np.ndarray]:
+    """The fitted artefacts as signals on the FE rows [µm] and current rows [A]."""
+    nf = c.rows_fe.size
+    total = np.zeros(nf + c.rows_tc.size)
+    for name, v in values.items():
+        total = total + v * c.artefacts[name]
+    fe = total[:nf] * c.sigma_fe
+    tc = total[nf:] * c.sigma_tc if c.rows_tc.size else np.zeros(0)
+    return fe, tc
+
+
+def _without(model: Model, axis: str, effect: str) -> Model:
+    out = {a: {e: dict(p) for e, p in m.items()} for a, m in model.items()}
+    out[axis].pop(effect, None)
+    return out
+
+
+def _confidence(delta_bic: float) -> float:
+    """Posterior probability of the effect from the BIC difference (Schwarz approximation of the Bayes factor)."""
+    if delta_bic > 40:
+        return 0.999
+    return _r(min(0.999, 1.0 / (1.0 + math.exp(-0.5 * delta_bic))), 3)
+
+
+def _report_params(effect: str, params: dict[str, float]) -> dict[str, float]:
+    from .library import EFFECT_PARAMETERS
+
+    names = EFFECT_PARAMETERS[effect]
+    return {k: _r(float(params.get(k, 0.0)), 5) for k in names}
+
+
+TIMING_EFFECTS = ("servo_delay", "velocity_feedforward")
+
+
+def _timing_effects(model: Model) -> bool:
+    return any(e in TIMING_EFFECTS for m in model.values() for e in m)
+
+
+def _name_and_refit(prep: Prepared, base: Model, lead: dict[str, float], vertical: tuple[str, ...],
+                    machine: Machine, refit_scales: bool, say: Callable[[str], None], log: list[str]
+                    ) -> tuple[dict[str, AxisColumns], dict[str, Selection], dict[str, list[Choice]], RefitResult]:
+    """Library columns, selection per axis and the joint refit (steps 2-4 of the pipeline)."""
+    say("building the effect library (batched replay)")
+    cols, _ = build(prep, base, lead, vertical)
+    selections: dict[str, Selection] = {}
+    for a, c in cols.items():
+        selections[a] = select(c.y, c.artefacts, c.variants, c.columns)
+        log += [f"[{a}] {line}" for line in selections[a].log]
+    choices = {a: s.choices for a, s in selections.items()}
+    start, free = _start_model(choices)
+    for a in prep.axes:
+        start.setdefault(a, {})
+    if refit_scales and any(choices.values()):
+        free += _scale_parameters(machine, [a for a in prep.axes if choices[a]], start)
+    if any(choices.values()):
+        # without recorded commands the program clock is known only through the block transitions and
+        # the current ripple: refit the command timing with the effects (a shift mimics feed-forward)
+        for a in prep.axes:
+            if not prep.ref_recorded[a] and choices[a]:
+                start[a]["command_shift"] = {"shift_ms": 0.0}
+                free.append(Parameter(a, "command_shift", "shift_ms"))
+    say(f"refitting {len(free)} parameters")
+    fit = refit(prep, cols, start, free)
+    log += fit.log
+    return cols, selections, choices, fit
+
+
+def _timing_check(prep: Prepared, cols: dict[str, AxisColumns], final: Model, fit: RefitResult) -> float | None:
+    """A servo-clock phase that explains timing effects (delay, feed-forward) as well as they do, or None.
+
+    The servo phase is an alignment quantity: recorded commands fix it only when the machine
+    interpolates as the twin does, the current ripple only up to a servo delay. Removing the delay, the
+    feed-forward or both (and the scale factors refitted with them), the model is replayed at the other
+    :data:`prepare.PHASE_STEPS` - 1 trial phases; if one of them comes within the minimum gain of the
+    model with the timing effects, the phase is the better explanation (alignment before physics).
+    """
+    from .prepare import PHASE_STEPS
+
+    proj = fit.projectors or projectors(cols)
+    shifted = prep.shifted_commands()
+    present = [e for e in TIMING_EFFECTS if any(e in m for m in final.values())]
+    subsets = [(e,) for e in present] + ([tuple(present)] if len(present) > 1 else [])
+    alternatives = [{a: {e: dict(p) for e, p in m.items() if e not in sub + ("servo_scales",)}
+                     for a, m in final.items()} for sub in subsets]
+    sim = simulate(prep.machine, prep.t, prep.commands, [final], prep.t_start, shifted)
+    r = residuals(prep, cols, sim, 0, proj)
+    cost_with = float(r @ r)
+    n = r.size
+    tp = float(prep.machine.si("servo")["position_loop_period"])
+    best = (np.inf, 0.0, 0)
+    for k in range(1, PHASE_STEPS):
+        phase = tp * k / PHASE_STEPS
+        phase = phase - tp if phase > tp / 2 else phase
+        s = simulate(prep.machine, prep.t, prep.commands, alternatives, prep.t_start + phase, shifted)
+        for j in range(len(alternatives)):
+            rr = residuals(prep, cols, s, j, proj)
+            best = min(best, (float(rr @ rr), phase, j))
+    cost, phase, j = best
+    if cost > cost_with + MIN_GAIN * n:
+        # the remaining parameters were refitted with the timing effects: refit them at that phase
+        removed = subsets[j]
+        free = [p for p in fit.parameters if p.effect not in removed]
+        start = {a: {e: dict(p) for e, p in m.items() if e not in removed} for a, m in final.items()}
+        saved = prep.t_start
+        prep.t_start = saved + phase
+        try:
+            trial = refit(prep, cols, start, free, max_iterations=5)
+        finally:
+            prep.t_start = saved
+        cost = trial.cost_end
+    if cost <= cost_with + MIN_GAIN * n:
+        return phase
+    return None
+
+
+def _evaluate_case(name: str, prep: Prepared, base: Model, final: Model, lead: dict[str, float],
+                   cols: dict[str, AxisColumns] | None = None) -> CaseResult:
+    if cols is None:
+        cols, _ = build(prep, base, lead)
+    sim = simulate(prep.machine, prep.t, prep.commands, [base, final], prep.t_start)
+    return CaseResult(name, prep, cols, sim, _rms(prep, cols, sim, 0), _rms(prep, cols, sim, 1))
+
+
+def diagnose(
+    case: str | Path | Case,
+    holdout: str | Path | Case | None = None,
+    machine: str | Path | Machine | None = None,
+    axes: list[str] | None = None,
+    vertical: tuple[str, ...] = ("z",),
+    refit_scales: bool = True,
+    progress: Callable[[str], None] | None = None,
+) -> Diagnosis:
+    """Diagnose a case: where the recording disagrees with the twin, and which missing physics explains it.
+
+    Parameters
+    ----------
+    case : case folder, ``case.toml`` or Case
+        Program and recording (columns per shared/spec/recording.md; at least
+        ``t_s`` and ``{a}_mm`` of a moving axis; ``{a}_ref_mm``,
+        ``{a}_tcmd_A`` and ``line`` make the diagnosis sharper).
+    holdout : case, optional
+        A second case of the same machine, only re-simulated: RMS before /
+        after with the diagnosed model (is the model general?).
+    machine : name, path or Machine, optional
+        Parameter set to start from (default: the case's, e.g. an identified one).
+    axes : list of str, optional
+        Axes to diagnose (default: every recorded axis that moves).
+    vertical : tuple of str
+        Axes that carry a weight (gravity candidates).
+    refit_scales : bool
+        Refit the scale factors Spp, Svp, Svi together with the effects.
+    progress : callable, optional
+        ``progress(message)``.
+
+    Returns
+    -------
+    Diagnosis
+
+    Examples
+    --------
+    >>> from orchestrator.diagnose import diagnose
+    >>> d = diagnose("cases/z_strokes", holdout="cases/z_strokes_2")   # doctest: +SKIP
+    >>> [e["effect"] for e in d.effects]                              # doctest: +SKIP
+    ['gravity']
+    >>> d.write("out/diag")                                           # doctest: +SKIP
+    """
+    say = progress or (lambda message: None)
+    case = as_case(case)
+    base_machine = machine if isinstance(machine, Machine) else (
+        load_machine(machine) if machine is not None else case.machine)
+    recording = _read(case)
+    say("aligning the recording with the twin")
+    prep = prepare(case, recording, base_machine, axes)
+    lead = {a: _lead_mm(base_machine, a) for a in "xyz"}
+    base: Model = {a: {} for a in prep.axes}
+    log: list[str] = [f"time offset: {prep.offset:.6f} s ({prep.offset_method})"]
+    cols, selections, choices, fit = _name_and_refit(prep, base, lead, vertical, base_machine, refit_scales, say, log)
+    final = fit.model
+    if _timing_effects(final):
+        phase = _timing_check(prep, cols, final, fit)
+        if phase is not None:
+            log.append(f"timing check: a servo-clock phase of {phase * 1e3:+.3f} ms explains timing effects as "
+                       "well (the commands or the current ripple did not fix the phase); diagnosing again")
+            prep.t_start += phase
+            prep.phase_from_commands = False
+            cols, selections, choices, fit = _name_and_refit(prep, base, lead, vertical, base_machine,
+                                                             refit_scales, say, log)
+            final = fit.model
+
+    # final replay: baseline, final, and the final model without each effect (its contribution)
+    effect_keys = [(a, e) for a in prep.axes for e in final.get(a, {}) if e not in PSEUDO_EFFECTS]
+    shifted = prep.shifted_commands()
+    proj = fit.projectors or projectors(cols)
+    base = {a: ({"command_shift": dict(final[a]["command_shift"])} if "command_shift" in final.get(a, {}) else {})
+            for a in prep.axes}
+    members = [base, final] + [_without(final, a, e) for a, e in effect_keys]
+    sim = simulate(prep.machine, prep.t, prep.commands, members, prep.t_start, shifted)
+    # effects the refit made negligible are dropped (their contribution is below the minimum gain)
+    kept = []
+    r_final = residuals(prep, cols, sim, 1, proj)
+    for k, (a, e) in enumerate(effect_keys):
+        r_wo = residuals(prep, cols, sim, 2 + k, proj)
+        gain = float(r_wo @ r_wo - r_final @ r_final)
+        n_axis = cols[a].y.size
+        if gain < MIN_GAIN * n_axis:
+            log.append(f"[{a}] drop {e} after the refit: gain {gain / n_axis:.4f} n below {MIN_GAIN}")
+            final[a].pop(e, None)
+            continue
+        kept.append((a, e))
+    if len(kept) != len(effect_keys):
+        effect_keys = kept
+        members = [base, final] + [_without(final, a, e) for a, e in effect_keys]
+        sim = simulate(prep.machine, prep.t, prep.commands, members, prep.t_start, shifted)
+    rms_before = _rms(prep, cols, sim, 0)
+    rms_after = _rms(prep, cols, sim, 1)
+    for a, diff in prep.nc_difference.items():
+        value = _r(float(np.sqrt(np.nanmean(diff ** 2))), 4)
+        rms_before[f"{a}_ref_mm"] = value
+        rms_after[f"{a}_ref_mm"] = value
+
+    locator = Locator(prep, cols)
+    art = artefact_values(prep, cols, sim, 1)
+    alignment = _alignment(prep, cols, art, final)
+    ci_of = {(p.axis, p.effect, p.name): fit.ci90[i] for i, p in enumerate(fit.parameters)}
+    effects = []
+    for k, (a, e) in enumerate(effect_keys):
+        choice = next(ch for ch in choices[a] if ch.variant.effect == e)
+        params = _report_params(e, final[a][e])
+        ci = {}
+        for name in params:
+            bounds = ci_of.get((a, e, name))
+            if bounds is not None and np.all(np.isfinite(bounds)):
+                ci[name] = [_r(float(bounds[0]), 5), _r(float(bounds[1]), 5)]
+            else:
+                ci[name] = [params[name], params[name]]
+        where, channels = locator.effect_where(a, e, sim, 1, 2 + k, params)
+        effects.append({
+            "effect": e, "axis": a, "channels": channels, "where": where,
+            "parameters": params, "ci90": ci, "confidence": _confidence(choice.delta_bic),
+            "evidence": locator.evidence(a, e, choice, sim, 1, 2 + k, selections[a]),
+        })
+    effects.sort(key=lambda d: -next(ch.delta_bic for ch in choices[d["axis"]] if ch.variant.effect == d["effect"]))
+    unexplained = locator.unexplained(sim, 1, art)
+    for a, diff in prep.nc_difference.items():
+        rms = rms_before[f"{a}_ref_mm"]
+        if rms > NC_DIFFERENCE_MM:
+            windows = residual_windows(prep.t, np.abs(diff) > NC_DIFFERENCE_MM, min_s=0.01)
+            unexplained.append({"channels": [f"{a}_ref_mm"],
+                                "where": {"time_s": windows[:10], "lines": locator.lines_in(windows),
+                                          "event": "NC-kernel interpolation differs from the recorded command",
+                                          "frequency_Hz": None},
+                                "rms": rms})
+    machine_out, provenance = extended_machine(base_machine, final, case)
+    results = [CaseResult(Path(case.folder).name, prep, cols, sim, rms_before, rms_after)]
+    hold = None
+    if holdout is not None:
+        say("re-simulating the held-out case")
+        hcase = as_case(holdout)
+        hprep = prepare(hcase, _read(hcase), base_machine, [a for a in prep.axes])
+        hres = _evaluate_case(Path(hcase.folder).name, hprep, {a: {} for a in hprep.axes},
+                              {a: final.get(a, {}) for a in hprep.axes}, lead)
+        results.append(hres)
+        hold = {"case": str(hcase.folder), "rms_before": hres.rms_before, "rms_after": hres.rms_after}
+    noise = {}
+    for a, c in cols.items():
+        noise[f"{a}_fe_um"] = _r(c.sigma_fe, 4)
+        if c.rows_tc.size:
+            noise[f"{a}_tcmd_A"] = _r(c.sigma_tc, 4)
+    return Diagnosis(alignment, effects, unexplained, rms_before, rms_after, machine_out, provenance,
+                     holdout=hold, log=log, noise=noise, results=results, final_model=final,
+                     case_name=Path(case.folder).name)
+
+
+def _alignment(prep: Prepared, cols: dict[str, AxisColumns], art: dict[str, dict[str, float]],
+               model: Model) -> dict[str, Any]:
+    shift_ms = [v.get("time shift ms", 0.0) + model.get(a, {}).get("command_shift", {}).get("shift_ms", 0.0)
+                for a, v in art.items()]
+    offset = prep.offset + (float(np.median(shift_ms)) * 1e-3 if shift_ms else 0.0)
+    channels: dict[str, dict[str, float]] = {}
+    for a in prep.axes:
+        if prep.ref_recorded[a]:
+            channels[f"{a}_ref_mm"] = {"scale": 1.0, "offset": _r(prep.ref_offset_mm.get(a, 0.0), 6)}
+        channels[f"{a}_mm"] = {"scale": 1.0, "offset": _r(art[a].get(f"{a}_mm offset", 0.0) * 1e-3, 6)}
+        if prep.current[a] is not None:
+            channels[f"{a}_tcmd_A"] = {"scale": 1.0, "offset": _r(art[a].get(f"{a}_tcmd_A offset", 0.0), 6)}
+    return {"time_offset_s": _r(offset, 7), "channels": channels}
+
+
+def extended_machine(base: Machine, model: Model, case: Case) -> tuple[Machine, dict[str, str]]:
+    """The base parameter set with the diagnosed model: changed existing keys and ``[axis.<a>.effects]``."""
+    source = (f"diagnosed: cnctwin diagnose, {_dt.date.today().isoformat()}, from {Path(case.folder).name}")
+    m = base
+    prov: dict[str, str] = {}
+
+    def put(section: str, key: str, value: float) -> None:
+        nonlocal m
+        m = m.with_values(section, **{key: float(value)})
+        prov[f"{section}.{key}"] = source
+
+    for a, am in model.items():
+        axis = f"axis.{a}"
+        table = base.table(axis)
+        for e, p in am.items():
+            if e == "command_shift":
+                continue
+            if e == "servo_scales":
+                for sym, key in (("Spp", "position_scale"), ("Svp", "velocity_p_scale"), ("Svi", "velocity_i_scale")):
+                    put(axis, key, _r(p[sym], 6))
+            elif e == "friction_mismatch":
+                for d in ("positive", "negative"):
+                    fr = base.table(f"{axis}.friction.{d}")
+                    dc, dv = p.get("coulomb_N", 0.0), p.get("viscous_Ns_per_m", 0.0)
+                    put(f"{axis}.friction.{d}", "coulomb_N", _r(max(float(fr["coulomb_N"]) + dc, 0.0), 6))
+                    put(f"{axis}.friction.{d}", "static_N", _r(max(float(fr["static_N"]) + dc, 0.0), 6))
+                    put(f"{axis}.friction.{d}", "viscous_Ns_per_m", _r(max(float(fr["viscous_Ns_per_m"]) + dv, 0.0), 6))
+            elif e == "inertia_mismatch":
+                put(axis, "mass_kg", _r(float(table["mass_kg"]) + p["mass_kg"], 6))
+            elif e == "velocity_feedforward":
+                put(axis, "velocity_feedforward", _r(float(table["velocity_feedforward"]) + p["gain"], 6))
+            elif e == "current_saturation":
+                put(axis, "peak_current_A", _r(p["limit_A"], 6))
+            else:
+                for key, value in machine_keys(e, p).items():
+                    put(f"{axis}.effects", key, _r(value, 6))
+    m = m.with_values("machine", name=f"{base.name}-diagnosed")
+    return m, prov

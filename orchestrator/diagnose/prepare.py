@@ -1,0 +1,232 @@
+"""Step 1 of a diagnosis: read, align and put the recording and the twin's commands side by side."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from ..case import Case
+from ..machine import Machine
+from ..recording import Recording
+from ..simulate import simulate as simulate_twin
+from ..twin import TwinOptions
+from .align import fill_gaps, refine_offset_by_commands, time_offset_from_lines, time_offset_from_signal
+from .errors import DiagnosisError
+
+#: Samples closer than this to the start of the recording are not compared (replay start-up), s.
+WARM_UP_S = 0.02
+#: Recorded commands within this RMS of the twin's NC kernel (mm) are taken as the same interpolation.
+SAME_COMMANDS_MM = 1e-3
+#: An axis whose command spans less than this is not diagnosed, m.
+MIN_STROKE_M = 1e-5
+
+
+@dataclass
+class Prepared:
+    """A recording aligned with the twin.
+
+    Attributes
+    ----------
+    recording : Recording
+    machine : Machine
+    t : ndarray, shape (n,)
+        Sample times on the logger clock (the replay runs on this clock), s.
+    offset : float
+        Logger clock minus program clock, s.
+    offset_method : str
+    axes : list of str
+        Diagnosed axes.
+    commands : dict axis -> ndarray
+        Commanded positions at ``t`` [m] (recorded, else the twin's NC kernel at ``t - offset``).
+    ref_recorded : dict axis -> bool
+    fe : dict axis -> ndarray
+        Measured following error ``cmd - actual`` [µm] (NaN where not measured).
+    current : dict axis -> ndarray or None
+        Measured current command [A] (NaN where not measured).
+    valid : ndarray of bool
+        Samples compared (after the warm-up).
+    line : ndarray
+        Source line at each sample (recorded, else the twin's at ``t - offset``).
+    nc : Recording
+        The twin's own run of the program (NC kernel and servo, no cutting).
+    nc_difference : dict axis -> ndarray
+        Recorded minus twin commanded position [mm], offset removed (axes with a recorded command).
+    ref_offset_mm : dict axis -> float
+        Constant part of that difference (work offset), mm.
+    t_start : float
+        First servo tick of the replays: on the controller's position-loop grid
+        (program time ``k Tp``) seen through the estimated offset.
+    """
+
+    recording: Recording
+    machine: Machine
+    t: np.ndarray
+    offset: float
+    offset_method: str
+    axes: list[str]
+    commands: dict[str, np.ndarray]
+    ref_recorded: dict[str, bool]
+    fe: dict[str, np.ndarray]
+    current: dict[str, np.ndarray | None]
+    valid: np.ndarray
+    line: np.ndarray
+    nc: Recording
+    nc_difference: dict[str, np.ndarray] = field(default_factory=dict)
+    ref_offset_mm: dict[str, float] = field(default_factory=dict)
+    t_start: float | None = None
+    phase_from_commands: bool = False
+
+    def shifted_commands(self) -> dict:
+        """Axis -> ``f(s)``: the twin's commands at ``t - offset - s`` [m], for axes without a recorded command."""
+        out = {}
+        for a in self.axes:
+            if not self.ref_recorded[a]:
+                t_nc = np.asarray(self.nc.t, float)
+                ref = np.asarray(self.nc[f"{a}_ref_mm"], float) * 1e-3
+                out[a] = (lambda s, t_nc=t_nc, ref=ref: np.interp(self.t - self.offset - s, t_nc, ref))
+        return out
+
+
+def _finite_fraction(rec: Recording, name: str) -> float:
+    return float(np.mean(np.isfinite(rec[name]))) if name in rec else 0.0
+
+
+def twin_commands(case: Case, machine: Machine) -> Recording:
+    """The twin's run of the case's program without cutting (its NC commands, lines, servo response)."""
+    result = simulate_twin(case=replace(case, machine=machine), plot=False, options=TwinOptions(cutting=False))
+    if len(result.recording) < 3:
+        raise DiagnosisError(f"{case.program}: the twin could not run the program: {result.message}")
+    return result.recording
+
+
+def prepare(case: Case, recording: Recording, machine: Machine, axes: list[str] | None = None,
+            nc: Recording | None = None) -> Prepared:
+    """Align a recording with the twin and collect what the diagnosis compares.
+
+    Raises
+    ------
+    DiagnosisError
+        No ``{a}_mm`` of a moving axis, or the time offset cannot be estimated.
+    """
+    src = recording.source
+    nc = nc if nc is not None else twin_commands(case, machine)
+    t = np.asarray(recording.t, dtype=float)
+    # --- time offset: block transitions first (pure timing), else velocities
+    offset, method = float("nan"), ""
+    if "line" in recording and np.isfinite(recording["line"]).any():
+        offset, matched = time_offset_from_lines(t, recording["line"], nc.t, nc["line"])
+        method = f"{matched} matched block transitions"
+        if matched < 2:
+            offset = float("nan")
+    if not np.isfinite(offset):
+        for suffix in ("_ref_mm", "_mm"):
+            cands = [a for a in "xyz" if _finite_fraction(recording, f"{a}{suffix}") > 0.5
+                     and np.ptp(nc[f"{a}_ref_mm"]) > MIN_STROKE_M * 1e3]
+            if cands:
+                a = max(cands, key=lambda c: np.ptp(nc[f"{c}_ref_mm"]))
+                offset = time_offset_from_signal(t, recording[f"{a}{suffix}"], nc.t, nc[f"{a}_ref_mm"])
+                method = f"cross-correlation of {a}{suffix} with the twin's command"
+                break
+    if not np.isfinite(offset):
+        raise DiagnosisError(f"{src}: cannot align the recording with the program: no 'line' transitions and no "
+                             "position channel that moves")
+    with_ref = {a: np.asarray(recording[f"{a}_ref_mm"], float) for a in "xyz"
+                if _finite_fraction(recording, f"{a}_ref_mm") > 0.5 and np.ptp(nc[f"{a}_ref_mm"]) > MIN_STROKE_M * 1e3}
+    if with_ref:
+        offset = refine_offset_by_commands(t, with_ref, np.asarray(nc.t, float),
+                                           {a: np.asarray(nc[f"{a}_ref_mm"], float) for a in with_ref}, offset)
+        method += "; refined on the recorded commands"
+    t_prog = t - offset
+    wanted = axes or [a for a in "xyz" if _finite_fraction(recording, f"{a}_mm") > 0.5]
+    commands, recorded, fe, cur = {}, {}, {}, {}
+    nc_diff, ref_off = {}, {}
+    for a in wanted:
+        if f"{a}_mm" not in recording:
+            raise DiagnosisError(f"{src}: axis {a} has no '{a}_mm' column; the recording has {recording.channels}")
+        nc_cmd = np.interp(t_prog, nc.t, nc[f"{a}_ref_mm"])
+        has_ref = _finite_fraction(recording, f"{a}_ref_mm") > 0.5
+        cmd_mm = fill_gaps(t, recording[f"{a}_ref_mm"]) if has_ref else nc_cmd
+        if np.ptp(cmd_mm) * 1e-3 < MIN_STROKE_M:
+            continue
+        if has_ref:
+            inside = (t_prog >= nc.t[0]) & (t_prog <= nc.t[-1])
+            diff = cmd_mm - nc_cmd
+            ref_off[a] = float(np.median(diff[inside])) if inside.any() else 0.0
+            nc_diff[a] = np.where(inside, diff - ref_off[a], np.nan)
+        commands[a] = cmd_mm * 1e-3
+        recorded[a] = has_ref
+        fe[a] = (cmd_mm - np.asarray(recording[f"{a}_mm"], float)) * 1e3
+        cur[a] = np.asarray(recording[f"{a}_tcmd_A"], float) if f"{a}_tcmd_A" in recording else None
+    if not commands:
+        raise DiagnosisError(f"{src}: no axis moves (commanded stroke below {MIN_STROKE_M * 1e6:g} µm); "
+                             "nothing to diagnose")
+    valid = (t - t[0]) >= WARM_UP_S
+    if not all(recorded.values()):
+        valid &= (t_prog >= nc.t[0]) & (t_prog <= nc.t[-1])
+    if "line" in recording and np.isfinite(recording["line"]).any():
+        line = fill_gaps(t, recording["line"])
+    else:
+        idx = np.clip(np.searchsorted(nc.t, t_prog, side="right") - 1, 0, len(nc) - 1)
+        line = np.asarray(nc["line"], float)[idx]
+    tp = float(machine.si("servo")["position_loop_period"])
+    t_start = float(offset + tp * np.ceil((t[0] - offset) / tp - 1e-9))
+    valid &= t >= t_start + tp + WARM_UP_S
+    prep = Prepared(recording, machine, t, float(offset), method, list(commands), commands, recorded, fe, cur,
+                    valid, line, nc, nc_diff, ref_off, t_start)
+    same_commands = bool(nc_diff) and all(
+        float(np.sqrt(np.nanmean(d ** 2))) < SAME_COMMANDS_MM for d in nc_diff.values())
+    if not (with_ref and same_commands):
+        # recorded commands equal to the twin's fix the program clock, and with it the servo phase, to a
+        # small fraction of a tick; otherwise (no commands, or a controller that interpolates differently)
+        # only the block transitions do, to a sample period: take the phase from the current ripple.
+        # A servo delay shorter than a position-loop period is then partly absorbed by that phase.
+        align_servo_phase(prep)
+    else:
+        prep.phase_from_commands = True
+    return prep
+
+
+#: Candidate servo-clock phases tried per position-loop period.
+PHASE_STEPS = 8
+
+
+def _phase_cost(prep: Prepared, t_start: float) -> float:
+    """High-pass (first-difference) residual power of the baseline replay started at ``t_start``."""
+    from .model import simulate  # local: model imports the replay, which needs nothing from here
+
+    sim = simulate(prep.machine, prep.t, prep.commands, [{}], t_start)
+    cost = 0.0
+    for a in prep.axes:
+        ok = prep.valid & np.isfinite(prep.fe[a])
+        d = np.diff((prep.fe[a] - sim.fe[a][:, 0])[ok])
+        cost += float(np.sum(d * d)) / max(float(np.median(d * d)), 1e-12) if d.size else 0.0
+        if prep.current[a] is not None:
+            ok = prep.valid & np.isfinite(prep.current[a])
+            d = np.diff((prep.current[a] - sim.current[a][:, 0])[ok])
+            cost += float(np.sum(d * d)) / max(float(np.median(d * d)), 1e-12) if d.size else 0.0
+    return cost
+
+
+def align_servo_phase(prep: Prepared) -> None:
+    """Put the replay's servo ticks in the controller's phase (in place: ``t_start`` and ``offset``).
+
+    The position loop samples the command every ``Tp`` and the current
+    command jumps at each of those ticks; a logger sees that ripple at a phase
+    fixed by the controller's clock, which the block transitions only locate
+    to a sample period. The phase is chosen among :data:`PHASE_STEPS` per
+    ``Tp`` by the high-frequency residual power of the baseline replay
+    (smooth physics does not move it), refined by a parabola, and the logger
+    offset is then snapped to the nearest time consistent with it.
+    """
+    tp = float(prep.machine.si("servo")["position_loop_period"])
+    phases = tp * np.arange(PHASE_STEPS) / PHASE_STEPS
+    costs = np.array([_phase_cost(prep, prep.t_start + p) for p in phases])
+    i = int(np.argmin(costs))
+    c_m, c_0, c_p = costs[i - 1], costs[i], costs[(i + 1) % PHASE_STEPS]
+    den = c_m - 2.0 * c_0 + c_p
+    frac = 0.5 * (c_m - c_p) / den if den > 0 else 0.0
+    phase = phases[i] + float(np.clip(frac, -0.5, 0.5)) * tp / PHASE_STEPS
+    t_start = prep.t_start + phase
+    prep.offset = float(t_start - tp * np.round((t_start - prep.offset) / tp))
+    prep.t_start = float(t_start)
+    prep.offset_method += f"; servo phase from the current ripple ({PHASE_STEPS} trial phases)"

@@ -1,0 +1,158 @@
+"""Batched replay of the twin's servo loop and drives on commanded positions, with effect terms.
+
+Like :func:`orchestrator.identify.closed_loop.replay` (same timing: servo
+ticks at ``Tv`` from the first command sample, MCU first, then the drives
+with this tick's command, the position loop sampling the command at the
+tick), but it returns what diagnosis compares: the **table** position (the
+drive's ``table_position``, which carries the motor-to-table effects), the
+motor position and force (for the kinematic effect columns) and the current
+command, and it accepts per-member effect parameters of the MCU and the
+drives.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Mapping
+
+import numpy as np
+from scipy.interpolate import PchipInterpolator
+
+from fmus_src.servo import MCU, DriveAxis
+
+from ..machine import Machine
+from ..twin import drive_parameters, mcu_parameters
+from .errors import DiagnosisError
+
+
+@dataclass
+class Replay:
+    """Replay outputs at the requested times, arrays of shape (n, B) per axis.
+
+    Attributes
+    ----------
+    t : ndarray, shape (n,)
+    table : dict
+        Table position [m].
+    motor : dict
+        Motor-side position [m].
+    force : dict
+        Motor force ``u`` [N].
+    current : dict
+        Current command [A].
+    """
+
+    t: np.ndarray
+    table: dict[str, np.ndarray]
+    motor: dict[str, np.ndarray]
+    force: dict[str, np.ndarray]
+    current: dict[str, np.ndarray]
+
+
+def interpolate_command(t: np.ndarray, x: np.ndarray, query: np.ndarray) -> np.ndarray:
+    """Commanded position at ``query`` from samples: shape-preserving cubic (PCHIP), held outside.
+
+    A logger samples the command more coarsely than the servo tick; linear
+    interpolation would cut the corners of every acceleration by
+    ``a dt^2 / 8`` (0.7 µm at 2 m/s2 and 1.7 ms), which the loop turns into a
+    delay-like residual. PCHIP is exact for the command's piecewise cubic
+    shape to third order and never overshoots at the ends of a move.
+    """
+    q = np.clip(query, t[0], t[-1])
+    if t.size < 3:
+        return np.interp(q, t, x) if x.ndim == 1 else np.column_stack([np.interp(q, t, c) for c in x.T])
+    return PchipInterpolator(t, x, axis=0, extrapolate=False)(q)
+
+
+def run_replay(
+    machine: Machine,
+    t_cmd: np.ndarray,
+    commands: Mapping[str, np.ndarray],
+    t_out: np.ndarray,
+    batch: int = 1,
+    mcu_values: Mapping[str, np.ndarray | float] | None = None,
+    drive_values: Mapping[str, Mapping[str, np.ndarray | float]] | None = None,
+    t_start: float | None = None,
+) -> Replay:
+    """Simulate MCU + drives of the axes in ``commands`` for ``B`` parameter sets.
+
+    Parameters
+    ----------
+    machine : Machine
+        Nominal parameters.
+    t_cmd : ndarray, shape (m,)
+        Times of the commanded positions (program clock), s, increasing.
+    commands : mapping axis -> ndarray, shape (m,) or (m, B)
+        Commanded positions [m] (per member when 2-D).
+    t_out : ndarray, shape (n,)
+        Output times within ``[t_cmd[0], t_cmd[-1]]``.
+    batch : int
+    mcu_values, drive_values : mapping, optional
+        Per-member parameter overrides (arrays of shape (B,) or scalars).
+    t_start : float, optional
+        First servo tick (default ``t_cmd[0]``): put it on the controller's own
+        tick grid when known, so that the position loop samples the command
+        in the controller's phase. Outputs before it hold the initial state.
+
+    Returns
+    -------
+    Replay
+    """
+    t_cmd = np.asarray(t_cmd, dtype=float)
+    t_out = np.asarray(t_out, dtype=float)
+    axes = [a for a in "xyz" if a in commands]
+    if not axes:
+        raise DiagnosisError("replay needs the commanded positions of at least one axis")
+    tv = float(machine.si("servo")["velocity_loop_period"])
+    t0 = float(t_cmd[0]) if t_start is None else float(t_start)
+    n_ticks = int(np.floor((float(t_out[-1]) - t0) / tv + 1e-9)) + 1
+    tick_t = t0 + tv * np.arange(n_ticks + 1)
+    ref = {a: interpolate_command(t_cmd, np.asarray(commands[a], dtype=float), tick_t) for a in axes}
+
+    params = mcu_parameters(machine)
+    params.update(dict(mcu_values or {}))
+    mcu = MCU("mcu", batch=batch, **params)
+    drives: dict[str, DriveAxis] = {}
+    for a in axes:
+        dp = drive_parameters(machine, a)
+        dp.update(dict((drive_values or {}).get(a, {})))
+        drives[a] = DriveAxis(f"{a}_drive", batch=batch, initial_position=ref[a][0], **dp)
+        mcu.set(f"{a}_ref", ref[a][0])
+        mcu.set(f"{a}_position", ref[a][0])
+    mcu.setup(t0)
+    for d in drives.values():
+        d.setup(t0)
+    shape = (n_ticks + 1, batch)
+    table = {a: np.empty(shape) for a in axes}
+    motor = {a: np.empty(shape) for a in axes}
+    force = {a: np.empty(shape) for a in axes}
+    cur = {a: np.empty(shape) for a in axes}
+    mv = mcu.values
+    for a in axes:
+        dv = drives[a].values
+        table[a][0], motor[a][0], force[a][0] = dv["table_position"], dv["position"], dv["motor_force"]
+        cur[a][0] = mv[f"{a}_current_cmd"]
+    for k in range(n_ticks):
+        t = t0 + k * tv
+        for a in axes:
+            dv = drives[a].values
+            mv[f"{a}_ref"][...] = ref[a][k]
+            mv[f"{a}_position"][...] = dv["position"]
+            mv[f"{a}_velocity"][...] = dv["velocity"]
+        mcu.do_step(t, tv)
+        for a in axes:
+            drive = drives[a]
+            dv = drive.values
+            dv["current_cmd"][...] = mv[f"{a}_current_cmd"]
+            drive.do_step(t, tv)
+            table[a][k + 1] = dv["table_position"]
+            motor[a][k + 1] = dv["position"]
+            force[a][k + 1] = dv["motor_force"]
+            cur[a][k + 1] = mv[f"{a}_current_cmd"]
+    j = np.clip(np.searchsorted(tick_t, t_out, side="right"), 1, n_ticks)
+    f = np.clip((t_out - tick_t[j - 1]) / tv, 0.0, 1.0)[:, None]
+
+    def sample(arr: np.ndarray) -> np.ndarray:
+        return arr[j - 1] * (1.0 - f) + arr[j] * f
+
+    return Replay(t_out, {a: sample(table[a]) for a in axes}, {a: sample(motor[a]) for a in axes},
+                  {a: sample(force[a]) for a in axes}, {a: sample(cur[a]) for a in axes})

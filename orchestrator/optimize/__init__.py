@@ -1,0 +1,26 @@
+"""Optimisation of feed and spindle speed per G-code line on the twin (Sim & Lee 2023, section 3).
+
+Public API
+----------
+optimize, OptimizeSettings, OptimizeResult
+    Problem → Algorithm → Termination → Result, with checkpoints, workers and Dask.
+evaluate_population, Evaluation
+    B individuals in one batched twin call.
+build_reference, ProblemContext, Ranges
+    The problem (cutting lines, genes, S-word placement) from one reference run.
+LineProblem
+    The pymoo problem (and the line-wise operators in :mod:`.problem`).
+"""
+from __future__ import annotations
+
+from .context import ProblemContext, Ranges
+from .errors import OptimizeError
+from .evaluate import Evaluation, evaluate_population
+from .problem import LineProblem
+from .reference import Reference, build_reference
+from .run import OptimizeResult, OptimizeSettings, optimize
+
+__all__ = [
+    "Evaluation", "LineProblem", "OptimizeError", "OptimizeResult", "OptimizeSettings", "ProblemContext", "Ranges",
+    "Reference", "build_reference", "evaluate_population", "optimize",
+]

@@ -1,0 +1,290 @@
+"""What the optimiser varies: cutting lines, their feed and spindle genes, and where S words go.
+
+Rules (documented for machinists)
+---------------------------------
+* **Cutting line**: a source line holding a feed move (G1/G2/G3) that removes
+  at least ``min_removed_mm3`` of material in one reference run of the
+  original program on the twin (removed volume = time integral of the
+  cutting component's material removal rate over the time the NC kernel
+  executes that line). Air moves, plunges outside the stock and rapids are
+  not cutting lines.
+* **Genes**: one feed (mm/min) and one spindle speed (rpm) per cutting line,
+  keys ``L0042.feed`` and ``L0042.spindle`` (``0042`` = 1-based line of the
+  program file), on a grid of ``feed_step`` (10 mm/min) and ``spindle_step``
+  (50 rpm) within the ranges.
+* **Non-cutting feed lines keep their feed**: a non-cutting feed line that
+  would inherit a changed F modally from a cutting line gets its original F
+  written explicitly (a "pin").
+* **Where the S word goes** (``spindle_line``): the spindle speed of cutting
+  line L must be in effect when L starts. If L directly follows another
+  cutting line, S is written on L. Otherwise it is written at the start of the
+  non-cutting stretch before L (on the original S word of that stretch if it
+  has one, else on its first block line), so that the spindle ramps while the
+  tool retracts, rapids and plunges; only the remainder of the ramp (the NC
+  kernel's speed-arrival wait) costs time. Every cutting line always gets its
+  S word (also when unchanged), so the simulated and the written program are
+  the same program.
+"""
+from __future__ import annotations
+
+import hashlib
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from fmus_src.nck.blocks import Arc, Block, Linear, SpindleSpeed, SpindleStop, ToolChange
+from fmus_src.nck.writer import rewrite_program
+
+from ..case import Case
+from .errors import OptimizeError
+
+RPM_PER_RAD_S = 60.0 / (2.0 * math.pi)
+MM_PER_MIN_PER_M_S = 60000.0
+
+
+@dataclass(frozen=True)
+class Ranges:
+    """Search ranges and the machinist's grid.
+
+    Attributes
+    ----------
+    feed_mm_per_min : (float, float)
+        Feed range (the paper: 100–500 mm/min).
+    spindle_rpm : (float, float)
+        Spindle speed range (the paper: 1000–8000 rpm).
+    feed_step : float
+        Feed grid, mm/min.
+    spindle_step : float
+        Spindle grid, rpm.
+    """
+
+    feed_mm_per_min: tuple[float, float] = (100.0, 500.0)
+    spindle_rpm: tuple[float, float] = (1000.0, 8000.0)
+    feed_step: float = 10.0
+    spindle_step: float = 50.0
+
+    def __post_init__(self) -> None:
+        for name, (lo, hi), step in (("feed range", self.feed_mm_per_min, self.feed_step),
+                                     ("spindle range", self.spindle_rpm, self.spindle_step)):
+            if not (math.isfinite(lo) and math.isfinite(hi) and 0 < lo <= hi and step > 0):
+                raise OptimizeError(f"{name} must be 0 < low <= high with a positive grid step, got {lo}, {hi}, {step}")
+            if math.ceil(lo / step - 1e-9) * step > hi + 1e-9:
+                raise OptimizeError(f"{name} {lo}..{hi} holds no multiple of {step}")
+
+
+@dataclass
+class ProblemContext:
+    """Everything needed to evaluate an individual (picklable; sent to worker processes).
+
+    Attributes
+    ----------
+    case : Case
+        Stock, tool, machine; ``case.program`` names the file.
+    program_text : str
+        The original program.
+    lines : ndarray of int, shape (L,)
+        Cutting lines (1-based), in program order.
+    spindle_lines : ndarray of int, shape (L,)
+        Line that carries the S word of each cutting line.
+    pinned_feeds : dict[int, float]
+        Non-cutting feed lines whose original feed is written explicitly, mm/min.
+    original_feed, original_spindle : ndarray, shape (L,)
+        Feed (mm/min) and spindle speed (rpm) of each cutting line in the original program.
+    ranges : Ranges
+        Search ranges and grid.
+    load_limit_N : float
+        Cutting load limit Flim, N.
+    removed_mm3 : dict[int, float]
+        Removed volume per feed line in the reference run, mm3 (how lines were classified).
+    step : float
+        Communication step of the twin, s.
+    time_limit_s : float
+        Simulated-time limit per evaluation, s.
+    original_load_N : ndarray, shape (L,)
+        Largest cutting load of each cutting line in the reference run, N (seeds the chip-load scaling).
+    """
+
+    case: Case
+    program_text: str
+    lines: np.ndarray
+    spindle_lines: np.ndarray
+    pinned_feeds: dict[int, float]
+    original_feed: np.ndarray
+    original_spindle: np.ndarray
+    ranges: Ranges
+    load_limit_N: float
+    removed_mm3: dict[int, float] = field(default_factory=dict)
+    step: float = 1e-3
+    time_limit_s: float = 3600.0
+    original_load_N: np.ndarray = field(default_factory=lambda: np.zeros(0))
+
+    @property
+    def n_lines(self) -> int:
+        """Number of cutting lines L."""
+        return int(len(self.lines))
+
+    @property
+    def keys(self) -> list[str]:
+        """Readable gene names ``L0042.feed``, ``L0042.spindle`` (feed, spindle per line)."""
+        width = max(4, len(str(int(self.lines.max())))) if self.n_lines else 4
+        out = []
+        for line in self.lines.tolist():
+            out += [f"L{line:0{width}d}.feed", f"L{line:0{width}d}.spindle"]
+        return out
+
+    def fingerprint(self) -> str:
+        """Hash of program, genes and ranges (a checkpoint only resumes the same problem)."""
+        h = hashlib.sha256(self.program_text.encode("utf-8"))
+        h.update(repr((self.lines.tolist(), self.spindle_lines.tolist(), sorted(self.pinned_feeds.items()),
+                       self.ranges, self.load_limit_N, self.step)).encode("utf-8"))
+        return h.hexdigest()[:16]
+
+    # ------------------------------------------------------------------ genes <-> values
+    def snap(self, feeds: np.ndarray, spindles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Round half up to the grid and clip into the ranges (shape kept)."""
+        r = self.ranges
+        f = np.clip(np.floor(np.asarray(feeds, float) / r.feed_step + 0.5) * r.feed_step,
+                    math.ceil(r.feed_mm_per_min[0] / r.feed_step - 1e-9) * r.feed_step,
+                    math.floor(r.feed_mm_per_min[1] / r.feed_step + 1e-9) * r.feed_step)
+        s = np.clip(np.floor(np.asarray(spindles, float) / r.spindle_step + 0.5) * r.spindle_step,
+                    math.ceil(r.spindle_rpm[0] / r.spindle_step - 1e-9) * r.spindle_step,
+                    math.floor(r.spindle_rpm[1] / r.spindle_step + 1e-9) * r.spindle_step)
+        return f, s
+
+    def overrides(self, feeds: np.ndarray, spindles: np.ndarray) -> tuple[dict[int, object], dict[int, object]]:
+        """NC-kernel overrides for a population.
+
+        Parameters
+        ----------
+        feeds : ndarray, shape (B, L)
+            Feed per cutting line, mm/min.
+        spindles : ndarray, shape (B, L)
+            Spindle speed per cutting line, rpm.
+
+        Returns
+        -------
+        feed, spindle : dict line -> ndarray (B,)
+            In m/s and rad/s, for :meth:`fmus_src.nck.NCKernel.set_overrides`.
+        """
+        feeds = np.atleast_2d(np.asarray(feeds, float))
+        spindles = np.atleast_2d(np.asarray(spindles, float))
+        batch = feeds.shape[0]
+        feed: dict[int, object] = {int(line): np.full(batch, f / MM_PER_MIN_PER_M_S)
+                                   for line, f in self.pinned_feeds.items()}
+        for i, line in enumerate(self.lines.tolist()):
+            feed[int(line)] = feeds[:, i] / MM_PER_MIN_PER_M_S
+        spindle: dict[int, object] = {int(line): spindles[:, i] / RPM_PER_RAD_S
+                                      for i, line in enumerate(self.spindle_lines.tolist())}
+        return feed, spindle
+
+    def program_for(self, feeds: np.ndarray, spindles: np.ndarray) -> str:
+        """The rewritten program of one individual (only F and S words change).
+
+        Parameters
+        ----------
+        feeds, spindles : ndarray, shape (L,)
+            mm/min and rpm.
+        """
+        feed_by_line = dict(self.pinned_feeds)
+        feed_by_line.update({int(line): float(f) for line, f in zip(self.lines.tolist(), np.ravel(feeds))})
+        spindle_by_line = {int(line): float(s) for line, s in zip(self.spindle_lines.tolist(), np.ravel(spindles))}
+        return rewrite_program(self.program_text, feed_by_line, spindle_by_line, file=str(self.case.program))
+
+    def chip_load_feeds(self, spindles: np.ndarray, load_fraction: np.ndarray | float) -> np.ndarray:
+        """Feeds that put each line at ``load_fraction`` of the limit at the given spindle speeds, mm/min.
+
+        The cutting force of Eq. 10–13 is linear in the chip thickness, i.e. in the feed per tooth
+        ``F / (S z)``, so at an unchanged engagement the load of line ``i`` scales as
+        ``load_ref_i · (F / S) / (F_ref_i / S_ref_i)``. Lines that did not load the tool keep the top of the range.
+
+        Parameters
+        ----------
+        spindles : ndarray, shape (..., L)
+            Spindle speeds, rpm.
+        load_fraction : float or ndarray broadcastable to (..., L)
+            Target load as a fraction of the limit.
+        """
+        s = np.asarray(spindles, float)
+        load = np.maximum(self.original_load_N, 1e-9)
+        fz_ref = self.original_feed / np.maximum(self.original_spindle, 1e-9)
+        target = np.asarray(load_fraction, float) * self.load_limit_N
+        feeds = fz_ref * s * target / load
+        return np.where(self.original_load_N > 1.0, feeds, self.ranges.feed_mm_per_min[1])
+
+    def as_dict(self, feeds: np.ndarray, spindles: np.ndarray) -> dict[str, float]:
+        """One individual as ``{"L0042.feed": 300.0, "L0042.spindle": 6000.0, ...}``."""
+        x = np.empty(2 * self.n_lines)
+        x[0::2], x[1::2] = np.ravel(feeds), np.ravel(spindles)
+        return dict(zip(self.keys, x.tolist()))
+
+
+def classify_lines(blocks: tuple[Block, ...], removed_mm3: dict[int, float], min_removed_mm3: float
+                   ) -> tuple[list[int], list[int], dict[int, float], list[float], list[float]]:
+    """Cutting lines, their S-word lines, feed pins and original values (see the module rules).
+
+    Parameters
+    ----------
+    blocks : tuple of Block
+        Interpreted original program (execution order, SI units).
+    removed_mm3 : dict line -> mm3
+        Removed volume per line in the reference run.
+    min_removed_mm3 : float
+        Threshold of a cutting line, mm3.
+
+    Returns
+    -------
+    lines, spindle_lines, pins, feeds_mm_per_min, spindles_rpm
+    """
+    feed_lines: dict[int, tuple[float, int]] = {}
+    for b in blocks:
+        if isinstance(b, (Linear, Arc)) and b.line not in feed_lines:
+            feed_lines[b.line] = (b.feed * MM_PER_MIN_PER_M_S, b.feed_line)
+    cutting = sorted(line for line in feed_lines if removed_mm3.get(line, 0.0) >= min_removed_mm3)
+    cut_set = set(cutting)
+    pins = {line: f for line, (f, src) in feed_lines.items() if line not in cut_set and src in cut_set}
+    # spindle speed in effect at each cutting line, and where its S word goes
+    speed_at: dict[int, float] = {}
+    speed = 0.0
+    for b in blocks:
+        if isinstance(b, SpindleSpeed):
+            speed = b.speed * RPM_PER_RAD_S
+        elif isinstance(b, SpindleStop):
+            speed = 0.0
+        if b.line in cut_set and b.line not in speed_at:
+            speed_at[b.line] = speed
+    block_lines = sorted({b.line for b in blocks})
+    spindle_lines = []
+    previous = 0
+    for line in cutting:
+        between = [b for b in blocks if previous < b.line < line]
+        target = line
+        if between:
+            barrier = None
+            for b in between:
+                if isinstance(b, (SpindleSpeed, SpindleStop, ToolChange)):
+                    barrier = b
+            if barrier is None:
+                target = min(b.line for b in between)
+            elif isinstance(barrier, SpindleSpeed):
+                target = barrier.line
+        if target not in block_lines:
+            target = line
+        spindle_lines.append(target)
+        previous = line
+    # values as written in the program (undo the SI round trip)
+    return (cutting, spindle_lines, {k: round(v, 6) for k, v in pins.items()},
+            [round(feed_lines[line][0], 6) for line in cutting], [round(speed_at.get(line, 0.0), 6) for line in cutting])
+
+
+def check_context(ctx: ProblemContext) -> None:
+    """Refuse problems the optimiser cannot treat (no cutting line, spindle stopped on a cutting line)."""
+    if ctx.n_lines == 0:
+        raise OptimizeError(
+            f"{ctx.case.program}: no cutting line found (a feed move removing material in the reference run); "
+            "check the case's [stock] and the program's work offsets"
+        )
+    stopped = ctx.lines[ctx.original_spindle <= 0.0]
+    if stopped.size:
+        raise OptimizeError(f"{ctx.case.program}:{int(stopped[0])}: cutting line with the spindle stopped; "
+                            "expected S and M3/M4 before the first cut")

@@ -1,0 +1,225 @@
+"""Evaluate a population on the twin in ONE batched run.
+
+:func:`evaluate_population` is the single entry point the optimiser uses:
+``build_twin(batch=B)`` + ``nck.set_overrides`` + ``Master.run``. Faster
+components (a fast cutting mode, numba servo) plug in behind it unchanged.
+
+Figures per member ``b``
+------------------------
+* cycle time ``Tp`` (Eq. 17 with ``Num(Dt) Ts``): the time the member met the
+  twin's stop condition (program done and in position);
+* production cost ``Cp`` (Eq. 19–22, :func:`orchestrator.cost.production_cost`):
+  Taylor tool life with Miner's sum over the member's actual (ramped) spindle
+  speed history up to ``Tp``;
+* cutting load ``Fcf``: the largest ``fc_peak`` (largest resultant cutting
+  force within each communication step, Eq. 13) up to ``Tp``;
+* per cutting line: time the NC kernel executed it and its largest load.
+
+A member still running at ``ctx.time_limit_s`` (the cycle-time cut-off, by
+default 1.5 times the original cycle) is not simulated further: it is marked
+failed (``success`` False). The batch then costs at most the cut-off in
+simulated time, however slow its slowest member would be.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..cost import CostModel, production_cost
+from ..master import Master, MasterSettings
+from ..recording import Recording
+from ..twin import TwinOptions, build_twin
+from .context import ProblemContext
+
+#: Channels an evaluation records (a full recording of a large batch would not fit in memory).
+EVAL_CHANNELS = ("line", "spindle_rpm", "fc_peak_N")
+
+
+@dataclass
+class Evaluation:
+    """Figures of merit of B individuals.
+
+    Attributes
+    ----------
+    cycle_time_s : ndarray (B,)
+        Machining time Tp, s (NaN when the member failed).
+    cost_KRW : ndarray (B,)
+        Production cost Cp, KRW.
+    max_load_N : ndarray (B,)
+        Largest cutting load Fcf, N.
+    tool_life_used : ndarray (B,)
+        Fraction of one tool life used (Miner's sum).
+    line_time_s : ndarray (B, L)
+        Time spent on each cutting line, s.
+    line_max_load_N : ndarray (B, L)
+        Largest cutting load on each cutting line, N.
+    success : ndarray of bool (B,)
+        The member reached the program end without diverging.
+    feasible : ndarray of bool (B,)
+        ``success`` and ``max_load_N <= load_limit_N``.
+    reason : list of str
+        Empty for feasible members, else why not.
+    """
+
+    cycle_time_s: np.ndarray
+    cost_KRW: np.ndarray
+    max_load_N: np.ndarray
+    tool_life_used: np.ndarray
+    line_time_s: np.ndarray
+    line_max_load_N: np.ndarray
+    success: np.ndarray
+    feasible: np.ndarray
+    reason: list[str] = field(default_factory=list)
+
+    @property
+    def batch(self) -> int:
+        """Number of members B."""
+        return int(self.cycle_time_s.shape[0])
+
+    def take(self, index: np.ndarray | list[int]) -> "Evaluation":
+        """The members ``index`` (a new Evaluation)."""
+        idx = np.asarray(index, dtype=int)
+        return Evaluation(
+            self.cycle_time_s[idx], self.cost_KRW[idx], self.max_load_N[idx], self.tool_life_used[idx],
+            self.line_time_s[idx], self.line_max_load_N[idx], self.success[idx], self.feasible[idx],
+            [self.reason[i] for i in idx.tolist()],
+        )
+
+    @staticmethod
+    def concatenate(parts: list["Evaluation"]) -> "Evaluation":
+        """Join evaluations member-wise, in order."""
+        return Evaluation(
+            *(np.concatenate([getattr(p, name) for p in parts]) for name in (
+                "cycle_time_s", "cost_KRW", "max_load_N", "tool_life_used", "line_time_s", "line_max_load_N",
+                "success", "feasible")),
+            reason=[r for p in parts for r in p.reason],
+        )
+
+    def member(self, b: int) -> dict[str, object]:
+        """Member ``b`` as JSON-ready scalars (NaN as None)."""
+        def clean(x: float) -> float | None:
+            return float(x) if math.isfinite(float(x)) else None
+
+        return {
+            "cycle_time_s": clean(self.cycle_time_s[b]),
+            "cost_KRW": clean(self.cost_KRW[b]),
+            "max_cutting_load_N": clean(self.max_load_N[b]),
+            "tool_life_used": clean(self.tool_life_used[b]),
+            "feasible": bool(self.feasible[b]),
+            "reason": self.reason[b],
+        }
+
+
+def run_twin(ctx: ProblemContext, feeds: np.ndarray | None, spindles: np.ndarray | None, batch: int,
+             channels: tuple[str, ...] | None = EVAL_CHANNELS, program_text: str | None = None):
+    """One batched twin run with per-line overrides; returns the Master's RunResult.
+
+    Parameters
+    ----------
+    ctx : ProblemContext
+        The problem.
+    feeds, spindles : ndarray (B, L) or None
+        mm/min and rpm per cutting line; None runs the program as written.
+    batch : int
+        B.
+    channels : tuple of str or None
+        Recording channels (None: all of the twin's).
+    program_text : str, optional
+        Program to run instead of ``ctx.program_text``.
+    """
+    twin = build_twin(ctx.case, batch=batch, options=TwinOptions(step=ctx.step),
+                      program_text=program_text if program_text is not None else ctx.program_text)
+    if feeds is not None and spindles is not None:
+        feed, spindle = ctx.overrides(feeds, spindles)
+        twin.nck.set_overrides(feed=feed, spindle=spindle)
+    probes = twin.probes if channels is None else [p for p in twin.probes if p.channel in channels]
+    settings = MasterSettings(step=twin.options.step, time_limit=ctx.time_limit_s, stop_when=twin.stop_when,
+                              limits=getattr(twin, "limits", None) or {})
+    return Master(twin.system, settings, probes).run()
+
+
+def _column(recording: Recording, name: str, batch: int) -> np.ndarray:
+    x = np.asarray(recording[name], dtype=float)
+    return x.reshape(-1, 1) if batch == 1 and x.ndim == 1 else x
+
+
+def figures(ctx: ProblemContext, run, batch: int) -> Evaluation:
+    """Evaluation of a finished batched run (see the module docstring)."""
+    rec = run.recording
+    t = np.asarray(rec.t, dtype=float)
+    lines = _column(rec, "line", batch)
+    rpm = _column(rec, "spindle_rpm", batch)
+    load = _column(rec, "fc_peak_N", batch) if "fc_peak_N" in rec else np.zeros_like(rpm)
+    model = CostModel.from_machine(ctx.case.machine)
+    diameter = ctx.case.tool.diameter_mm
+    failed = np.asarray(getattr(run, "failed", np.zeros(batch, bool)), dtype=bool)
+    if failed.shape != (batch,):
+        failed = np.zeros(batch, bool)
+    failures = list(getattr(run, "failures", []) or [None] * batch)
+    stopped = np.asarray(run.stopped_at, dtype=float)
+    L = ctx.n_lines
+    out = {k: np.full(batch, np.nan) for k in ("time", "cost", "load", "used")}
+    line_time = np.full((batch, L), np.nan)
+    line_load = np.full((batch, L), np.nan)
+    success = np.zeros(batch, bool)
+    reasons = []
+    dt = np.zeros_like(t)
+    dt[:-1] = np.diff(t)
+    for b in range(batch):
+        ok = not failed[b] and math.isfinite(stopped[b])
+        if not ok:
+            why = failures[b] if b < len(failures) and failures[b] else (run.message or "")
+            if "time limit" in why or (run.success and not failed[b]):
+                reasons.append(f"not done within the cycle-time cut-off of {ctx.time_limit_s:g} s")
+            else:
+                reasons.append(f"simulation failed: {why}")
+            continue
+        tp = float(stopped[b] - t[0])
+        n = int(np.searchsorted(t, stopped[b], side="right"))
+        c = production_cost(t[:n], rpm[:n, b], diameter, model, tp)
+        out["time"][b], out["cost"][b], out["used"][b] = tp, c.total_KRW, c.tool_life_used
+        out["load"][b] = float(np.nanmax(load[:n, b])) if n else 0.0
+        ln = lines[:n, b]
+        w = dt[:n].copy()
+        if n:
+            w[-1] = 0.0
+        for i, line in enumerate(ctx.lines.tolist()):
+            mask = ln == line
+            line_time[b, i] = float(w[mask].sum())
+            line_load[b, i] = float(load[:n, b][mask].max()) if mask.any() else 0.0
+        success[b] = True
+        reasons.append("")
+    feasible = success & (np.nan_to_num(out["load"], nan=np.inf) <= ctx.load_limit_N)
+    for b in np.flatnonzero(success & ~feasible):
+        reasons[b] = f"cutting load {out['load'][b]:.1f} N exceeds the limit {ctx.load_limit_N:g} N"
+    return Evaluation(out["time"], out["cost"], out["load"], out["used"], line_time, line_load, success,
+                      feasible, reasons)
+
+
+def evaluate_population(ctx: ProblemContext, feeds: np.ndarray, spindles: np.ndarray) -> Evaluation:
+    """Evaluate B individuals in one batched twin run.
+
+    Parameters
+    ----------
+    ctx : ProblemContext
+        The problem (case, program, cutting lines, limit).
+    feeds : ndarray, shape (B, L)
+        Feed per cutting line, mm/min.
+    spindles : ndarray, shape (B, L)
+        Spindle speed per cutting line, rpm.
+
+    Returns
+    -------
+    Evaluation
+    """
+    feeds = np.atleast_2d(np.asarray(feeds, dtype=float))
+    spindles = np.atleast_2d(np.asarray(spindles, dtype=float))
+    if feeds.shape != spindles.shape or feeds.shape[1] != ctx.n_lines:
+        from .errors import OptimizeError
+
+        raise OptimizeError(f"feeds {feeds.shape} and spindles {spindles.shape} must both be (B, {ctx.n_lines})")
+    batch = feeds.shape[0]
+    run = run_twin(ctx, feeds, spindles, batch)
+    return figures(ctx, run, batch)

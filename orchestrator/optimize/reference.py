@@ -1,0 +1,106 @@
+"""The reference run: the original program on the twin, once, to find the cutting lines."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..case import Case
+from .context import ProblemContext, Ranges, check_context, classify_lines
+from .evaluate import Evaluation, figures, run_twin
+from .errors import OptimizeError
+
+#: Default threshold of a cutting line: removed volume in the reference run, mm3.
+MIN_REMOVED_MM3 = 0.1
+#: Default cycle-time cut-off of an evaluation, as a multiple of the original cycle time.
+MAX_CYCLE_FACTOR = 1.5
+
+
+@dataclass
+class Reference:
+    """The problem found from the reference run, and that run's figures.
+
+    Attributes
+    ----------
+    context : ProblemContext
+        Cutting lines, S-word lines, pins, original values.
+    evaluation : Evaluation
+        Figures of the original program (B = 1).
+    recording : Recording
+        The full recording of the reference run (for plots).
+    """
+
+    context: ProblemContext
+    evaluation: Evaluation
+    recording: object
+
+
+def removed_volume_by_line(recording) -> dict[int, float]:
+    """Removed volume per executing line, mm3 (integral of the MRR channel)."""
+    t = np.asarray(recording.t, float)
+    lines = np.asarray(recording["line"], float).ravel()
+    mrr = np.asarray(recording["mrr_mm3_per_min"], float).ravel() / 60.0  # mm3/s, step mean over (t-h, t]
+    dt = np.zeros_like(t)
+    dt[1:] = np.diff(t)  # the step mean recorded at t covers the step ending at t
+    out: dict[int, float] = {}
+    # attribute a step's removal to the line executing at the start of that step
+    prev = np.concatenate([[lines[0]], lines[:-1]])
+    for line in np.unique(prev[np.isfinite(prev)]):
+        mask = prev == line
+        out[int(line)] = float(np.sum(mrr[mask] * dt[mask]))
+    return out
+
+
+def build_reference(case: Case, program_text: str | None = None, ranges: Ranges | None = None,
+                    load_limit_N: float = 60.0, min_removed_mm3: float = MIN_REMOVED_MM3, step: float = 1e-3,
+                    time_limit_s: float = 3600.0, max_cycle_factor: float = MAX_CYCLE_FACTOR) -> Reference:
+    """Run the original program once and build the optimisation problem.
+
+    Parameters
+    ----------
+    case : Case
+        Case with a stock (an air cut has no cutting line).
+    program_text : str, optional
+        Program text; default: ``case.program`` read from disk.
+    ranges : Ranges, optional
+        Search ranges and grid.
+    load_limit_N : float
+        Cutting load limit, N.
+    min_removed_mm3 : float
+        A feed line removing at least this volume is a cutting line, mm3.
+    step : float
+        Communication step, s.
+    time_limit_s : float
+        Simulated-time limit of the reference run, s.
+    max_cycle_factor : float
+        Evaluations stop at this multiple of the original cycle time (slower
+        individuals are marked failed; see :mod:`.evaluate`).
+    """
+    if case.stock is None:
+        raise OptimizeError(f"{case.source or case.program}: the case has no [stock]; nothing is cut, nothing to optimise")
+    if not load_limit_N > 0:
+        raise OptimizeError(f"load limit must be positive, got {load_limit_N!r} N")
+    text = program_text if program_text is not None else case.program.read_text(encoding="utf-8")
+    ranges = ranges or Ranges()
+    probe = ProblemContext(case, text, np.zeros(0, int), np.zeros(0, int), {}, np.zeros(0), np.zeros(0), ranges,
+                           float(load_limit_N), {}, step, time_limit_s)
+    run = run_twin(probe, None, None, 1, channels=None)
+    if not run.success:
+        raise OptimizeError(f"{case.program}: the original program fails on the twin: {run.message}")
+    # the twin has planned the program: reuse its interpretation
+    from ..twin import TwinOptions, build_twin
+
+    twin = build_twin(case, batch=1, options=TwinOptions(step=step), program_text=text)
+    twin.nck.setup(0.0)
+    blocks = twin.nck.blocks_
+    removed = removed_volume_by_line(run.recording)
+    lines, s_lines, pins, f0, s0 = classify_lines(blocks, removed, min_removed_mm3)
+    ctx = ProblemContext(case, text, np.asarray(lines, int), np.asarray(s_lines, int), pins, np.asarray(f0, float),
+                         np.asarray(s0, float), ranges, float(load_limit_N), removed, step, time_limit_s)
+    check_context(ctx)
+    evaluation = figures(ctx, run, 1)
+    if not max_cycle_factor > 1.0:
+        raise OptimizeError(f"max_cycle_factor must exceed 1, got {max_cycle_factor!r}")
+    ctx.original_load_N = np.nan_to_num(evaluation.line_max_load_N[0], nan=0.0)
+    ctx.time_limit_s = min(time_limit_s, float(np.ceil(max_cycle_factor * evaluation.cycle_time_s[0])))
+    return Reference(ctx, evaluation, run.recording)

@@ -1,0 +1,435 @@
+"""``optimize``: Problem → Algorithm → Termination → Result, with checkpoints and workers.
+
+Default method (``method="default"``)
+    GA (``time``, ``cost``) or NSGA-II (``pareto``) with the seeded sampling,
+    line-wise crossover and mutation and the grid repair of :mod:`.problem`;
+    the load limit is a constraint (feasibility first).
+Paper's reference (``method="paper"``)
+    GA with pymoo's default real-coded operators (random sampling, SBX, PM),
+    the penalty fitness of Eq. 17/18 with weight ``penalty_weight`` and the
+    paper's stopping rule (``gens`` generations, or best fitness <=
+    ``fitness_limit``). Values are snapped to the same grid so that both
+    methods write the same kind of program.
+
+The chosen program is re-simulated on its own (B = 1, rewritten text): the
+``after`` figures are those of the written program. With the default method a
+candidate that exceeds the load limit in this re-simulation is skipped for the
+next best (and the original program is kept when none passes).
+"""
+from __future__ import annotations
+
+import sys
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+from pymoo.algorithms.moo.nsga2 import NSGA2, binary_tournament
+from pymoo.algorithms.soo.nonconvex.ga import GA, comp_by_cv_and_fitness
+from pymoo.operators.selection.tournament import TournamentSelection
+from pymoo.operators.crossover.sbx import SBX
+from pymoo.operators.mutation.pm import PM
+from pymoo.operators.sampling.rnd import FloatRandomSampling
+from pymoo.termination.max_gen import MaximumGenerationTermination
+from pymoo.util.nds.non_dominated_sorting import NonDominatedSorting
+
+from ..case import Case
+from .backends import CachedEvaluator, DaskBackend, ProcessBackend, SerialBackend
+from .checkpoint import latest_checkpoint, read_pickle, write_checkpoint, write_pickle
+from .context import Ranges
+from .errors import OptimizeError
+from .evaluate import Evaluation, figures, run_twin
+from .problem import (
+    METHODS, OBJECTIVES, GridRepair, LineProblem, LinewiseCrossover, LinewiseMutation, SeededSampling,
+    objectives,
+)
+from .reference import MAX_CYCLE_FACTOR, MIN_REMOVED_MM3, Reference, build_reference
+
+
+@dataclass
+class OptimizeSettings:
+    """Settings of :func:`optimize` (CLI flags in brackets).
+
+    Attributes
+    ----------
+    objective : {"time", "cost", "pareto"}
+        [--objective] machining time (Eq. 17), production cost (Eq. 18–22) or both (NSGA-II).
+    method : {"default", "paper"}
+        [--method] constraint-handling GA/NSGA-II, or the paper's penalty GA.
+    load_limit_N : float
+        [--load-limit-N] cutting load limit Flim, N (paper: 60).
+    feed_range : (float, float)
+        [--feed-range] mm/min (paper: 100–500).
+    spindle_range : (float, float)
+        [--spindle-range] rpm (paper: 1000–8000).
+    feed_step, spindle_step : float
+        Grid a machinist writes: 10 mm/min, 50 rpm.
+    pop, gens : int
+        [--pop, --gens] population size and number of generations.
+    seed : int
+        [--seed] random seed.
+    workers : int
+        [--workers] worker processes (population split into that many batched chunks).
+    dask : str or None
+        [--dask] Dask scheduler address (or a ``dask.distributed.Client``).
+    resume : bool
+        [--resume] continue from the newest checkpoint in the output folder.
+    penalty_weight : float
+        w of Eq. 17/18 for the paper's method (objective unit per N).
+    fitness_limit : float or None
+        The paper's "fitness limit": stop when the best fitness reaches it (paper method only).
+    min_removed_mm3 : float
+        Cutting-line threshold (removed volume in the reference run), mm3.
+    max_cycle_factor : float
+        [--max-cycle-factor] an individual still running at this multiple of the original cycle time is
+        stopped and counted as failed (it cannot be the best: bounds the cost of a generation).
+    step : float
+        Communication step of the twin, s.
+    time_limit_s : float
+        Simulated-time limit per run, s.
+    progress : bool
+        Progress bar on stderr (only when stderr is a terminal).
+    plot : bool
+        Write ``report.png``.
+    """
+
+    objective: str = "time"
+    method: str = "default"
+    load_limit_N: float = 60.0
+    feed_range: tuple[float, float] = (100.0, 500.0)
+    spindle_range: tuple[float, float] = (1000.0, 8000.0)
+    feed_step: float = 10.0
+    spindle_step: float = 50.0
+    pop: int = 20
+    gens: int = 10
+    seed: int = 1
+    workers: int = 1
+    dask: Any = None
+    resume: bool = False
+    penalty_weight: float = 1.0
+    fitness_limit: float | None = None
+    min_removed_mm3: float = MIN_REMOVED_MM3
+    max_cycle_factor: float = MAX_CYCLE_FACTOR
+    step: float = 1e-3
+    time_limit_s: float = 3600.0
+    progress: bool = True
+    plot: bool = True
+
+    def __post_init__(self) -> None:
+        if self.objective not in OBJECTIVES:
+            raise OptimizeError(f"objective must be one of {OBJECTIVES}, got {self.objective!r}")
+        if self.method not in METHODS:
+            raise OptimizeError(f"method must be one of {METHODS}, got {self.method!r}")
+        if self.method == "paper" and self.objective == "pareto":
+            raise OptimizeError("the paper's method optimises one objective: use --objective time or cost")
+        if int(self.pop) != self.pop or self.pop < 2:
+            raise OptimizeError(f"population size must be an integer >= 2, got {self.pop!r}")
+        if int(self.gens) != self.gens or self.gens < 1:
+            raise OptimizeError(f"number of generations must be an integer >= 1, got {self.gens!r}")
+        if int(self.workers) != self.workers or self.workers < 1:
+            raise OptimizeError(f"workers must be an integer >= 1, got {self.workers!r}")
+
+    def ranges(self) -> Ranges:
+        """The search ranges and grid."""
+        return Ranges(tuple(map(float, self.feed_range)), tuple(map(float, self.spindle_range)),  # type: ignore[arg-type]
+                      float(self.feed_step), float(self.spindle_step))
+
+    def identity(self) -> dict[str, Any]:
+        """Settings that must match for ``resume`` (everything but gens, workers, progress, plot)."""
+        keep = ("objective", "method", "load_limit_N", "feed_range", "spindle_range", "feed_step", "spindle_step",
+                "pop", "seed", "penalty_weight", "fitness_limit", "min_removed_mm3", "max_cycle_factor", "step")
+        d = asdict(self)
+        return {k: (list(d[k]) if isinstance(d[k], tuple) else d[k]) for k in keep}
+
+
+@dataclass
+class OptimizeResult:
+    """Outcome of :func:`optimize` (pymoo style).
+
+    Attributes
+    ----------
+    X : dict[str, float]
+        Chosen individual, ``{"L0042.feed": mm/min, "L0042.spindle": rpm, ...}``.
+    program_text : str
+        The optimised program (only F and S words changed).
+    before, after : dict
+        ``cycle_time_s``, ``cost_KRW``, ``max_cutting_load_N``, ``tool_life_used`` of the original and the
+        optimised program (each re-simulated alone).
+    lines : list of dict
+        Per cutting line: feed and spindle before/after, time and largest load before/after.
+    history : list of dict
+        Per generation: evaluations so far, best objective, feasible count.
+    front : list of dict
+        Pareto objective: the feasible non-dominated individuals (time, cost, genes).
+    evaluations : int
+        Distinct individuals simulated.
+    wall_time_s : float
+        Wall time of the optimisation (all sessions of a resumed job), s.
+    files : dict[str, Path]
+        Files written.
+    """
+
+    X: dict[str, float]
+    program_text: str
+    before: dict[str, Any]
+    after: dict[str, Any]
+    lines: list[dict[str, Any]]
+    history: list[dict[str, Any]]
+    front: list[dict[str, Any]] = field(default_factory=list)
+    evaluations: int = 0
+    wall_time_s: float = 0.0
+    files: dict[str, Path] = field(default_factory=dict)
+    recording_before: Any = None
+    recording_after: Any = None
+
+
+class _ProgressBar:
+    """One line on stderr: generation, best objective, feasible members (TTY only)."""
+
+    def __init__(self, enabled: bool, total: int) -> None:
+        self.enabled = enabled and sys.stderr.isatty()
+        self.total = total
+
+    def __call__(self, row: dict[str, Any]) -> None:
+        if not self.enabled:
+            return
+        frac = min(1.0, row["generation"] / self.total)
+        best = row.get("best")
+        best_txt = "-" if best is None else ("/".join(f"{b:.4g}" for b in best) if isinstance(best, list) else f"{best:.4g}")
+        sys.stderr.write(f"\roptimize [{'#' * int(25 * frac):<25}] gen {row['generation']}/{self.total} "
+                         f"best {best_txt} feasible {row['feasible']}/{row['pop']} evals {row['evaluations']}   ")
+        sys.stderr.flush()
+
+    def close(self) -> None:
+        if self.enabled:
+            sys.stderr.write("\n")
+            sys.stderr.flush()
+
+
+def _ga_comparison(pop, P, **kwargs):
+    """pymoo's GA tournament (feasibility first, then fitness), as a picklable module-level function."""
+    return comp_by_cv_and_fitness(pop, P, **kwargs)
+
+
+def _nsga2_comparison(pop, P, **kwargs):
+    """pymoo's NSGA-II binary tournament, as a picklable module-level function."""
+    return binary_tournament(pop, P, **kwargs)
+
+
+def make_algorithm(problem: LineProblem, settings: OptimizeSettings):
+    """The pymoo algorithm of the settings (not yet set up; picklable for checkpoints)."""
+    ga_selection = TournamentSelection(func_comp=_ga_comparison)
+    if settings.method == "paper":
+        return GA(pop_size=settings.pop, sampling=FloatRandomSampling(), selection=ga_selection,
+                  crossover=SBX(prob=0.8), mutation=PM(), repair=GridRepair(), eliminate_duplicates=True)
+    ops = dict(sampling=SeededSampling(), crossover=LinewiseCrossover(), mutation=LinewiseMutation(),
+               repair=GridRepair(), eliminate_duplicates=True)
+    if settings.objective == "pareto":
+        return NSGA2(pop_size=settings.pop, selection=TournamentSelection(func_comp=_nsga2_comparison), **ops)
+    return GA(pop_size=settings.pop, selection=ga_selection, **ops)
+
+
+def _backend(settings: OptimizeSettings):
+    if settings.dask is not None:
+        return DaskBackend(settings.dask)
+    if settings.workers > 1:
+        return ProcessBackend(settings.workers)
+    return SerialBackend()
+
+
+def _generation_row(algorithm, generation: int, evaluator: CachedEvaluator, settings: OptimizeSettings
+                    ) -> dict[str, Any]:
+    """History row: evaluations so far, members within the load limit, best objective among them."""
+    pop = algorithm.pop
+    X = pop.get("X")
+    ev = evaluator(X[:, 0::2], X[:, 1::2])  # cached: no simulation
+    F = pop.get("F")
+    feasible = np.asarray(ev.feasible, bool)
+    best: Any = None
+    if feasible.any():
+        if settings.objective == "pareto":
+            best = [float(F[feasible, 0].min()), float(F[feasible, 1].min())]
+        else:
+            best = float(F[feasible, 0].min())
+    return {"generation": generation, "evaluations": evaluator.evaluations, "pop": len(pop),
+            "feasible": int(feasible.sum()), "best": best}
+
+
+def _candidates(ctx, cache: dict, settings: OptimizeSettings) -> tuple[list[tuple], list[dict[str, Any]]]:
+    """Evaluated individuals in order of preference, and the Pareto front (pareto objective)."""
+    keys = list(cache)
+    if not keys:
+        return [], []
+    ev = Evaluation.concatenate([cache[k] for k in keys])
+    F, _ = objectives(ev, settings.objective, settings.method, ctx.load_limit_N, settings.penalty_weight)
+    L = ctx.n_lines
+    front: list[dict[str, Any]] = []
+    if settings.method == "paper":
+        order = np.argsort(F[:, 0], kind="stable")
+        return [keys[i] for i in order if ev.success[i]], front
+    feas = np.flatnonzero(ev.feasible)
+    if settings.objective != "pareto":
+        order = feas[np.argsort(F[feas, 0], kind="stable")]
+        return [keys[i] for i in order], front
+    if feas.size == 0:
+        return [], front
+    nd = feas[NonDominatedSorting().do(F[feas], only_non_dominated_front=True)]
+    nd = nd[np.argsort(F[nd, 0], kind="stable")]
+    lo, hi = F[nd].min(axis=0), F[nd].max(axis=0)
+    scaled = (F[nd] - lo) / np.where(hi > lo, hi - lo, 1.0)
+    knee = nd[np.argsort(np.linalg.norm(scaled, axis=1), kind="stable")]
+    for i in nd.tolist():
+        k = keys[i]
+        front.append({"cycle_time_s": float(F[i, 0]), "cost_KRW": float(F[i, 1]),
+                      "max_cutting_load_N": float(ev.max_load_N[i]),
+                      "X": ctx.as_dict(np.array(k[:L]), np.array(k[L:]))})
+    on_front = set(knee.tolist())
+    rest = [int(i) for i in feas[np.argsort(F[feas, 0], kind="stable")] if int(i) not in on_front]
+    return [keys[i] for i in knee] + [keys[i] for i in rest], front
+
+
+def _resimulate(ctx, text: str):
+    run = run_twin(ctx, None, None, 1, channels=None, program_text=text)
+    return figures(ctx, run, 1), run.recording
+
+
+def optimize(program: str | Path | None = None, case: str | Path | Case | None = None,
+             settings: OptimizeSettings | None = None, out: str | Path | None = None,
+             machine: str | Path | None = None,
+             callback: Callable[[dict[str, Any]], None] | None = None,
+             reference: Reference | None = None) -> OptimizeResult:
+    """Optimise feed and spindle speed per cutting line of a program on the twin.
+
+    Parameters
+    ----------
+    program : str or Path, optional
+        G-code file (overrides the case's program).
+    case : str, Path or Case
+        Case folder / ``case.toml`` with a stock (the twin must cut something).
+    settings : OptimizeSettings, optional
+        Objective, method, ranges, budget, workers, resume.
+    out : str or Path, optional
+        Output folder: ``optimized.nc``, ``report.json``, ``report.png`` and
+        ``checkpoints/`` (one per generation). Required for ``resume``.
+    machine : str or Path, optional
+        Machine set overriding the case's.
+    callback : callable, optional
+        Called with the history row after every generation.
+    reference : Reference, optional
+        A reference run from :func:`~.reference.build_reference` with the same case, ranges, limit and
+        step (skips the reference run; several optimisations of one program can share it).
+
+    Returns
+    -------
+    OptimizeResult
+    """
+    from ..simulate import resolve_case
+    from .report import write_outputs
+
+    settings = settings or OptimizeSettings()
+    if settings.resume and out is None:
+        raise OptimizeError("resume needs the output folder of the interrupted job (--out)")
+    resolved = resolve_case(program, case, machine)
+    out_path = Path(out) if out is not None else None
+    t_start = time.perf_counter()
+    state = latest_checkpoint(out_path) if (settings.resume and out_path is not None) else None
+    if settings.resume and out_path is not None and state is None and (out_path / "checkpoints").exists():
+        raise OptimizeError(f"{out_path}/checkpoints: no readable checkpoint to resume from")
+
+    ref_file = out_path / "checkpoints" / "reference.pkl" if out_path is not None else None
+    if state is not None and ref_file is not None and ref_file.is_file():
+        reference = read_pickle(ref_file)  # the resumed job's own reference run
+    elif reference is not None:
+        c = reference.context
+        if (c.ranges != settings.ranges() or c.load_limit_N != settings.load_limit_N or c.step != settings.step
+                or c.program_text != resolved.program.read_text(encoding="utf-8")):
+            raise OptimizeError("the given reference was built for another program, ranges, load limit or step")
+    else:
+        reference = build_reference(resolved, ranges=settings.ranges(), load_limit_N=settings.load_limit_N,
+                                    min_removed_mm3=settings.min_removed_mm3, step=settings.step,
+                                    time_limit_s=settings.time_limit_s, max_cycle_factor=settings.max_cycle_factor)
+    if ref_file is not None and state is None:
+        write_pickle(ref_file, reference)
+    ctx = reference.context
+
+    backend = _backend(settings)
+    try:
+        if state is not None:
+            if state["identity"] != settings.identity() or state["fingerprint"] != ctx.fingerprint():
+                raise OptimizeError(
+                    f"{state['path']}: the checkpoint belongs to another job (settings {state['identity']}); "
+                    "resume with the same program, case and settings, or use a new --out")
+            algorithm = state["algorithm"]
+            evaluator = CachedEvaluator(ctx, backend, state["cache"])
+            history = list(state["history"])
+            generation = int(state["generation"])
+            wall_before = float(state["wall_s"])
+            problem = algorithm.problem
+            algorithm.termination = MaximumGenerationTermination(settings.gens)
+        else:
+            evaluator = CachedEvaluator(ctx, backend)
+            problem = LineProblem(ctx, settings.objective, settings.method, settings.penalty_weight)
+            algorithm = make_algorithm(problem, settings)
+            algorithm.setup(problem, termination=MaximumGenerationTermination(settings.gens), seed=settings.seed,
+                            verbose=False)
+            history, generation, wall_before = [], 0, 0.0
+        problem.evaluator = evaluator
+        bar = _ProgressBar(settings.progress, settings.gens)
+        stop_early = any(h.get("fitness_limit_reached") for h in history)
+        while generation < settings.gens and not stop_early and algorithm.has_next():
+            pop = algorithm.ask()
+            algorithm.evaluator.eval(problem, pop, algorithm=algorithm)
+            algorithm.tell(infills=pop)
+            generation += 1
+            row = _generation_row(algorithm, generation, evaluator, settings)
+            if settings.method == "paper" and settings.fitness_limit is not None:
+                row["fitness_limit_reached"] = bool(algorithm.pop.get("F")[:, 0].min() <= settings.fitness_limit)
+                stop_early = row["fitness_limit_reached"]
+            history.append(row)
+            if out_path is not None:
+                write_checkpoint(out_path, generation, {
+                    "identity": settings.identity(), "fingerprint": ctx.fingerprint(), "algorithm": algorithm,
+                    "cache": evaluator.cache, "history": history,
+                    "wall_s": wall_before + time.perf_counter() - t_start})
+            bar(row)
+            if callback is not None:
+                callback(row)
+        bar.close()
+    finally:
+        backend.close()
+
+    # choose and re-simulate the written program
+    L = ctx.n_lines
+    candidates, front = _candidates(ctx, evaluator.cache, settings)
+    before = reference.evaluation
+    chosen = None
+    for key in candidates[:5]:
+        f, s = np.array(key[:L]), np.array(key[L:])
+        text = ctx.program_for(f, s)
+        ev_after, rec_after = _resimulate(ctx, text)
+        if settings.method == "paper" or bool(ev_after.feasible[0]):
+            chosen = (f, s, text, ev_after, rec_after)
+            break
+    if chosen is None:
+        chosen = (ctx.original_feed.copy(), ctx.original_spindle.copy(), ctx.program_text, before, reference.recording)
+    f, s, text, ev_after, rec_after = chosen
+    lines = []
+    for i, line in enumerate(ctx.lines.tolist()):
+        lines.append({
+            "line": int(line), "key": ctx.keys[2 * i][:-5], "s_word_line": int(ctx.spindle_lines[i]),
+            "feed_before_mm_per_min": float(ctx.original_feed[i]), "feed_after_mm_per_min": float(f[i]),
+            "spindle_before_rpm": float(ctx.original_spindle[i]), "spindle_after_rpm": float(s[i]),
+            "time_before_s": float(before.line_time_s[0, i]), "time_after_s": float(ev_after.line_time_s[0, i]),
+            "max_load_before_N": float(before.line_max_load_N[0, i]),
+            "max_load_after_N": float(ev_after.line_max_load_N[0, i]),
+        })
+    result = OptimizeResult(
+        X=ctx.as_dict(f, s), program_text=text, before=before.member(0), after=ev_after.member(0), lines=lines,
+        history=history, front=front, evaluations=evaluator.evaluations,
+        wall_time_s=wall_before + time.perf_counter() - t_start,
+        recording_before=reference.recording, recording_after=rec_after,
+    )
+    if out_path is not None:
+        result.files = write_outputs(result, ctx, settings, out_path)
+    return result

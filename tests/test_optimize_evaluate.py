@@ -1,0 +1,95 @@
+"""evaluate_population: one batched twin call; spindle changes cost their ramp; batch vs single."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from orchestrator.case import load_case
+from orchestrator.machine import load_machine
+from orchestrator.optimize import Ranges, build_reference, evaluate_population
+from tests.test_optimize_cases import write_case
+
+RANGES = Ranges((100.0, 600.0), (1000.0, 8000.0))
+
+
+@pytest.fixture(scope="module")
+def spindle_params():
+    s = load_machine("default").si("spindle")
+    ramp_rpm_per_s = s["ramp"] * 60.0 / (2.0 * np.pi)
+    return ramp_rpm_per_s, s["speed_arrival_tolerance"]
+
+
+def _saving_and_wait(second_mm, f1, f2, s1, s2, ramp, tol):
+    """Time saved on line 2 by the higher feed, and the speed-arrival wait of the S change (s)."""
+    saving = second_mm / f1 * 60.0 - second_mm / f2 * 60.0
+    wait = (abs(s2 - s1) - tol * s2) / ramp
+    return saving, wait
+
+
+@pytest.fixture(scope="module")
+def short_ref(tmp_path_factory):
+    return build_reference(load_case(write_case(tmp_path_factory.mktemp("short"), 2.0)), ranges=RANGES)
+
+
+@pytest.mark.parametrize("second_mm, worth_it", [(2.0, False), (10.0, True)])
+def test_spindle_change_costs_its_ramp(tmp_path, short_ref, spindle_params, second_mm, worth_it):
+    """Doubling S and F on line 2 keeps the chip load but waits for the spindle: pays only on a long line."""
+    ramp, tol = spindle_params
+    ref = short_ref if second_mm == 2.0 else build_reference(load_case(write_case(tmp_path, second_mm)), ranges=RANGES)
+    ctx = ref.context
+    feeds = np.array([[250.0, 250.0], [250.0, 500.0]])
+    spindles = np.array([[3000.0, 3000.0], [3000.0, 6000.0]])
+    ev = evaluate_population(ctx, feeds, spindles)
+    saving, wait = _saving_and_wait(second_mm, 250.0, 500.0, 3000.0, 6000.0, ramp, tol)
+    delta = ev.cycle_time_s[1] - ev.cycle_time_s[0]
+    # acceleration to the higher feed and period rounding: a few ms
+    assert delta == pytest.approx(wait - saving, abs=0.02)
+    assert (delta < 0) == worth_it
+    # same feed per tooth on line 2: the same load level
+    assert ev.line_max_load_N[1, 1] == pytest.approx(ev.line_max_load_N[0, 1], rel=0.1)
+    # the higher speed uses more tool life (Taylor, n = 0.15)
+    assert ev.tool_life_used[1] > ev.tool_life_used[0]
+
+
+def test_batch_member_matches_single_run(short_ref):
+    """A batch member has the figures of its rewritten program run alone (B = 1)."""
+    from orchestrator.optimize.evaluate import figures, run_twin
+
+    ctx = short_ref.context
+    feeds = np.array([[300.0, 300.0], [200.0, 400.0], [100.0, 100.0]])
+    spindles = np.array([[3000.0, 3000.0], [5000.0, 5000.0], [3000.0, 3000.0]])
+    ev = evaluate_population(ctx, feeds, spindles)
+    # member 2 needs > 6 mm / (100 mm/min) = 3.6 s of cutting alone: beyond the cut-off of ceil(1.5 x cycle)
+    assert ctx.time_limit_s == np.ceil(1.5 * short_ref.evaluation.cycle_time_s[0])
+    assert not ev.success[2] and not ev.feasible[2] and "cut-off" in ev.reason[2]
+    alone = figures(ctx, run_twin(ctx, None, None, 1, program_text=ctx.program_for(feeds[1], spindles[1])), 1)
+    assert ev.cycle_time_s[1] == pytest.approx(alone.cycle_time_s[0], abs=1e-9)
+    assert ev.cost_KRW[1] == pytest.approx(alone.cost_KRW[0], rel=1e-9)
+    assert ev.max_load_N[1] == pytest.approx(alone.max_load_N[0], rel=1e-3)
+    # member 0 has the original values; its S word on line 8 stops the path there for a few ms
+    assert 0.0 <= ev.cycle_time_s[0] - short_ref.evaluation.cycle_time_s[0] < 0.05
+    assert np.all(ev.success[:2])
+    # feasibility is the load limit
+    assert list(ev.feasible[:2]) == list(ev.max_load_N[:2] <= ctx.load_limit_N)
+    # per-line times add up to less than the cycle (rapids, plunge, ramp wait are not cutting lines)
+    assert np.all(ev.line_time_s[:2].sum(axis=1) < ev.cycle_time_s[:2])
+    # line time of a constant-feed line: length / feed (+ acc/dec), line 7 is 4 mm
+    assert ev.line_time_s[0, 0] == pytest.approx(4.0 / 300.0 * 60.0, abs=0.05)
+
+
+def test_cost_matches_eq_19_to_22(short_ref):
+    """Cp from the twin = Tp (Ep + Cd) + Miner's sum (Pt + Tc (Ep + Cd)); check against a hand integration."""
+    from orchestrator.cost import CostModel
+
+    ref = short_ref
+    model = CostModel.from_machine(ref.context.case.machine)
+    rec = ref.recording
+    t, rpm = np.asarray(rec.t), np.asarray(rec["spindle_rpm"]).ravel()
+    tp = ref.evaluation.cycle_time_s[0]
+    n = np.searchsorted(t, tp + 1e-12)
+    v = np.pi * 6.0 * rpm[:n] / 1000.0  # m/min
+    rate = (v / model.taylor_C) ** (1.0 / model.taylor_n) / 60.0  # 1 / Tl, Tl = (C / V)^(1/n) min
+    used = np.sum(0.5 * (rate[1:] + rate[:-1]) * np.diff(t[:n]))
+    rate_krw = model.labor_KRW_per_s + model.depreciation_KRW_per_s
+    expected = tp * rate_krw + used * (model.tool_price_KRW + model.tool_change_time_s * rate_krw)
+    assert ref.evaluation.cost_KRW[0] == pytest.approx(expected, rel=1e-9)
