@@ -31,7 +31,7 @@ import math
 
 import numpy as np
 
-from ._jit import njit
+from ..jit import njit
 from .kernel import OMEGA_FLOOR
 
 TWO_PI = 2.0 * math.pi

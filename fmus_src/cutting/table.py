@@ -40,7 +40,7 @@ from typing import Mapping
 
 import numpy as np
 
-from ._jit import njit
+from ..jit import njit
 from .component import PATH_SPACING, CuttingError, CuttingLoad
 from .engagement import RIM_TOL, SweptPath
 from .stock import ZMapStock

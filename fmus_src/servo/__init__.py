@@ -14,7 +14,7 @@ reference they are tested against (``MCU.use_compiled = False``,
 """
 from __future__ import annotations
 
-from ._jit import NUMBA_AVAILABLE
+from ..jit import NUMBA_AVAILABLE
 from .control import CascadeGains, CascadeState, position_loop, velocity_loop
 from .drive import DEFAULT_INTEGRATION_STEP, DriveAxis, stribeck_step_cap
 from .errors import ServoError

@@ -25,7 +25,7 @@ from typing import ClassVar
 import numpy as np
 
 from ..component import Component, Variable
-from ._jit import NUMBA_AVAILABLE
+from ..jit import NUMBA_AVAILABLE
 from .effects import TableState, axis_load, reversal_friction, table_position, update_travel
 from .errors import ServoError
 from .friction import StribeckParameters

@@ -28,7 +28,7 @@ from typing import ClassVar
 import numpy as np
 
 from ..component import Component, Variable
-from ._jit import NUMBA_AVAILABLE
+from ..jit import NUMBA_AVAILABLE
 from .control import CascadeGains, CascadeState, position_loop, velocity_loop
 from .control_numba import mcu_kernel
 from .effects import DelayLine

@@ -20,7 +20,7 @@ import math
 
 import numpy as np
 
-from ._jit import njit
+from ..jit import njit
 from .errors import ServoError
 from .friction import StribeckParameters
 from .stick_slip import CROSSING_MAX_ITER, CROSSING_TIME_RTOL, CROSSING_VELOCITY_TOL, SlipState

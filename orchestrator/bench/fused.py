@@ -39,7 +39,7 @@ import numpy as np
 
 from fmus_src.servo.control_numba import mcu_kernel
 from fmus_src.servo.stick_slip_numba import OK, advance_kernel
-from fmus_src.servo._jit import njit
+from fmus_src.jit import njit
 
 from ..case import Case
 from ..errors import CncTwinError

@@ -31,7 +31,7 @@ from typing import Mapping
 
 import numpy as np
 
-from fmus_src.servo._jit import njit
+from fmus_src.jit import njit
 
 from ..machine import Machine
 from ..recording import Recording

@@ -1,4 +1,4 @@
-"""Optional numba compilation of the servo hot paths.
+"""Optional numba compilation of the hot paths of the components (servo, drives, cutting).
 
 ``numba`` is a dependency of cnctwin, but ``fmus_src`` is also shipped inside
 FMUs, whose host interpreter might lack it. Without numba, :func:`njit`
