@@ -109,6 +109,9 @@ def build_parser() -> argparse.ArgumentParser:
     from .cli_diagnose import add_parsers as add_diagnose_parsers
 
     add_diagnose_parsers(sub)
+    from .cli_optimize import add_parsers as add_optimize_parsers
+
+    add_optimize_parsers(sub)
     return parser
 
 

@@ -33,6 +33,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from fmus_src.cutting.table import EngagementTable
+
 from fmus_src.nck.blocks import Arc, Block, Linear, SpindleSpeed, SpindleStop, ToolChange
 from fmus_src.nck.writer import rewrite_program
 
@@ -103,6 +105,10 @@ class ProblemContext:
         Simulated-time limit per evaluation, s.
     original_load_N : ndarray, shape (L,)
         Largest cutting load of each cutting line in the reference run, N (seeds the chip-load scaling).
+    engagement : EngagementTable or None
+        Cutter–workpiece engagement along the program's path, computed once
+        (F and S change the timing, not the path); every evaluation then runs
+        the twin's path-mode cutting load. None: Z-map cutting per member.
     """
 
     case: Case
@@ -118,6 +124,7 @@ class ProblemContext:
     step: float = 1e-3
     time_limit_s: float = 3600.0
     original_load_N: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    engagement: EngagementTable | None = field(default=None, repr=False, compare=False)
 
     @property
     def n_lines(self) -> int:

@@ -129,7 +129,9 @@ def run_twin(ctx: ProblemContext, feeds: np.ndarray | None, spindles: np.ndarray
     program_text : str, optional
         Program to run instead of ``ctx.program_text``.
     """
-    twin = build_twin(ctx.case, batch=batch, options=TwinOptions(step=ctx.step),
+    options = TwinOptions(step=ctx.step, cutting_mode="path" if ctx.engagement is not None else "zmap",
+                          engagement=ctx.engagement)
+    twin = build_twin(ctx.case, batch=batch, options=options,
                       program_text=program_text if program_text is not None else ctx.program_text)
     if feeds is not None and spindles is not None:
         feed, spindle = ctx.overrides(feeds, spindles)
