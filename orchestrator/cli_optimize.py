@@ -10,7 +10,6 @@ import json
 import sys
 from typing import Sequence
 
-from .errors import CncTwinError
 
 
 def _pair(text: str) -> tuple[float, float]:
@@ -70,17 +69,9 @@ def add_parsers(subparsers: argparse._SubParsersAction) -> None:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run ``optimize`` alone (same behaviour as ``cnctwin optimize``)."""
-    parser = argparse.ArgumentParser(prog="cnctwin")
-    add_parsers(parser.add_subparsers(dest="command", required=True))
-    args = parser.parse_args(["optimize", *(sys.argv[1:] if argv is None else argv)])
-    try:
-        return int(args.func(args))
-    except CncTwinError as exc:
-        print(f"cnctwin: error: {exc}", file=sys.stderr)
-        return 2
-    except OSError as exc:
-        print(f"cnctwin: error: {exc.filename or ''}: {exc.strerror or exc}", file=sys.stderr)
-        return 2
+    from .cli import main as cnctwin_main
+
+    return cnctwin_main(["optimize", *(sys.argv[1:] if argv is None else argv)])
 
 
 if __name__ == "__main__":  # pragma: no cover

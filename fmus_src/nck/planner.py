@@ -35,7 +35,7 @@ from typing import Sequence
 import numpy as np
 
 from .blocks import (
-    Arc, Block, Coolant, Dwell, Linear, Program, ProgramEnd, Rapid, SpindleSpeed, SpindleStop, ToolChange,
+    Arc, Block, Coolant, Dwell, Linear, ProgramEnd, Rapid, SpindleSpeed, SpindleStop, ToolChange,
 )
 from .errors import GCodeError
 from .filters import apply_fir, box_lengths, filter_extension
