@@ -14,6 +14,14 @@ from typing import Sequence
 from .errors import CncTwinError
 
 
+def emit(*parts: object, file=None, end: str = "\n", flush: bool = False) -> None:
+    """The one place the command line writes text (stdout unless ``file`` says otherwise).
+
+    Library modules never print; the ``cli_*`` modules report through this.
+    """
+    print(*parts, file=file if file is not None else sys.stdout, end=end, flush=flush)
+
+
 class _ProgressBar:
     """A one-line progress bar on stderr (only when stderr is a terminal)."""
 
@@ -52,11 +60,11 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     bar.close()
     s = result.summary
     keys = ["cycle_time_s", "max_cutting_load_N", "cost_KRW", "rms_following_error_um"]
-    print(json.dumps({k: s[k] for k in keys if k in s}, indent=2))
+    emit(json.dumps({k: s[k] for k in keys if k in s}, indent=2))
     for name, path in result.files.items():
-        print(f"wrote {name}: {path}")
+        emit(f"wrote {name}: {path}")
     if not result.success:
-        print(f"cnctwin: error: {result.message}", file=sys.stderr)
+        emit(f"cnctwin: error: {result.message}", file=sys.stderr)
         return 1
     return 0
 
@@ -66,7 +74,7 @@ def _cmd_export_ssp(args: argparse.Namespace) -> int:
     from .twin import write_twin_ssp
 
     ssd, ssv = write_twin_ssp(resolve_case(args.program, args.case, args.machine), args.ssd)
-    print(f"wrote {ssd}\nwrote {ssv}")
+    emit(f"wrote {ssd}\nwrote {ssv}")
     return 0
 
 
@@ -125,10 +133,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         return int(args.func(args))
     except CncTwinError as exc:
-        print(f"cnctwin: error: {exc}", file=sys.stderr)
+        emit(f"cnctwin: error: {exc}", file=sys.stderr)
         return 2
     except OSError as exc:
-        print(f"cnctwin: error: {exc.filename or ''}: {exc.strerror or exc}", file=sys.stderr)
+        emit(f"cnctwin: error: {exc.filename or ''}: {exc.strerror or exc}", file=sys.stderr)
         return 2
 
 

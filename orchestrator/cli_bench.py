@@ -9,21 +9,22 @@ import argparse
 import json
 import sys
 from pathlib import Path
+from .cli import emit
 
 
 def _cmd_bench(args: argparse.Namespace) -> int:
     from .atomic import atomic_write_json
     from .bench import format_table, run_bench
 
-    progress = None if args.silent else (lambda text: print(f"... {text}", file=sys.stderr, flush=True))
+    progress = None if args.silent else (lambda text: emit(f"... {text}", file=sys.stderr, flush=True))
     result = run_bench(quick=args.quick, progress=progress)
-    print(format_table(result))
+    emit(format_table(result))
     if args.json:
         atomic_write_json(Path(args.json), result)
-        print(f"\nwrote {args.json}")
+        emit(f"\nwrote {args.json}")
     else:
-        print()
-        print(json.dumps(result, indent=2, default=float))
+        emit()
+        emit(json.dumps(result, indent=2, default=float))
     return 0
 
 

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from .cli import emit
 
 
 def _cmd_diagnose(args: argparse.Namespace) -> int:
@@ -14,19 +15,19 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
 
     def progress(message: str) -> None:
         if not args.quiet:
-            print(f"diagnose: {message}", file=sys.stderr)
+            emit(f"diagnose: {message}", file=sys.stderr)
 
     result = diagnose(args.case, holdout=args.holdout, machine=args.machine, axes=args.axes,
                       vertical=tuple(args.vertical), refit_scales=not args.no_scales, progress=progress)
     files = result.write(args.out, plots=not args.no_plots)
     found = ", ".join(f"{e['effect']} ({e['axis']})" for e in result.effects) or "no effect above the noise"
-    print(f"effects: {found}")
+    emit(f"effects: {found}")
     if result.unexplained:
-        print("unexplained: " + ", ".join(",".join(u["channels"]) for u in result.unexplained))
+        emit("unexplained: " + ", ".join(",".join(u["channels"]) for u in result.unexplained))
     for channel, before in result.rms_before.items():
-        print(f"rms {channel}: {before:g} -> {result.rms_after[channel]:g}")
+        emit(f"rms {channel}: {before:g} -> {result.rms_after[channel]:g}")
     for name, path in files.items():
-        print(f"wrote {name}: {path}")
+        emit(f"wrote {name}: {path}")
     return 0
 
 

@@ -10,6 +10,7 @@ import argparse
 from pathlib import Path
 
 from .errors import CncTwinError
+from .cli import emit
 
 
 def _parse_mapping(items: list[str]) -> dict[str, str]:
@@ -39,7 +40,7 @@ def _cmd_build_fmus(args: argparse.Namespace) -> int:
     from .fmu import build_fmus
 
     for path in build_fmus(out_dir=Path(args.out), machine=args.machine):
-        print(f"built {path}")
+        emit(f"built {path}")
     return 0
 
 
@@ -48,7 +49,7 @@ def _cmd_check_fmu(args: argparse.Namespace) -> int:
 
     report = check_fmu(args.path, role=args.role, mapping=_parse_mapping(args.map),
                        parameters=_parse_values(args.set))
-    print(report.to_text())
+    emit(report.to_text())
     return 0 if report.ok else 1
 
 

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import json
+from .cli import emit
 
 
 def _cmd_identify(args: argparse.Namespace) -> int:
@@ -24,9 +25,9 @@ def _cmd_identify(args: argparse.Namespace) -> int:
     fit = identify(args.kind, args.cases, out=args.out, method=args.method, seed=args.seed, **options)
     report = fit.report()
     report.pop("segments", None)
-    print(json.dumps(report, indent=2))
+    emit(json.dumps(report, indent=2))
     for name, path in fit.files_.items():
-        print(f"wrote {name}: {path}")
+        emit(f"wrote {name}: {path}")
     return 0
 
 
@@ -40,8 +41,8 @@ def _cmd_experiment(args: argparse.Namespace) -> int:
         kwargs["speeds_mm_min"] = tuple(args.speeds)
     files = write_experiment(args.kind, args.out, **kwargs)
     for name, path in files.items():
-        print(f"wrote {name}: {path}")
-    print(f"run {files['program'].name} on the machine, save the log as recording.csv in {args.out}, then: "
+        emit(f"wrote {name}: {path}")
+    emit(f"run {files['program'].name} on the machine, save the log as recording.csv in {args.out}, then: "
           f"cnctwin identify {args.kind} {args.out} --out <result folder>")
     return 0
 

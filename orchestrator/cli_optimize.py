@@ -9,6 +9,7 @@ import argparse
 import json
 import sys
 from typing import Sequence
+from .cli import emit
 
 
 
@@ -31,10 +32,10 @@ def _cmd_optimize(args: argparse.Namespace) -> int:
     )
     result = optimize(program=args.program, case=args.case, settings=settings, out=args.out, machine=args.machine)
     keys = ("cycle_time_s", "cost_KRW", "max_cutting_load_N")
-    print(json.dumps({"before": {k: result.before[k] for k in keys}, "after": {k: result.after[k] for k in keys},
+    emit(json.dumps({"before": {k: result.before[k] for k in keys}, "after": {k: result.after[k] for k in keys},
                       "evaluations": result.evaluations}, indent=2))
     for name, path in result.files.items():
-        print(f"wrote {name}: {path}")
+        emit(f"wrote {name}: {path}")
     return 0
 
 

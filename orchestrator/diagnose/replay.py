@@ -19,6 +19,7 @@ from scipy.interpolate import PchipInterpolator
 
 from fmus_src.servo import MCU, DriveAxis
 
+from ..identify.closed_loop import run_servo_ticks
 from ..machine import Machine
 from ..twin import drive_parameters, mcu_parameters
 from .errors import DiagnosisError
@@ -121,33 +122,9 @@ def run_replay(
     mcu.setup(t0)
     for d in drives.values():
         d.setup(t0)
-    shape = (n_ticks + 1, batch)
-    table = {a: np.empty(shape) for a in axes}
-    motor = {a: np.empty(shape) for a in axes}
-    force = {a: np.empty(shape) for a in axes}
-    cur = {a: np.empty(shape) for a in axes}
-    mv = mcu.values
-    for a in axes:
-        dv = drives[a].values
-        table[a][0], motor[a][0], force[a][0] = dv["table_position"], dv["position"], dv["motor_force"]
-        cur[a][0] = mv[f"{a}_current_cmd"]
-    for k in range(n_ticks):
-        t = t0 + k * tv
-        for a in axes:
-            dv = drives[a].values
-            mv[f"{a}_ref"][...] = ref[a][k]
-            mv[f"{a}_position"][...] = dv["position"]
-            mv[f"{a}_velocity"][...] = dv["velocity"]
-        mcu.do_step(t, tv)
-        for a in axes:
-            drive = drives[a]
-            dv = drive.values
-            dv["current_cmd"][...] = mv[f"{a}_current_cmd"]
-            drive.do_step(t, tv)
-            table[a][k + 1] = dv["table_position"]
-            motor[a][k + 1] = dv["position"]
-            force[a][k + 1] = dv["motor_force"]
-            cur[a][k + 1] = mv[f"{a}_current_cmd"]
+    traces = run_servo_ticks(mcu, drives, ref, t0, tv, n_ticks, ("table_position", "position", "motor_force"))
+    table, motor, force = traces["table_position"], traces["position"], traces["motor_force"]
+    cur = traces["current_cmd"]
     j = np.clip(np.searchsorted(tick_t, t_out, side="right"), 1, n_ticks)
     f = np.clip((t_out - tick_t[j - 1]) / tv, 0.0, 1.0)[:, None]
 

@@ -133,29 +133,67 @@ def replay(
     mcu.setup(t0)
     for d in drives.values():
         d.setup(t0)
-    pos = {a: np.empty((n_ticks + 1, batch)) for a in axes}
-    cur = {a: np.empty((n_ticks + 1, batch)) for a in axes}
-    for a in axes:
-        pos[a][0] = drives[a].values["position"]
-        cur[a][0] = mcu.values[f"{a}_current_cmd"]
-    mv = mcu.values
-    for k in range(n_ticks):
-        t = t0 + k * tv
-        for a in axes:
-            d = drives[a].values
-            mv[f"{a}_ref"][...] = ref_ticks[a][k]
-            mv[f"{a}_position"][...] = d["position"]
-            mv[f"{a}_velocity"][...] = d["velocity"]
-        mcu.do_step(t, tv)
-        for a in axes:
-            drive = drives[a]
-            drive.values["current_cmd"][...] = mv[f"{a}_current_cmd"]
-            drive.do_step(t, tv)
-            pos[a][k + 1] = drive.values["position"]
-            cur[a][k + 1] = mv[f"{a}_current_cmd"]
+    traces = run_servo_ticks(mcu, drives, ref_ticks, t0, tv, n_ticks, ("position",))
+    pos, cur = traces["position"], traces["current_cmd"]
     # linear interpolation of the tick outputs to the requested times
     j = np.clip(np.searchsorted(tick_t, t_out, side="right"), 1, n_ticks)
     f = ((t_out - tick_t[j - 1]) / tv)[:, None]
     out_p = {a: pos[a][j - 1] * (1.0 - f) + pos[a][j] * f for a in axes}
     out_c = {a: cur[a][j - 1] * (1.0 - f) + cur[a][j] * f for a in axes}
     return ReplayResult(t_out, out_p, out_c, n_ticks)
+
+
+def run_servo_ticks(
+    mcu: MCU,
+    drives: dict[str, DriveAxis],
+    ref: dict[str, np.ndarray],
+    t0: float,
+    tv: float,
+    n_ticks: int,
+    outputs: tuple[str, ...] = ("position",),
+) -> dict[str, dict[str, np.ndarray]]:
+    """Step a set-up MCU and its drives tick by tick against given reference positions.
+
+    Parameters
+    ----------
+    mcu, drives : MCU and DriveAxis (one per axis in ``ref``), already set up at ``t0``.
+    ref : dict axis -> ndarray, shape (n_ticks + 1,) or (n_ticks + 1, B)
+        Reference position at each velocity-loop tick, m.
+    t0, tv : float
+        Start time and velocity-loop period, s.
+    n_ticks : int
+        Ticks to run.
+    outputs : tuple of str
+        Drive outputs to record besides the MCU current command.
+
+    Returns
+    -------
+    dict
+        ``{output: {axis: ndarray (n_ticks + 1, B)}}`` with ``"current_cmd"`` (A) included.
+    """
+    axes = list(ref)
+    batch = mcu.batch
+    traces = {name: {a: np.empty((n_ticks + 1, batch)) for a in axes} for name in (*outputs, "current_cmd")}
+    mv = mcu.values
+
+    def record(k: int) -> None:
+        for a in axes:
+            dv = drives[a].values
+            for name in outputs:
+                traces[name][a][k] = dv[name]
+            traces["current_cmd"][a][k] = mv[f"{a}_current_cmd"]
+
+    record(0)
+    for k in range(n_ticks):
+        t = t0 + k * tv
+        for a in axes:
+            dv = drives[a].values
+            mv[f"{a}_ref"][...] = ref[a][k]
+            mv[f"{a}_position"][...] = dv["position"]
+            mv[f"{a}_velocity"][...] = dv["velocity"]
+        mcu.do_step(t, tv)
+        for a in axes:
+            drives[a].values["current_cmd"][...] = mv[f"{a}_current_cmd"]
+            drives[a].do_step(t, tv)
+        record(k + 1)
+    return traces
