@@ -164,8 +164,10 @@ def main() -> None:  # pragma: no cover - a study, run by hand
     parser.add_argument("--seeds", type=int, default=3)
     parser.add_argument("--clean-seeds", type=int, default=10)
     args = parser.parse_args()
+    from ..cli import emit  # the command line's one output point
+
     rows = score(Path(args.out), args.seeds, args.clean_seeds)
-    print(json.dumps(rows, indent=2))
+    emit(json.dumps(rows, indent=2))
 
 
 if __name__ == "__main__":  # pragma: no cover
