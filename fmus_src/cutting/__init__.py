@@ -5,6 +5,9 @@
 * :mod:`.force` — chip thickness and mechanistic tooth forces (Eq. 10-13);
 * :mod:`.kernel` — one communication step: substeps, exact means, entry/exit location, peak;
 * :mod:`.component` — :class:`CuttingLoad`, the FMI-style component;
+* :mod:`.effects`, :mod:`.chip`, :mod:`.effect_model` — effect terms (runout, helix, edge force, deflection,
+  wear, spindle droop, chatter), off by default; :mod:`.kernel_effects` and :mod:`.path_effects` the steps
+  with them on (Z-map and path mode);
 * :mod:`.study` — Z-map resolution study (accuracy and cost).
 """
 from .component import CuttingError, CuttingLoad

@@ -23,6 +23,17 @@ Time discretisation of one communication step ``[t, t + h]``
   means do not suffer from the angular sampling of the entry/exit jumps.
 * ``fc_peak`` is the largest ``Fc`` over the substep instants of the step and
   over the entry/exit instants so located.
+
+Effect terms (diagnosis, issue 8)
+---------------------------------
+Runout, helix, edge force, static tool deflection, tool wear, spindle droop
+and regenerative chatter are parameters, all 0 (off, the paper's model) by
+default (:mod:`.effect_model`, physics in :mod:`.effects` and :mod:`.chip`).
+With runout, helix, edge force, deflection or chatter on, the step runs in
+:func:`.kernel_effects.cut_step_effects`; wear (``Kt x (1 + rate t_cut)``)
+and droop (spindle speed minus ``droop x`` the previous step's torque) only
+change the inputs of :func:`.kernel.cut_step`, so with every term off the
+outputs are those of the baseline bit for bit.
 """
 from __future__ import annotations
 
@@ -32,8 +43,10 @@ import numpy as np
 
 from ..component import Component, Variable
 from ..errors import CncTwinError
+from .effect_model import CHATTER_SUBSTEPS_PER_PERIOD, EffectParameters, EffectState
 from .engagement import SweptPath
 from .kernel import cut_step
+from .kernel_effects import cut_step_effects
 from .stock import ZMapStock
 
 #: Refuse steps needing more substeps than this (spindle speed or jump far too large).
@@ -73,6 +86,18 @@ class CuttingLoad(Component):
         _p("stock_cell", "m", 1e-4, "Z-map cell edge (upper bound; cells divide the block exactly)"),
         _p("angle_steps_per_tooth", "1", 36, "spindle-angle samples per tooth pitch", "Integer"),
         _p("initial_spindle_angle", "rad", 0.0, "angle of tooth 0 at t0, clockwise from +y"),
+        # effect terms (diagnosis, issue 8): all 0 = off = the paper's model
+        _p("runout_eccentricity", "m", 0.0, "cutter eccentricity (runout); 0 = off"),
+        _p("runout_phase", "rad", 0.0, "angle of the eccentricity from tooth 0, clockwise like phi"),
+        _p("helix_angle", "rad", 0.0, "flute helix angle (lag along the axial depth); 0 = straight flutes"),
+        _p("edge_force_tangential", "N/m", 0.0, "tangential edge (ploughing) force per axial depth, Kte; 0 = off"),
+        _p("edge_force_radial", "N/m", 0.0, "radial edge (ploughing) force per axial depth, Kre; 0 = off"),
+        _p("tool_stiffness", "N/m", 0.0, "static tool bending stiffness; 0 = rigid tool"),
+        _p("wear_rate", "1/s", 0.0, "growth of the cutting coefficients per second of cutting time; 0 = off"),
+        _p("spindle_droop", "rad/(s.N.m)", 0.0, "spindle speed drop per cutting torque; 0 = off"),
+        _p("chatter_frequency", "Hz", 0.0, "natural frequency of the tool mode (x and y); 0 = no chatter"),
+        _p("chatter_damping", "1", 0.0, "damping ratio of the tool mode"),
+        _p("chatter_stiffness", "N/m", 0.0, "modal stiffness of the tool mode"),
         Variable("x_position", "input", "m", 0.0, "actual tool-tip x, work coordinates"),
         Variable("y_position", "input", "m", 0.0, "actual tool-tip y, work coordinates"),
         Variable("z_position", "input", "m", 0.0, "actual tool-tip z, work coordinates"),
@@ -90,6 +115,11 @@ class CuttingLoad(Component):
         Variable("axial_depth", "output", "m", 0.0, "largest axial depth over engaged teeth at t + h"),
         Variable("chip_thickness", "output", "m", 0.0, "largest chip thickness over engaged teeth at t + h"),
         Variable("engaged_teeth", "output", "1", 0, "teeth in material with a positive chip at t + h", "Integer"),
+        Variable("spindle_speed_actual", "output", "rad/s", 0.0,
+                 "spindle speed under load over the last step (= spindle_speed without droop)"),
+        Variable("tool_vibration_x", "output", "m", 0.0, "x displacement of the tool mode at t + h (chatter)"),
+        Variable("tool_vibration_y", "output", "m", 0.0, "y displacement of the tool mode at t + h (chatter)"),
+        Variable("cutting_time", "output", "s", 0.0, "time with material removal since t0 (tool wear clock)"),
     )
 
     # ------------------------------------------------------------------ lifecycle
@@ -108,12 +138,47 @@ class CuttingLoad(Component):
         self.path = SweptPath(position, spacing, lag, capacity)
         self._p_prev = position
         self._theta = np.mod(np.asarray(v["initial_spindle_angle"], dtype=np.float64), 2.0 * math.pi)
+        self._setup_effects(self._theta)
         # no motion known at t0: no chip, no force
         for name in ("fx", "fy", "fc", "fc_peak", "fx_mean", "fy_mean", "spindle_torque", "spindle_power",
                      "mrr", "axial_depth", "chip_thickness"):
             v[name][...] = 0.0
         v["engaged_teeth"][...] = 0
         v["spindle_angle"][...] = self._theta
+
+    def _setup_effects(self, theta: np.ndarray) -> None:
+        """Check the effect parameters and start their state (shared with the path mode)."""
+        v = self.values
+        self._eff = EffectParameters.from_values(v, self.name, CuttingError)
+        self._effect_state = EffectState(self.batch, theta, self._eff.chatter)
+        v["spindle_speed_actual"][...] = v["spindle_speed"]
+        for name in ("tool_vibration_x", "tool_vibration_y", "cutting_time"):
+            v[name][...] = 0.0
+
+    def _actual_speed(self) -> np.ndarray:
+        """Spindle speed under the previous step's torque, rad/s (the input itself without droop)."""
+        cmd = np.asarray(self.values["spindle_speed"], dtype=np.float64)
+        droop = self._eff.droop
+        if not np.any(droop != 0):
+            return cmd
+        drop = droop * self._effect_state.torque
+        return np.where((droop != 0) & (cmd > 0), np.maximum(cmd - drop, 0.0), cmd)
+
+    def _wear(self) -> np.ndarray:
+        """Factor on the cutting coefficients from tool wear, ``1 + rate t_cut`` (1 without wear)."""
+        return 1.0 + self._eff.wear_rate * self._effect_state.cutting_time
+
+    def _finish_effects(self, h: float, omega: np.ndarray, actual: np.ndarray) -> None:
+        """Advance the effect clocks after a step and write their outputs."""
+        v = self.values
+        st = self._effect_state
+        st.cutting_time += np.where(np.asarray(v["mrr"]) > 0.0, h, 0.0)
+        st.torque[...] = v["spindle_torque"]
+        st.angle += omega * h
+        v["spindle_speed_actual"][...] = actual
+        v["tool_vibration_x"][...] = st.mode[:, 0]
+        v["tool_vibration_y"][...] = st.mode[:, 1]
+        v["cutting_time"][...] = st.cutting_time
 
     def _reset(self) -> None:
         self.__dict__.pop("stock", None)
@@ -152,7 +217,9 @@ class CuttingLoad(Component):
         # at most pitch/steps and at most pi/2 per substep (interval_mean_quantities needs < pi)
         n_angle = np.ceil(omega * h / np.minimum(pitch / steps, 0.5 * math.pi) - 1e-9).max()
         n_move = np.ceil(move / (0.05 * self._radius) - 1e-9).max()
-        n = int(max(1.0, n_angle, n_move))
+        # the tool mode (chatter) is stepped exactly per substep under the substep-mean force
+        n_mode = np.ceil(h * self._eff.chatter_wn / (2.0 * math.pi) * CHATTER_SUBSTEPS_PER_PERIOD - 1e-9).max()
+        n = int(max(1.0, n_angle, n_move, n_mode))
         if n > MAX_SUBSTEPS:
             raise CuttingError(
                 f"{self.name}: step of {h} s needs {n} substeps (spindle speed up to {omega.max():.4g} rad/s, "
@@ -160,16 +227,47 @@ class CuttingLoad(Component):
             )
         return n
 
+    def _step_inputs(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Tool position (B, 3) m, actual spindle speed (B,) rad/s and the members with non-finite inputs.
+
+        Non-finite inputs come from a member that failed or diverged upstream (the
+        master reports it with the reason): that member is held where it was, with
+        the spindle stopped, and its outputs are blanked to NaN after the step.
+        """
+        v = self.values
+        p_new = np.stack([v["x_position"], v["y_position"], v["z_position"]], axis=1).astype(np.float64)
+        actual = np.asarray(self._actual_speed(), dtype=np.float64)
+        lost = ~(np.isfinite(p_new).all(axis=1) & np.isfinite(actual))
+        if lost.any():
+            p_new[lost] = self._p_prev[lost]
+            actual = np.where(lost, 0.0, actual)
+        return p_new, actual, lost
+
+    def _blank(self, lost: np.ndarray) -> None:
+        """NaN outputs (spindle angle kept, no engaged tooth) for the members in ``lost``, shape (B,)."""
+        for var in self.declared_variables():
+            if var.causality == "output" and var.name != "spindle_angle":
+                self.values[var.name][lost] = 0 if var.type == "Integer" else np.nan
+
     def _do_step(self, t: float, h: float) -> None:
         v = self.values
-        p_new = self._position()
-        omega = np.maximum(np.asarray(v["spindle_speed"], dtype=np.float64), 0.0)
+        p_new, actual, lost = self._step_inputs()
+        omega = np.maximum(actual, 0.0)
         dp = p_new - self._p_prev
         n = self._substeps(omega, np.hypot(dp[:, 0], dp[:, 1]), h)
-        r = cut_step(
-            self.stock, self.path.near_field(), self._p_prev, p_new, self._theta, omega, h, n,
-            self._radius, self._flutes, np.asarray(v["kt"], dtype=np.float64), np.asarray(v["ke"], dtype=np.float64),
-        )
+        wear = self._wear()
+        kt = np.asarray(v["kt"], dtype=np.float64) * wear
+        ke = np.asarray(v["ke"], dtype=np.float64)
+        if self._eff.geometric:
+            coefficients = np.stack([kt, ke, self._eff.kte * wear, self._eff.kre * wear])
+            r = cut_step_effects(
+                self.stock, self.path.near_field(), self._p_prev, p_new, self._theta, omega, h, n, self._radius,
+                self._flutes, np.asarray(v["angle_steps_per_tooth"], dtype=np.float64), coefficients, self._eff,
+                self._effect_state, np.asarray(v["stock_z_max"], dtype=np.float64),
+            )
+        else:
+            r = cut_step(self.stock, self.path.near_field(), self._p_prev, p_new, self._theta, omega, h, n,
+                         self._radius, self._flutes, kt, ke)
         v["fx"][...] = -r.force[:, 0]
         v["fy"][...] = -r.force[:, 1]
         v["fc"][...] = np.hypot(r.force[:, 0], r.force[:, 1])
@@ -184,8 +282,11 @@ class CuttingLoad(Component):
         v["engaged_teeth"][...] = r.engaged_teeth
         self._theta = np.mod(self._theta + omega * h, 2.0 * math.pi)
         v["spindle_angle"][...] = self._theta
+        self._finish_effects(h, omega, actual)
         self._p_prev = p_new
         self._commit(p_new)
+        if lost.any():
+            self._blank(lost)
 
     def _commit(self, position: np.ndarray) -> None:
         """Store the new tool position and move old path segments into the Z-map."""

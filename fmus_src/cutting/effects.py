@@ -4,6 +4,9 @@ Angles and signs follow :mod:`fmus_src.cutting.force` (``phi`` clockwise from
 +y, chip thickness ``h = max(dx sin phi + dy cos phi, 0)``, ``Ft = Kt d h``,
 ``Fr = Ke Ft``). Every term is off at its default (0), which is the paper's
 model. All functions are vectorised (numpy broadcasting); SI units inside.
+The components use them through the compiled kernels of :mod:`.chip`
+(:mod:`.kernel_effects`, :mod:`.path_effects`); parameters in
+:mod:`.effect_model`.
 
 =================  ===========================================================
 effect             function(s)
@@ -53,11 +56,14 @@ def runout_chip_thickness(h_nominal: np.ndarray, flutes: int, eccentricity: floa
     Returns
     -------
     ndarray
-        ``max(h + r_j - r_{j-1}, 0)``: a tooth standing out by ``r_j - r_{j-1}`` against the tooth before
-        it cuts that much more (single-tooth memory, valid while no tooth loses contact for a whole turn).
+        ``max(h + r_j - r_{j+1}, 0)``: a tooth standing out by ``r_j - r_{j+1}`` against the tooth that
+        passed before it cuts that much more (tooth ``j`` is at ``theta + j pitch``, so tooth ``j + 1`` passes
+        each point one pitch earlier). Single-tooth memory, valid while no tooth loses contact; the twin's
+        components also take the older surfaces into account (``min`` over the last teeth, see
+        :meth:`fmus_src.cutting.effect_model.EffectParameters.runout_offsets`).
     """
     r = runout_radius_offsets(flutes, eccentricity, phase)
-    return np.maximum(np.asarray(h_nominal) + (r - np.roll(r, 1)), 0.0)
+    return np.maximum(np.asarray(h_nominal) + (r - np.roll(r, -1)), 0.0)
 
 
 def helix_lag_angle(axial_depth: np.ndarray, diameter: float, helix: float) -> np.ndarray:

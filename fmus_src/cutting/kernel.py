@@ -49,6 +49,38 @@ class StepResult:
     engaged_teeth: np.ndarray
 
 
+def step_kinematics(
+    p_old: np.ndarray, p_new: np.ndarray, theta0: np.ndarray, omega: np.ndarray, h: float, n: int,
+    flutes: np.ndarray,
+) -> tuple[np.ndarray, int, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Tool motion over a step of ``n`` substeps (linear move, constant spindle speed); arguments as :func:`cut_step`.
+
+    Returns
+    -------
+    dp : ndarray, shape (B, 3)
+        Move over the step, m.
+    nmax : int
+        Most teeth of a member.
+    pitch : ndarray, shape (B,)
+        Tooth pitch, rad.
+    centre : ndarray, shape (B, n + 1, 3)
+        Tool tip at the instants ``t + k h / n``, m.
+    theta : ndarray, shape (B, n + 1)
+        Spindle angle (tooth 0) at those instants, rad.
+    feed : ndarray, shape (B, 2)
+        Feed per tooth vector from the tool-centre velocity over the step, m.
+    """
+    dp = p_new - p_old
+    nmax = int(flutes.max())
+    pitch = 2.0 * math.pi / flutes
+    frac = np.arange(n + 1) / n  # (n+1,)
+    centre = p_old[:, None, :] + frac[None, :, None] * dp[:, None, :]  # (B, n+1, 3)
+    theta = theta0[:, None] + (omega * h)[:, None] * frac[None, :]  # (B, n+1)
+    period = 2.0 * math.pi / (flutes * np.maximum(omega, OMEGA_FLOOR))
+    feed = dp[:, :2] / h * period[:, None]  # (B, 2)
+    return dp, nmax, pitch, centre, theta, feed
+
+
 def cut_step(
     stock: ZMapStock, near: NearField, p_old: np.ndarray, p_new: np.ndarray, theta0: np.ndarray,
     omega: np.ndarray, h: float, n: int, radius: np.ndarray, flutes: np.ndarray, kt: np.ndarray, ke: np.ndarray,
@@ -84,19 +116,10 @@ def cut_step(
     """
     B = p_old.shape[0]
     R = radius
-    dp = p_new - p_old
-    nmax = int(flutes.max())
-    pitch = 2.0 * math.pi / flutes
-    frac = np.arange(n + 1) / n  # (n+1,)
-    centre = p_old[:, None, :] + frac[None, :, None] * dp[:, None, :]  # (B, n+1, 3)
-    theta = theta0[:, None] + (omega * h)[:, None] * frac[None, :]  # (B, n+1)
+    dp, nmax, pitch, centre, theta, feed = step_kinematics(p_old, p_new, theta0, omega, h, n, flutes)
     teeth = np.arange(nmax)
     phi = theta[:, :, None] + teeth[None, None, :] * pitch[:, None, None]  # (B, n+1, N)
     tooth_ok = (teeth[None, :] < flutes[:, None])[:, None, :]
-
-    # feed per tooth vector from the tool-centre velocity over the step
-    period = 2.0 * math.pi / (flutes * np.maximum(omega, OMEGA_FLOOR))
-    feed = dp[:, :2] / h * period[:, None]  # (B, 2)
     hc = chip_thickness(feed[:, 0, None, None], feed[:, 1, None, None], phi)
 
     # a tooth is engaged when it is in material AND has a chip (trailing teeth are not evaluated)

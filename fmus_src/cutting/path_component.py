@@ -16,6 +16,10 @@ projection on the path, so a lateral offset ``e`` changes the radial
 immersion by ``e`` that the table does not see. A member farther than
 ``path_tolerance`` from the path where the table has material is an error.
 
+The effect terms are those of :class:`.component.CuttingLoad` (same
+parameters and outputs); with runout, helix, edge force, deflection or
+chatter on the step runs in :func:`.path_effects.path_step_effects`.
+
 The table is handed over either as a Python object
 (:meth:`PathCuttingLoad.attach_table`, before ``setup``) or as an ``.npz``
 file named by the String parameter ``engagement_table`` (FMU use).
@@ -29,6 +33,8 @@ import numpy as np
 from ..component import Variable
 from . import path_kernel as pk
 from .component import MAX_SUBSTEPS, CuttingError, CuttingLoad
+from .effect_model import HISTORY_PER_PITCH
+from .path_effects import path_step_effects
 from .table import EngagementTable
 
 #: Relative mismatch of tool radius / stock tolerated between parameters and table.
@@ -127,6 +133,7 @@ class PathCuttingLoad(CuttingLoad):
             np.asarray(v["angle_steps_per_tooth"], dtype=np.float64),
         ])
         self._st = np.zeros((7, self.batch))
+        self._status = np.zeros(self.batch, dtype=np.int64)  # per-member error kind of the last step
         theta = np.mod(np.asarray(v["initial_spindle_angle"], dtype=np.float64), 2.0 * math.pi)
         self._st[pk.ST_THETA] = theta
         self._st[pk.ST_X:pk.ST_Z + 1] = position.T
@@ -141,6 +148,12 @@ class PathCuttingLoad(CuttingLoad):
         self._out[...] = 0.0
         self._out[pk.OUT_ANGLE] = theta
         v["engaged_teeth"][...] = 0
+        self._setup_effects(theta)
+        flutes = np.asarray(v["flutes"], dtype=np.int64)
+        self._runout = self._eff.runout_offsets(flutes, int(flutes.max()))
+        self._passes = self._eff.passes(flutes)
+        self._epar = self._eff.packed()
+        self._gap = 2.0 * math.pi / flutes / HISTORY_PER_PITCH
 
     def _reset(self) -> None:
         self.__dict__.pop("_st", None)
@@ -148,24 +161,50 @@ class PathCuttingLoad(CuttingLoad):
     # ------------------------------------------------------------------ step
     def _do_step(self, t: float, h: float) -> None:
         tb = self._table
-        code = pk.path_step(
-            h, self._inp, self._par, self._st, self._out, self.values["engaged_teeth"], tb.vertices, tb.vertex_s,
-            tb.spacing, tb.count, tb.alpha, tb.beta, tb.top, tb.z_floor, self._margin, self._tolerance, MAX_SUBSTEPS,
-        )
+        eff = self._eff
+        actual = self._actual_speed()
+        inp = self._inp
+        if np.any(eff.droop != 0):
+            inp = self._inp.copy()
+            inp[3] = actual
+        par = self._par
+        wear = self._wear()
+        if np.any(eff.wear_rate != 0):
+            par = self._par.copy()
+            par[pk.PAR_KT] *= wear
+        if eff.geometric:
+            es = self._effect_state
+            coef = np.stack([par[pk.PAR_KT], par[pk.PAR_KE], eff.kte * wear, eff.kre * wear])
+            code = path_step_effects(
+                h, inp, par, self._st, self._out, self.values["engaged_teeth"], tb.vertices, tb.vertex_s,
+                tb.spacing, tb.count, tb.alpha, tb.beta, tb.top, tb.z_floor, float(tb.stock_upper[2]), self._margin,
+                self._tolerance, MAX_SUBSTEPS, coef, self._epar, self._runout, self._passes, es.mode, es.ht, es.hx,
+                es.hy, es.meta, es.angle, self._gap, self._status,
+            )
+        else:
+            code = pk.path_step(
+                h, inp, par, self._st, self._out, self.values["engaged_teeth"], tb.vertices, tb.vertex_s,
+                tb.spacing, tb.count, tb.alpha, tb.beta, tb.top, tb.z_floor, self._margin, self._tolerance,
+                MAX_SUBSTEPS, self._status,
+            )
+        self._finish_effects(h, np.maximum(actual, 0.0), actual)
         if code:
-            self._raise(code, h)
+            self._fail_status(h)
 
-    def _raise(self, code: int, h: float) -> None:
-        kind, m = divmod(int(code), pk.ERROR_BASE)
-        p = self._inp[:3, m].tolist()
-        if kind == pk.ERR_NONFINITE:
-            raise CuttingError(f"{self.name}: tool position/spindle speed of member {m} is {p}, "
-                               f"{self._inp[3, m]}; expected finite values")
-        if kind == pk.ERR_SUBSTEPS:
-            raise CuttingError(f"{self.name}: step of {h} s of member {m} needs more than {MAX_SUBSTEPS} substeps "
-                               f"(spindle speed {self._inp[3, m]:.4g} rad/s, position {p} m)")
-        raise CuttingError(
-            f"{self.name}: member {m} at {p} m is farther than path_tolerance = {self._tolerance} m from the "
-            f"engagement table's path (last projection at s = {self._st[pk.ST_S, m]:.6g} m); expected every member "
-            "to follow the reference path"
-        )
+    def _fail_status(self, h: float) -> None:
+        """Fail the members the kernel reported in ``_status`` with their reasons (raises when none is left)."""
+        status = self._status
+        for kind in np.unique(status[status != 0]):
+            members = status == kind
+            m = int(np.flatnonzero(members)[0])
+            p = self._inp[:3, m].tolist()
+            more = "" if members.sum() == 1 else f" (and {int(members.sum()) - 1} more)"
+            if kind == pk.ERR_SUBSTEPS:
+                reason = (f"{self.name}: step of {h} s of member {m}{more} needs more than {MAX_SUBSTEPS} substeps "
+                          f"(spindle speed {self._inp[3, m]:.4g} rad/s, position {p} m)")
+            else:
+                reason = (f"{self.name}: member {m}{more} at {p} m is farther than path_tolerance = {self._tolerance} m "
+                          f"from the engagement table's path (last projection at s = {self._st[pk.ST_S, m]:.6g} m); "
+                          "expected every member to follow the reference path")
+            status[members] = 0
+            self.fail_members(members, reason, CuttingError)

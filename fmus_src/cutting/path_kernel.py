@@ -31,7 +31,7 @@ import math
 
 import numpy as np
 
-from ..jit import njit
+from ..jit import njit, njit_inline
 from .kernel import OMEGA_FLOOR
 
 TWO_PI = 2.0 * math.pi
@@ -44,9 +44,8 @@ INTERP_TOP_TOL = 1e-7
 #: Distance margin below which two projection candidates tie (smallest s wins), m.
 TIE_TOL = 1e-9
 
-#: Error kinds returned by :func:`path_step` (``kind * ERROR_BASE + member``).
-ERR_NONFINITE, ERR_SUBSTEPS, ERR_OFF_PATH = 1, 2, 3
-ERROR_BASE = 1 << 32
+#: Per-member error kinds written to ``status`` by :func:`path_step`.
+ERR_SUBSTEPS, ERR_OFF_PATH = 2, 3
 
 #: Rows of the output array of :func:`path_step`.
 OUT_FX, OUT_FY, OUT_FC, OUT_PEAK, OUT_FX_MEAN, OUT_FY_MEAN, OUT_TORQUE, OUT_POWER, OUT_MRR, OUT_ANGLE, \
@@ -280,10 +279,109 @@ def force_at(
 
 
 @njit
+def blank_member(out: np.ndarray, engaged: np.ndarray, m: int) -> None:
+    """Outputs of member ``m`` whose inputs are not finite: NaN (the angle kept), no engaged tooth, state kept.
+
+    Non-finite inputs come from a member that failed or diverged upstream (its
+    outputs are NaN from then on); the master reports that member with the
+    reason, and the other members are not held up by it.
+    """
+    for r in range(out.shape[0]):
+        if r != OUT_ANGLE:
+            out[r, m] = math.nan
+    engaged[m] = 0
+
+
+@njit
+def interval_buffers(kmax: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Work space for two sets of engagement intervals (start, end [rad], top [m]) of ``kmax`` entries each."""
+    return np.empty(kmax), np.empty(kmax), np.empty(kmax), np.empty(kmax), np.empty(kmax), np.empty(kmax)
+
+
+@njit
+def fail_member(status: np.ndarray, out: np.ndarray, engaged: np.ndarray, m: int, kind: int) -> int:
+    """Member ``m`` fails in this step with error ``kind`` (``ERR_*``): status set, outputs blanked; returns 1."""
+    status[m] = kind
+    blank_member(out, engaged, m)
+    return 1
+
+
+@njit_inline
+def member_motion(
+    st: np.ndarray, m: int, x1: float, y1: float, z1: float, reach_margin: float, verts: np.ndarray,
+    vs: np.ndarray,
+) -> tuple[float, float, float, float, float, float, int, float, float]:
+    """Move of member ``m`` over the step and where its new position ``(x1, y1, z1)`` [m] lies on the path.
+
+    Returns
+    -------
+    z0, ddx, ddy, ddz : float
+        Tip height at the step start and the move, m.
+    move : float
+        XY length of the move, m.
+    s0 : float
+        Arc length at the step start, m.
+    seg, s1, dist : int, float, float
+        :func:`locate` of the new position (forward window ``2 |dp| + reach_margin``).
+    """
+    x0, y0, z0 = st[ST_X, m], st[ST_Y, m], st[ST_Z, m]
+    ddx, ddy, ddz = x1 - x0, y1 - y0, z1 - z0
+    move = math.sqrt(ddx * ddx + ddy * ddy)
+    s0 = st[ST_S, m]
+    reach = 2.0 * math.sqrt(move * move + ddz * ddz) + reach_margin
+    seg, s1, dist = locate(x1, y1, z1, int(st[ST_SEG, m]), s0, reach, verts, vs)
+    return z0, ddx, ddy, ddz, move, s0, seg, s1, dist
+
+
+@njit_inline
+def substeps(om: float, h: float, pitch: float, steps: float, move: float, radius: float) -> float:
+    """Substeps the spindle turn (``pitch / steps``, at most ``pi / 2``) and the move (``R / 20``) need, >= 1."""
+    n_angle = math.ceil(om * h / min(pitch / steps, 0.5 * math.pi) - 1e-9)
+    n_move = math.ceil(move / (0.05 * radius) - 1e-9)
+    return max(1.0, n_angle, n_move)
+
+
+@njit_inline
+def write_member(
+    out: np.ndarray, st: np.ndarray, engaged: np.ndarray, m: int, f_end_x: float, f_end_y: float, peak: float,
+    acc: np.ndarray, n: int, om: float, d_end: float, h_end: float, n_end: int, theta0: float, h: float,
+    x1: float, y1: float, z1: float, s1: float, seg: int, dist: float,
+) -> None:
+    """Outputs (rows ``OUT_*``, forces on the workpiece) and new state (rows ``ST_*``) of member ``m``.
+
+    ``f_end_*`` [N] is the force on the tool at ``t + h``, ``acc`` the substep sums of
+    (Fx, Fy, torque, MRR) over ``n`` substeps, ``d_end``, ``h_end`` [m] and ``n_end`` the depth, chip
+    and engaged teeth at ``t + h``; the spindle angle advances by ``om h`` [rad].
+    """
+    out[OUT_FX, m] = -f_end_x
+    out[OUT_FY, m] = -f_end_y
+    out[OUT_FC, m] = math.sqrt(f_end_x * f_end_x + f_end_y * f_end_y)
+    out[OUT_PEAK, m] = peak
+    out[OUT_FX_MEAN, m] = -acc[0] / n
+    out[OUT_FY_MEAN, m] = -acc[1] / n
+    out[OUT_TORQUE, m] = acc[2] / n
+    out[OUT_POWER, m] = acc[2] / n * om
+    out[OUT_MRR, m] = acc[3] / n
+    out[OUT_DEPTH, m] = d_end
+    out[OUT_CHIP, m] = h_end
+    engaged[m] = n_end
+    theta = (theta0 + om * h) % TWO_PI
+    out[OUT_ANGLE, m] = theta
+    st[ST_THETA, m] = theta
+    st[ST_X, m] = x1
+    st[ST_Y, m] = y1
+    st[ST_Z, m] = z1
+    st[ST_S, m] = s1
+    st[ST_SEG, m] = seg
+    st[ST_DIST, m] = dist
+
+
+@njit
 def path_step(
     h: float, inp: np.ndarray, par: np.ndarray, st: np.ndarray, out: np.ndarray, engaged: np.ndarray,
     verts: np.ndarray, vs: np.ndarray, ds: float, count: np.ndarray, alpha: np.ndarray, beta: np.ndarray,
     top: np.ndarray, z_floor: float, reach_margin: float, tolerance: float, max_substeps: int,
+    status: np.ndarray,
 ) -> int:
     """Advance every member by one step ``h`` (see module docstring); write outputs and state in place.
 
@@ -310,43 +408,38 @@ def path_step(
     max_substeps : int
         Refuse steps needing more substeps.
 
+    status : ndarray of int64, shape (B,)
+        Set to the error kind (``ERR_*``) of each member that fails in this
+        step (too many substeps, off the table's path); that member's outputs
+        are blanked (:func:`blank_member`) and the others are advanced.
+
     Returns
     -------
     int
-        0, or ``kind * ERROR_BASE + member`` for the first failing member
-        (kinds ``ERR_*``); members after it are not advanced.
+        Number of members that failed in this step (0: all advanced). A member
+        with non-finite inputs (failed upstream) is blanked, not counted.
     """
     batch = inp.shape[1]
-    kmax = alpha.shape[1]
-    ia = np.empty(kmax)
-    ib = np.empty(kmax)
-    it = np.empty(kmax)
-    ja = np.empty(kmax)
-    jb = np.empty(kmax)
-    jt = np.empty(kmax)
+    ia, ib, it, ja, jb, jt = interval_buffers(alpha.shape[1])
     acc = np.zeros(4)
+    bad = 0
     for m in range(batch):
         x1, y1, z1 = inp[0, m], inp[1, m], inp[2, m]
         om = max(inp[3, m], 0.0)
         if not (math.isfinite(x1) and math.isfinite(y1) and math.isfinite(z1) and math.isfinite(om)):
-            return ERR_NONFINITE * ERROR_BASE + m
+            blank_member(out, engaged, m)  # an upstream failure: this member is out, the others go on
+            continue
         radius = par[PAR_RADIUS, m]
         flutes = int(par[PAR_FLUTES, m])
         kt = par[PAR_KT, m]
         ke = par[PAR_KE, m]
         steps = par[PAR_STEPS, m]
-        x0, y0, z0 = st[ST_X, m], st[ST_Y, m], st[ST_Z, m]
-        ddx, ddy, ddz = x1 - x0, y1 - y0, z1 - z0
-        move = math.sqrt(ddx * ddx + ddy * ddy)
-        s0 = st[ST_S, m]
-        reach = 2.0 * math.sqrt(move * move + ddz * ddz) + reach_margin
-        seg, s1, dist = locate(x1, y1, z1, int(st[ST_SEG, m]), s0, reach, verts, vs)
+        z0, ddx, ddy, ddz, move, s0, seg, s1, dist = member_motion(st, m, x1, y1, z1, reach_margin, verts, vs)
         pitch = TWO_PI / flutes
-        n_angle = math.ceil(om * h / min(pitch / steps, 0.5 * math.pi) - 1e-9)
-        n_move = math.ceil(move / (0.05 * radius) - 1e-9)
-        n = int(max(1.0, n_angle, n_move))
+        n = int(substeps(om, h, pitch, steps, move, radius))
         if n > max_substeps:
-            return ERR_SUBSTEPS * ERROR_BASE + m
+            bad += fail_member(status, out, engaged, m, ERR_SUBSTEPS)  # this member fails; the others go on
+            continue
         period = TWO_PI / (flutes * max(om, OMEGA_FLOOR))
         fxt = ddx / h * period
         fyt = ddy / h * period
@@ -418,26 +511,8 @@ def path_step(
             if k == n - 1:
                 f_end_x, f_end_y, d_end, h_end, n_end = fx, fy, dm, hm, ne
         if any_material and dist > tolerance:
-            return ERR_OFF_PATH * ERROR_BASE + m
-        out[OUT_FX, m] = -f_end_x
-        out[OUT_FY, m] = -f_end_y
-        out[OUT_FC, m] = math.sqrt(f_end_x * f_end_x + f_end_y * f_end_y)
-        out[OUT_PEAK, m] = peak
-        out[OUT_FX_MEAN, m] = -acc[0] / n
-        out[OUT_FY_MEAN, m] = -acc[1] / n
-        out[OUT_TORQUE, m] = acc[2] / n
-        out[OUT_POWER, m] = acc[2] / n * om
-        out[OUT_MRR, m] = acc[3] / n
-        out[OUT_DEPTH, m] = d_end
-        out[OUT_CHIP, m] = h_end
-        engaged[m] = n_end
-        theta = (theta0 + om * h) % TWO_PI
-        out[OUT_ANGLE, m] = theta
-        st[ST_THETA, m] = theta
-        st[ST_X, m] = x1
-        st[ST_Y, m] = y1
-        st[ST_Z, m] = z1
-        st[ST_S, m] = s1
-        st[ST_SEG, m] = seg
-        st[ST_DIST, m] = dist
-    return 0
+            bad += fail_member(status, out, engaged, m, ERR_OFF_PATH)  # this member fails; the others go on
+            continue
+        write_member(out, st, engaged, m, f_end_x, f_end_y, peak, acc, n, om, d_end, h_end, n_end, theta0, h,
+                     x1, y1, z1, s1, seg, dist)
+    return bad

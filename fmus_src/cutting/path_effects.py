@@ -1,0 +1,337 @@
+"""Compiled step of the path mode with the effect terms on (runout, helix, edge force, deflection, chatter).
+
+Used by :class:`.path_component.PathCuttingLoad` in place of
+:func:`.path_kernel.path_step` when one of those terms is on; the path
+projection, substeps and engagement intervals are those of
+:mod:`.path_kernel`, the chip, edge forces, helix bands, static deflection
+and tool mode those of :mod:`.kernel_effects` (shared scalar kernels in
+:mod:`.chip`), so both modes model the same physics:
+
+* each tooth is cut into helix bands (:func:`.effect_model.helix_bands`),
+  band ``b`` at ``phi_j - lag_b`` cutting the material between ``z_lo_b`` and
+  ``z_hi_b`` above the tool tip (from the interval's top of material);
+* in each substep, every band's sweep ``[phi_a, phi_b]`` is intersected with
+  the engagement intervals and each piece integrated exactly with the
+  generalised chip (:func:`.chip.add_piece`); the tooth's engaged depth for
+  the static deflection is the sum over its bands of the deepest piece with a
+  positive chip at its middle;
+* the tool mode advances exactly per substep under the substep-mean force
+  (:func:`.chip.mode_advance`); the regenerative displacement is held at its
+  substep-middle value over a substep (exact at the instants ``t + k h / n``).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..jit import njit
+from ..jit_cache import guard_cache
+from . import chip, effect_model, path_kernel
+from .chip import add_piece, add_piece_point, build_forms, chip_now, deflection_factors, edge_force_on_tool, \
+    effect_workspace, history_push, mode_advance, regenerative_displacements
+from .effect_model import CHATTER_SUBSTEPS_PER_PERIOD, E_KC, E_STIFF, E_TANH, E_WN, E_ZETA, MAX_PASSES, helix_bands
+from .kernel import OMEGA_FLOOR
+from .path_kernel import (
+    ERR_OFF_PATH, ERR_SUBSTEPS, INCLUSIVE_TOL, PAR_FLUTES, PAR_RADIUS, PAR_STEPS, ST_THETA, blank_member,
+    fail_member, interval_buffers, member_motion, substeps, table_at, write_member,
+)
+
+TWO_PI = 2.0 * math.pi
+#: Spindle turn per substep below which the point value replaces the exact integral, rad.
+SHORT_SPAN = 1e-9
+
+
+@njit
+def _top_at(phi: float, ia: np.ndarray, ib: np.ndarray, it: np.ndarray, cnt: int) -> float:
+    """Highest top of material among the intervals containing ``phi`` (inclusive), m; ``-inf`` in air."""
+    best = -math.inf
+    for k in range(cnt):
+        a = ia[k]
+        b = ib[k]
+        inside = (a - INCLUSIVE_TOL <= phi <= b + INCLUSIVE_TOL) or (phi + TWO_PI <= b + INCLUSIVE_TOL) \
+            or (phi - TWO_PI >= a - INCLUSIVE_TOL)
+        if inside and it[k] > best:
+            best = it[k]
+    return best
+
+
+@njit
+def _band_depth(top: float, bottom: float, ztip: float, z_lo: float, z_hi: float) -> float:
+    """Depth of material with top ``top`` within the band ``[z_lo, z_hi)`` above the tip, m."""
+    if not top > bottom:
+        return 0.0
+    return max(min(top - ztip, z_hi) - max(bottom - ztip, z_lo), 0.0)
+
+
+@njit
+def _wrap(p: float) -> float:
+    return p - math.floor(p / TWO_PI) * TWO_PI
+
+
+@njit
+def force_at_effects(
+    phi0: float, flutes: int, pitch: float, nb: int, lag: np.ndarray, z_lo: np.ndarray, z_hi: np.ndarray,
+    ia: np.ndarray, ib: np.ndarray, it: np.ndarray, cnt: int, bottom: float, ztip: float, fxt: float, fyt: float,
+    dq: np.ndarray, nf: int, toff: np.ndarray, kt: float, ke: float, kte: float, kre: float, stiff: float,
+    dsum: np.ndarray, forms: np.ndarray,
+) -> tuple[float, float, float, float, int]:
+    """Force on the tool at one instant (tooth 0 at ``phi0``) with the effect terms.
+
+    ``dq`` holds the regenerative displacements at that instant, ``toff`` the
+    runout offsets (nmax, passes) of the member, ``forms`` is work space.
+
+    Returns
+    -------
+    fx, fy : float
+        Force on the tool, N.
+    depth, chip : float
+        Largest engaged axial depth of a tooth and largest chip, m.
+    engaged : int
+        Teeth with a band in material with a positive chip.
+    """
+    if cnt == 0:
+        return 0.0, 0.0, 0.0, 0.0, 0
+    for j in range(flutes):
+        dsum[j] = 0.0
+        build_forms(forms, nf, fxt, fyt, dq, toff[j])
+        for b in range(nb):
+            phi = _wrap(phi0 + j * pitch - lag[b])
+            d = _band_depth(_top_at(phi, ia, ib, it, cnt), bottom, ztip, z_lo[b], z_hi[b])
+            if d > 0.0 and chip_now(forms, nf, 1.0, 0.0, phi) > 0.0:
+                dsum[j] += d
+    fx = 0.0
+    fy = 0.0
+    hmax = 0.0
+    dmax = 0.0
+    n_in = 0
+    for j in range(flutes):
+        if not dsum[j] > 0.0:
+            continue
+        alpha, beta = deflection_factors(kt, ke, kre, dsum[j], stiff)
+        build_forms(forms, nf, fxt, fyt, dq, toff[j])
+        dj = 0.0
+        for b in range(nb):
+            phi = _wrap(phi0 + j * pitch - lag[b])
+            d = _band_depth(_top_at(phi, ia, ib, it, cnt), bottom, ztip, z_lo[b], z_hi[b])
+            if not d > 0.0:
+                continue
+            hc = chip_now(forms, nf, alpha, beta, phi)
+            if not (hc > 0.0 and chip_now(forms, nf, 1.0, 0.0, phi) > 0.0):
+                continue
+            a, c, _ = edge_force_on_tool(kt, ke, kte, kre, d, hc, phi)
+            fx += a
+            fy += c
+            hmax = max(hmax, hc)
+            dj += d
+        if dj > 0.0:
+            n_in += 1
+            dmax = max(dmax, dj)
+    return fx, fy, dmax, hmax, n_in
+
+
+@njit
+def path_step_effects(
+    h: float, inp: np.ndarray, par: np.ndarray, st: np.ndarray, out: np.ndarray, engaged: np.ndarray,
+    verts: np.ndarray, vs: np.ndarray, ds: float, count: np.ndarray, alpha: np.ndarray, beta: np.ndarray,
+    top: np.ndarray, z_floor: float, stock_top: float, reach_margin: float, tolerance: float, max_substeps: int,
+    coef: np.ndarray, epar: np.ndarray, toff: np.ndarray, passes: np.ndarray, mode: np.ndarray, ht: np.ndarray,
+    hx: np.ndarray, hy: np.ndarray, meta: np.ndarray, angle: np.ndarray, gap: np.ndarray, status: np.ndarray,
+) -> int:
+    """Advance every member by one step ``h`` with the effect terms; write outputs and state in place.
+
+    Parameters
+    ----------
+    h, inp, par, st, out, engaged, verts, vs, ds, count, alpha, beta, top, z_floor, reach_margin, tolerance, \
+max_substeps
+        As :func:`.path_kernel.path_step` (``inp[3]`` is the actual spindle speed).
+    stock_top : float
+        Stock block top, m (helix bands reach up to it).
+    coef : ndarray, shape (4, B)
+        ``Kt`` [N/m2], ``Ke`` [1], ``Kte``, ``Kre`` [N/m], wear applied.
+    epar : ndarray, shape (11, B)
+        :meth:`.effect_model.EffectParameters.packed`.
+    toff : ndarray, shape (B, nmax, MAX_PASSES)
+        Runout chip offsets (:meth:`.effect_model.EffectParameters.runout_offsets`), m.
+    passes : ndarray of int, shape (B,)
+        Surfaces a tooth may cut (:meth:`.effect_model.EffectParameters.passes`).
+    mode : ndarray, shape (B, 4)
+        Tool vibration (qx, qy, vx, vy), updated.
+    ht, hx, hy, meta
+        Vibration history (:class:`.effect_model.EffectState`), updated.
+    angle : ndarray, shape (B,)
+        Unwrapped spindle angle at the start of the step, rad (not advanced here).
+    gap : ndarray, shape (B,)
+        History spacing, rad.
+    status : ndarray of int64, shape (B,)
+        Error kind of each member that fails in this step, as in :func:`.path_kernel.path_step`.
+
+    Returns
+    -------
+    int
+        Number of members that failed in this step (see :func:`.path_kernel.path_step`).
+    """
+    batch = inp.shape[1]
+    ia, ib, it, ja, jb, jt = interval_buffers(alpha.shape[1])
+    acc, sub, tmp, cuts, forms, dq, dtooth, dsum = effect_workspace(toff.shape[1])
+    cuts_forms = np.zeros((MAX_PASSES, 3))
+    bad = 0
+    for m in range(batch):
+        x1, y1, z1 = inp[0, m], inp[1, m], inp[2, m]
+        om = max(inp[3, m], 0.0)
+        if not (math.isfinite(x1) and math.isfinite(y1) and math.isfinite(z1) and math.isfinite(om)):
+            blank_member(out, engaged, m)  # an upstream failure: this member is out, the others go on
+            continue
+        radius = par[PAR_RADIUS, m]
+        flutes = int(par[PAR_FLUTES, m])
+        steps = par[PAR_STEPS, m]
+        kt, ke, kte, kre = coef[0, m], coef[1, m], coef[2, m], coef[3, m]
+        stiff = epar[E_STIFF, m]
+        wn = epar[E_WN, m]
+        chat = wn > 0.0
+        nf = passes[m]
+        z0, ddx, ddy, ddz, move, s0, seg, s1, dist = member_motion(st, m, x1, y1, z1, reach_margin, verts, vs)
+        pitch = TWO_PI / flutes
+        n_mode = math.ceil(h * wn / TWO_PI * CHATTER_SUBSTEPS_PER_PERIOD - 1e-9)
+        n = int(max(substeps(om, h, pitch, steps, move, radius), n_mode))
+        if n > max_substeps:
+            bad += fail_member(status, out, engaged, m, ERR_SUBSTEPS)  # this member fails; the others go on
+            continue
+        period = TWO_PI / (flutes * max(om, OMEGA_FLOOR))
+        fxt = ddx / h * period
+        fyt = ddy / h * period
+        theta0 = st[ST_THETA, m]
+        span = om * h / n
+        dt = h / n
+        # helix bands for this step
+        nb, dz = helix_bands(epar[E_TANH, m], radius, pitch, steps, stock_top - min(z0, z1))
+        lag = np.zeros(nb)
+        z_lo = np.zeros(nb)
+        z_hi = np.full(nb, math.inf)
+        if math.isfinite(dz):
+            for b in range(nb):
+                lag[b] = (b + 0.5) * dz * epar[E_TANH, m] / radius
+                z_lo[b] = b * dz
+                if b < nb - 1:
+                    z_hi[b] = (b + 1) * dz
+        qx, qy, vx, vy = mode[m, 0], mode[m, 1], mode[m, 2], mode[m, 3]
+        dq[:] = 0.0
+        acc[:] = 0.0
+        peak = 0.0
+        f_end_x = 0.0
+        f_end_y = 0.0
+        d_end = 0.0
+        h_end = 0.0
+        n_end = 0
+        any_material = False
+        for k in range(n):
+            f_mid = (k + 0.5) / n
+            s_mid = s0 + f_mid * (s1 - s0)
+            ztip = z0 + f_mid * ddz
+            bottom = max(ztip, z_floor)
+            cm = table_at(s_mid, ds, count, alpha, beta, top, ia, ib, it)
+            if chat:
+                regenerative_displacements(dq, nf, ht, hx, hy, meta, m, angle[m] + span * (k + 0.5),
+                                           qx + 0.5 * dt * vx, qy + 0.5 * dt * vy, pitch)
+            sub[:] = 0.0
+            if cm > 0:
+                any_material = True
+                phi_k = theta0 + om * h * k / n
+                # engaged depth per tooth (static deflection): deepest piece with a chip per band
+                for j in range(flutes):
+                    dtooth[j] = 0.0
+                    if not stiff > 0.0:
+                        continue
+                    build_forms(forms, nf, fxt, fyt, dq, toff[m, j])
+                    for b in range(nb):
+                        pa = _wrap(phi_k + j * pitch - lag[b])
+                        if span < SHORT_SPAN:
+                            pm = pa + 0.5 * span
+                            d = _band_depth(_top_at(pm, ia, ib, it, cm), bottom, ztip, z_lo[b], z_hi[b])
+                            if d > 0.0 and chip_now(forms, nf, 1.0, 0.0, pm) > 0.0:
+                                dtooth[j] += d
+                            continue
+                        pb = pa + span
+                        deepest = 0.0
+                        for q in range(cm):
+                            d = _band_depth(it[q], bottom, ztip, z_lo[b], z_hi[b])
+                            if not d > deepest:
+                                continue
+                            for shift in (-TWO_PI, 0.0, TWO_PI):
+                                lo = max(pa, ia[q] + shift)
+                                hi = min(pb, ib[q] + shift)
+                                if not hi > lo:
+                                    continue
+                                if chip_now(forms, nf, 1.0, 0.0, 0.5 * (lo + hi)) > 0.0:
+                                    deepest = d
+                                    break
+                        dtooth[j] += deepest
+                for j in range(flutes):
+                    al, be = deflection_factors(kt, ke, kre, dtooth[j], stiff)
+                    build_forms(forms, nf, fxt, fyt, dq, toff[m, j])
+                    for b in range(nb):
+                        if span < SHORT_SPAN:
+                            pm = _wrap(phi_k + 0.5 * span + j * pitch - lag[b])
+                            d = _band_depth(_top_at(pm, ia, ib, it, cm), bottom, ztip, z_lo[b], z_hi[b])
+                            if d > 0.0:
+                                sn = math.sin(pm)
+                                cs = math.cos(pm)
+                                add_piece_point(kt, ke, kte, kre, d, chip_now(forms, nf, al, be, pm),
+                                                fxt * sn + fyt * cs, pm, radius, om, 1.0, sub)
+                            continue
+                        pa = _wrap(phi_k + j * pitch - lag[b])
+                        pb = pa + span
+                        for q in range(cm):
+                            d = _band_depth(it[q], bottom, ztip, z_lo[b], z_hi[b])
+                            if not d > 0.0:
+                                continue
+                            for shift in (-TWO_PI, 0.0, TWO_PI):
+                                lo = max(pa, ia[q] + shift)
+                                hi = min(pb, ib[q] + shift)
+                                if not hi > lo:
+                                    continue
+                                add_piece(kt, ke, kte, kre, d, forms, nf, al, be, fxt, fyt, lo, hi, radius, om,
+                                          1.0 / span, sub, tmp, cuts)
+                                # entry/exit instants (engaged side: interval ends are inclusive), not the
+                                # step start t; also where this band's chip is 0 (the other bands may be loaded)
+                                for edge in (lo, hi):
+                                    if edge == pa and k == 0:
+                                        continue
+                                    fx, fy, _, _, _ = force_at_effects(
+                                        edge - j * pitch + lag[b], flutes, pitch, nb, lag, z_lo, z_hi, ia, ib, it,
+                                        cm, bottom, ztip, fxt, fyt, dq, nf, toff[m], kt, ke, kte, kre, stiff, dsum,
+                                        cuts_forms)
+                                    peak = max(peak, math.sqrt(fx * fx + fy * fy))
+            for i in range(4):
+                acc[i] += sub[i]
+            if chat:
+                qx, vx = mode_advance(qx, vx, sub[0], wn, epar[E_ZETA, m], epar[E_KC, m], dt)
+                qy, vy = mode_advance(qy, vy, sub[1], wn, epar[E_ZETA, m], epar[E_KC, m], dt)
+                theta1 = angle[m] + span * (k + 1)
+                history_push(ht, hx, hy, meta, m, theta1, qx, qy, gap[m])
+                regenerative_displacements(dq, nf, ht, hx, hy, meta, m, theta1, qx, qy, pitch)
+            # the instant t + (k + 1) h / n
+            f1 = (k + 1.0) / n
+            cj = table_at(s0 + f1 * (s1 - s0), ds, count, alpha, beta, top, ja, jb, jt)
+            if cj > 0:
+                any_material = True
+                zt1 = z0 + f1 * ddz
+                fx, fy, dm, hm, ne = force_at_effects(
+                    theta0 + om * h * f1, flutes, pitch, nb, lag, z_lo, z_hi, ja, jb, jt, cj, max(zt1, z_floor),
+                    zt1, fxt, fyt, dq, nf, toff[m], kt, ke, kte, kre, stiff, dsum, cuts_forms)
+            else:
+                fx, fy, dm, hm, ne = 0.0, 0.0, 0.0, 0.0, 0
+            peak = max(peak, math.sqrt(fx * fx + fy * fy))
+            if k == n - 1:
+                f_end_x, f_end_y, d_end, h_end, n_end = fx, fy, dm, hm, ne
+        if any_material and dist > tolerance:
+            bad += fail_member(status, out, engaged, m, ERR_OFF_PATH)  # this member fails; the others go on
+            continue
+        write_member(out, st, engaged, m, f_end_x, f_end_y, peak, acc, n, om, d_end, h_end, n_end, theta0, h,
+                     x1, y1, z1, s1, seg, dist)
+        mode[m, 0], mode[m, 1], mode[m, 2], mode[m, 3] = qx, qy, vx, vy
+    return bad
+
+
+# the cached step links the shared kernels' code: recompile it when their modules change
+guard_cache(path_step_effects, path_kernel, chip, effect_model)
