@@ -18,9 +18,11 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
             emit(f"diagnose: {message}", file=sys.stderr)
 
     result = diagnose(args.case, holdout=args.holdout, machine=args.machine, axes=args.axes,
-                      vertical=tuple(args.vertical), refit_scales=not args.no_scales, progress=progress)
+                      vertical=tuple(args.vertical), refit_scales=not args.no_scales, progress=progress,
+                      cutting=False if args.no_cutting else None, drives=not args.no_drives)
     files = result.write(args.out, plots=not args.no_plots)
-    found = ", ".join(f"{e['effect']} ({e['axis']})" for e in result.effects) or "no effect above the noise"
+    found = ", ".join(f"{e['effect']} ({e.get('axis', 'cutting')})" for e in result.effects) \
+        or "no effect above the noise"
     emit(f"effects: {found}")
     if result.unexplained:
         emit("unexplained: " + ", ".join(",".join(u["channels"]) for u in result.unexplained))
@@ -43,6 +45,10 @@ def add_parsers(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--vertical", nargs="*", default=["z"], choices=("x", "y", "z"),
                    help="axes carrying a weight (gravity candidates; default z)")
     p.add_argument("--no-scales", action="store_true", help="do not refit the scale factors Spp, Svp, Svi")
+    p.add_argument("--no-drives", action="store_true",
+                   help="diagnose only the cutting process (forces, spindle speed), not the feed drives")
+    p.add_argument("--no-cutting", action="store_true",
+                   help="diagnose only the feed drives, even when the recording has forces")
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     p.add_argument("--quiet", action="store_true", help="no progress messages")
     p.set_defaults(func=_cmd_diagnose)

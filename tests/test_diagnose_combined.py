@@ -113,7 +113,7 @@ def test_errors_name_the_problem(tmp_path):
     with pytest.raises(DiagnosisError, match="needs a recording"):
         diagnose(folder)
     (folder / "recording.csv").write_text("t_s,line\n0.0,1\n0.1,1\n0.2,1\n")
-    with pytest.raises(DiagnosisError, match="no axis|cannot align"):
+    with pytest.raises(DiagnosisError, match="no axis|cannot align|holds no block"):
         diagnose(folder)
 
 

@@ -3,7 +3,9 @@
 ``diagnose(case, holdout=None)`` returns a :class:`Diagnosis` whose
 ``to_json()`` is ``diagnosis.json`` of ``shared/spec/diagnosis.md`` and whose
 ``write(out)`` also writes ``machine.toml`` (the parameter set extended with
-the effects), ``report.md`` and the residual-map plots.
+the effects), ``report.md`` and the residual-map plots. Feed drives and
+controller per axis (:mod:`.core`), the cutting process from the forces and the
+spindle speed (:mod:`.cutting_core`).
 """
 from __future__ import annotations
 

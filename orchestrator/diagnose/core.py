@@ -15,12 +15,16 @@ Pipeline (each step its own module):
 5. :mod:`.locate` — where each effect and any unexplained residual sit
    (time windows, lines, events, frequencies); RMS before / after, also on a
    held-out case.
+
+With forces in the recording and a stock in the case, the cutting process is
+diagnosed as well (:mod:`.cutting_core`: forces and spindle speed, effects
+without ``axis``), and the recorded forces load the replayed drives.
 """
 from __future__ import annotations
 
 import datetime as _dt
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Callable
 
@@ -30,11 +34,14 @@ from ..case import Case, load_case
 from ..machine import Machine, load_machine
 from ..recording import Recording, RecordingError
 from .columns import AxisColumns, build
+from .cutting import has_forces
+from .cutting_core import CuttingResult, diagnose_cutting
+from .cutting_merge import holdout_cutting, merge_cutting
 from .errors import DiagnosisError
 from .library import machine_keys
 from .locate import Locator, residual_windows
 from .model import Model, Simulated, simulate
-from .prepare import Prepared, prepare
+from .prepare import Prepared, prepare, recorded_forces
 from .refit import Parameter, RefitResult, artefact_values, projectors, refit, residuals
 from .select import MIN_GAIN, Choice, Selection, select
 
@@ -92,6 +99,7 @@ class Diagnosis:
     results: list[CaseResult] = field(default_factory=list, repr=False)
     final_model: Model = field(default_factory=dict)
     case_name: str = ""
+    cutting: CuttingResult | None = field(default=None, repr=False)
 
     def to_json(self) -> dict[str, Any]:
         """The ``diagnosis.json`` object, exactly the layout of the spec."""
@@ -269,7 +277,7 @@ def _timing_check(prep: Prepared, cols: dict[str, AxisColumns], final: Model, fi
     subsets = [(e,) for e in present] + ([tuple(present)] if len(present) > 1 else [])
     alternatives = [{a: {e: dict(p) for e, p in m.items() if e not in sub + ("servo_scales",)}
                      for a, m in final.items()} for sub in subsets]
-    sim = simulate(prep.machine, prep.t, prep.commands, [final], prep.t_start, shifted)
+    sim = simulate(prep.machine, prep.t, prep.commands, [final], prep.t_start, shifted, disturbance=prep.disturbance)
     r = residuals(prep, cols, sim, 0, proj)
     cost_with = float(r @ r)
     n = r.size
@@ -278,7 +286,8 @@ def _timing_check(prep: Prepared, cols: dict[str, AxisColumns], final: Model, fi
     for k in range(1, PHASE_STEPS):
         phase = tp * k / PHASE_STEPS
         phase = phase - tp if phase > tp / 2 else phase
-        s = simulate(prep.machine, prep.t, prep.commands, alternatives, prep.t_start + phase, shifted)
+        s = simulate(prep.machine, prep.t, prep.commands, alternatives, prep.t_start + phase, shifted,
+                     disturbance=prep.disturbance)
         for j in range(len(alternatives)):
             rr = residuals(prep, cols, s, j, proj)
             best = min(best, (float(rr @ rr), phase, j))
@@ -304,7 +313,7 @@ def _evaluate_case(name: str, prep: Prepared, base: Model, final: Model, lead: d
                    cols: dict[str, AxisColumns] | None = None) -> CaseResult:
     if cols is None:
         cols, _ = build(prep, base, lead)
-    sim = simulate(prep.machine, prep.t, prep.commands, [base, final], prep.t_start)
+    sim = simulate(prep.machine, prep.t, prep.commands, [base, final], prep.t_start, disturbance=prep.disturbance)
     return CaseResult(name, prep, cols, sim, _rms(prep, cols, sim, 0), _rms(prep, cols, sim, 1))
 
 
@@ -316,6 +325,8 @@ def diagnose(
     vertical: tuple[str, ...] = ("z",),
     refit_scales: bool = True,
     progress: Callable[[str], None] | None = None,
+    cutting: bool | None = None,
+    drives: bool = True,
 ) -> Diagnosis:
     """Diagnose a case: where the recording disagrees with the twin, and which missing physics explains it.
 
@@ -338,6 +349,12 @@ def diagnose(
         Refit the scale factors Spp, Svp, Svi together with the effects.
     progress : callable, optional
         ``progress(message)``.
+    cutting : bool, optional
+        Diagnose the cutting process (forces ``fx_N``, ``fy_N`` and ``spindle_rpm``, effects without
+        ``axis``; :mod:`.cutting`). Default: when the recording has forces and the case a stock.
+    drives : bool
+        Diagnose the feed drives and the controller (per axis). The recorded cutting forces load the
+        replayed drives.
 
     Returns
     -------
@@ -356,11 +373,62 @@ def diagnose(
     base_machine = machine if isinstance(machine, Machine) else (
         load_machine(machine) if machine is not None else case.machine)
     recording = _read(case)
+    case_m = replace(case, machine=base_machine)
+    do_cut = has_forces(recording, case) if cutting is None else bool(cutting)
+    if do_cut and not has_forces(recording, case):
+        raise DiagnosisError(f"{case.recording}: a cutting diagnosis needs 'fx_N' and 'fy_N' (at least 100 samples) "
+                             f"and a [stock] in {case.source or case.folder}")
     say("aligning the recording with the twin")
-    prep = prepare(case, recording, base_machine, axes)
+    forces = recorded_forces(recording)
+    drive_rec = _cnc_rows(recording) if do_cut else recording
+    prep = prepare(case, drive_rec, base_machine, axes, disturbance=forces)
+    log: list[str] = [f"time offset: {prep.offset:.6f} s ({prep.offset_method})"]
+    if drives:
+        d = _diagnose_drives(case, prep, base_machine, holdout, vertical, refit_scales, say, log)
+    else:
+        d = Diagnosis({"time_offset_s": _r(prep.offset, 7), "channels": {}}, [], [], {}, {},
+                      base_machine.with_values("machine", name=f"{base_machine.name}-diagnosed"), {}, log=log,
+                      case_name=Path(case.folder).name)
+    if do_cut:
+        say("diagnosing the cutting process")
+        nc_t, nc_s = np.asarray(prep.nc.t, float), np.asarray(prep.nc["spindle_rpm"], float)
+        offset = prep.offset
+        locator = Locator(prep, {})
+        cres = diagnose_cutting(case_m, recording, spindle_command=lambda t: np.interp(t - offset, nc_t, nc_s),
+                                lines_of=locator.lines_in, unexplained_sigma=UNEXPLAINED_SIGMA, say=say)
+        merge_cutting(d, cres, case)
+        if holdout is not None:
+            say("re-simulating the held-out case (cutting)")
+            hcase = as_case(holdout)
+            hrec = _read(hcase)
+            if has_forces(hrec, hcase):
+                hold = holdout_cutting(replace(hcase, machine=base_machine), hrec, cres.model)
+                if d.holdout is None:
+                    d.holdout = {"case": str(hcase.folder), "rms_before": {}, "rms_after": {}}
+                d.holdout["rms_before"].update(hold[0])
+                d.holdout["rms_after"].update(hold[1])
+    return d
+
+
+def _cnc_rows(recording: Recording) -> Recording:
+    """The rows of the CNC logger (any position, command, current or line cell measured), without forces."""
+    names = [c for c in recording.channels if c in ("line",) or c.endswith(("_ref_mm", "_tcmd_A"))
+             or c in ("x_mm", "y_mm", "z_mm")]
+    keep = np.zeros(len(recording), bool)
+    for c in names:
+        keep |= np.isfinite(recording[c])
+    if keep.all():
+        return recording
+    channels = {c: np.asarray(recording[c], float)[keep] for c in recording.channels if c not in ("fx_N", "fy_N",
+                                                                                                   "fz_N", "fc_N")}
+    return Recording.from_channels(channels, source=recording.source)
+
+
+def _diagnose_drives(case: Case, prep: Prepared, base_machine: Machine, holdout, vertical: tuple[str, ...],
+                     refit_scales: bool, say: Callable[[str], None], log: list[str]) -> Diagnosis:
+    """Steps 2-5 of the pipeline for the feed drives and the controller."""
     lead = {a: _lead_mm(base_machine, a) for a in "xyz"}
     base: Model = {a: {} for a in prep.axes}
-    log: list[str] = [f"time offset: {prep.offset:.6f} s ({prep.offset_method})"]
     cols, selections, choices, fit = _name_and_refit(prep, base, lead, vertical, base_machine, refit_scales, say, log)
     final = fit.model
     if _timing_effects(final):
@@ -381,7 +449,7 @@ def diagnose(
     base = {a: ({"command_shift": dict(final[a]["command_shift"])} if "command_shift" in final.get(a, {}) else {})
             for a in prep.axes}
     members = [base, final] + [_without(final, a, e) for a, e in effect_keys]
-    sim = simulate(prep.machine, prep.t, prep.commands, members, prep.t_start, shifted)
+    sim = simulate(prep.machine, prep.t, prep.commands, members, prep.t_start, shifted, disturbance=prep.disturbance)
     # effects the refit made negligible are dropped (their contribution is below the minimum gain)
     kept = []
     r_final = residuals(prep, cols, sim, 1, proj)
@@ -397,7 +465,8 @@ def diagnose(
     if len(kept) != len(effect_keys):
         effect_keys = kept
         members = [base, final] + [_without(final, a, e) for a, e in effect_keys]
-        sim = simulate(prep.machine, prep.t, prep.commands, members, prep.t_start, shifted)
+        sim = simulate(prep.machine, prep.t, prep.commands, members, prep.t_start, shifted,
+                       disturbance=prep.disturbance)
     rms_before = _rms(prep, cols, sim, 0)
     rms_after = _rms(prep, cols, sim, 1)
     for a, diff in prep.nc_difference.items():
@@ -443,7 +512,8 @@ def diagnose(
     if holdout is not None:
         say("re-simulating the held-out case")
         hcase = as_case(holdout)
-        hprep = prepare(hcase, _read(hcase), base_machine, [a for a in prep.axes])
+        hrec = _read(hcase)
+        hprep = prepare(hcase, _cnc_rows(hrec), base_machine, [a for a in prep.axes], disturbance=recorded_forces(hrec))
         hres = _evaluate_case(Path(hcase.folder).name, hprep, {a: {} for a in hprep.axes},
                               {a: final.get(a, {}) for a in hprep.axes}, lead)
         results.append(hres)

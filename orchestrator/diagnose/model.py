@@ -73,7 +73,8 @@ class Simulated:
 
 def simulate(machine: Machine, t: np.ndarray, commands: Mapping[str, np.ndarray],
              members: Sequence[Model], t_start: float | None = None,
-             shifted: Mapping[str, Callable[[float], np.ndarray]] | None = None) -> Simulated:
+             shifted: Mapping[str, Callable[[float], np.ndarray]] | None = None,
+             disturbance: Mapping[str, Callable[[np.ndarray], np.ndarray]] | None = None) -> Simulated:
     """Replay all axes of ``commands`` for every member model at once.
 
     Parameters
@@ -92,6 +93,8 @@ def simulate(machine: Machine, t: np.ndarray, commands: Mapping[str, np.ndarray]
         clock (a member's ``command_shift.shift_ms``); for axes whose commands are the twin's, not
         recorded. The following error stays relative to ``commands`` (the comparison is then on
         positions).
+    disturbance : mapping axis -> callable, optional
+        Recorded cutting force on the axis, ``f(t)`` [N] (:func:`.replay.run_replay`).
     """
     batch = len(members)
     base_mcu = mcu_parameters(machine)
@@ -112,6 +115,6 @@ def simulate(machine: Machine, t: np.ndarray, commands: Mapping[str, np.ndarray]
         drive_values[a] = {k: np.broadcast_to(np.asarray(v, float), (batch,)).copy() for k, v in d.items()}
         mcu_values.update({k: np.broadcast_to(np.asarray(v, float), (batch,)).copy() for k, v in mc.items()})
     run = run_replay(machine, t, cmds, t, batch=batch, mcu_values=mcu_values, drive_values=drive_values,
-                     t_start=t_start)
+                     t_start=t_start, disturbance=disturbance)
     fe = {a: (np.asarray(commands[a], float)[:, None] - run.table[a]) * 1e6 for a in commands}
     return Simulated(fe, run.current, run.motor, run.force)

@@ -7,9 +7,10 @@ import numpy as np
 
 from ..case import Case
 from ..machine import Machine
-from ..recording import Recording
+from ..recording import Recording, RecordingError
 from ..simulate import simulate as simulate_twin
-from ..twin import TwinOptions
+from ..twin import TwinOptions, nck_parameters
+from ..validation import validate_recording
 from .align import fill_gaps, refine_offset_by_commands, time_offset_from_lines, time_offset_from_signal
 from .errors import DiagnosisError
 
@@ -56,6 +57,9 @@ class Prepared:
     t_start : float
         First servo tick of the replays: on the controller's position-loop grid
         (program time ``k Tp``) seen through the estimated offset.
+    disturbance : dict axis -> callable, or None
+        The recorded cutting force on the workpiece (``fx_N``, ``fy_N``) as ``f(t)`` [N]: the drives
+        of the replays carry what the machine's drives carried (commanded versus actual, for loads).
     """
 
     recording: Recording
@@ -75,6 +79,7 @@ class Prepared:
     ref_offset_mm: dict[str, float] = field(default_factory=dict)
     t_start: float | None = None
     phase_from_commands: bool = False
+    disturbance: dict | None = None
 
     def shifted_commands(self) -> dict:
         """Axis -> ``f(s)``: the twin's commands at ``t - offset - s`` [m], for axes without a recorded command."""
@@ -99,16 +104,35 @@ def twin_commands(case: Case, machine: Machine) -> Recording:
     return result.recording
 
 
+def recorded_forces(recording: Recording) -> dict | None:
+    """``{axis: f(t)}`` from ``fx_N`` / ``fy_N`` (linear between samples, 0 outside), or None without forces."""
+    out = {}
+    t = np.asarray(recording.t, float)
+    for a in "xy":
+        name = f"f{a}_N"
+        if name in recording:
+            f = np.asarray(recording[name], float)
+            ok = np.isfinite(f)
+            if ok.sum() > 10:
+                out[a] = (lambda q, tf=t[ok], ff=f[ok]: np.interp(q, tf, ff, left=0.0, right=0.0))
+    return out or None
+
+
 def prepare(case: Case, recording: Recording, machine: Machine, axes: list[str] | None = None,
-            nc: Recording | None = None) -> Prepared:
+            nc: Recording | None = None, disturbance: dict | None = None) -> Prepared:
     """Align a recording with the twin and collect what the diagnosis compares.
 
     Raises
     ------
     DiagnosisError
-        No ``{a}_mm`` of a moving axis, or the time offset cannot be estimated.
+        No ``{a}_mm`` of a moving axis, or the time offset cannot be estimated, or the recording
+        does not belong to the case's program (``validate_recording``).
     """
     src = recording.source
+    try:  # the recording must belong to the program (names the file, column and row)
+        validate_recording(recording, case.program, nc_parameters=nck_parameters(machine))
+    except RecordingError as exc:
+        raise DiagnosisError(str(exc)) from None
     nc = nc if nc is not None else twin_commands(case, machine)
     t = np.asarray(recording.t, dtype=float)
     # --- time offset: block transitions first (pure timing), else velocities
@@ -172,7 +196,8 @@ def prepare(case: Case, recording: Recording, machine: Machine, axes: list[str] 
     t_start = float(offset + tp * np.ceil((t[0] - offset) / tp - 1e-9))
     valid &= t >= t_start + tp + WARM_UP_S
     prep = Prepared(recording, machine, t, float(offset), method, list(commands), commands, recorded, fe, cur,
-                    valid, line, nc, nc_diff, ref_off, t_start)
+                    valid, line, nc, nc_diff, ref_off, t_start,
+                    disturbance=disturbance if disturbance is not None else recorded_forces(recording))
     same_commands = bool(nc_diff) and all(
         float(np.sqrt(np.nanmean(d ** 2))) < SAME_COMMANDS_MM for d in nc_diff.values())
     if not (with_ref and same_commands):
@@ -194,7 +219,7 @@ def _phase_cost(prep: Prepared, t_start: float) -> float:
     """High-pass (first-difference) residual power of the baseline replay started at ``t_start``."""
     from .model import simulate  # local: model imports the replay, which needs nothing from here
 
-    sim = simulate(prep.machine, prep.t, prep.commands, [{}], t_start)
+    sim = simulate(prep.machine, prep.t, prep.commands, [{}], t_start, disturbance=prep.disturbance)
     cost = 0.0
     for a in prep.axes:
         ok = prep.valid & np.isfinite(prep.fe[a])

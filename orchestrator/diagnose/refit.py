@@ -174,7 +174,8 @@ def refit(prep: Prepared, cols: dict[str, AxisColumns], start: Model, free: list
     for it in range(1, max_iterations + 1):
         if not free:
             break
-        sim = simulate(prep.machine, prep.t, prep.commands, models(theta, True), prep.t_start, shifted)
+        sim = simulate(prep.machine, prep.t, prep.commands, models(theta, True), prep.t_start, shifted,
+                       disturbance=prep.disturbance)
         replays += 1
         r0 = residuals(prep, cols, sim, 0, proj)
         cost = float(r0 @ r0)

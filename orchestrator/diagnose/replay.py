@@ -12,7 +12,7 @@ drives.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Mapping
+from typing import Callable, Mapping
 
 import numpy as np
 from scipy.interpolate import PchipInterpolator
@@ -73,6 +73,7 @@ def run_replay(
     mcu_values: Mapping[str, np.ndarray | float] | None = None,
     drive_values: Mapping[str, Mapping[str, np.ndarray | float]] | None = None,
     t_start: float | None = None,
+    disturbance: Mapping[str, Callable[[np.ndarray], np.ndarray]] | None = None,
 ) -> Replay:
     """Simulate MCU + drives of the axes in ``commands`` for ``B`` parameter sets.
 
@@ -93,6 +94,9 @@ def run_replay(
         First servo tick (default ``t_cmd[0]``): put it on the controller's own
         tick grid when known, so that the position loop samples the command
         in the controller's phase. Outputs before it hold the initial state.
+    disturbance : mapping axis -> callable, optional
+        ``f(t)`` -> disturbance force on the axis [N] (the recorded cutting force on the workpiece,
+        ``Fd = +F``), evaluated at the middle of each servo tick.
 
     Returns
     -------
@@ -122,7 +126,9 @@ def run_replay(
     mcu.setup(t0)
     for d in drives.values():
         d.setup(t0)
-    traces = run_servo_ticks(mcu, drives, ref, t0, tv, n_ticks, ("table_position", "position", "motor_force"))
+    dist = ({a: np.asarray(f(tick_t[:-1] + 0.5 * tv), dtype=float) for a, f in disturbance.items() if a in drives}
+            if disturbance else None)
+    traces = run_servo_ticks(mcu, drives, ref, t0, tv, n_ticks, ("table_position", "position", "motor_force"), dist)
     table, motor, force = traces["table_position"], traces["position"], traces["motor_force"]
     cur = traces["current_cmd"]
     j = np.clip(np.searchsorted(tick_t, t_out, side="right"), 1, n_ticks)

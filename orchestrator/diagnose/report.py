@@ -19,7 +19,9 @@ def report_markdown(d: "Diagnosis") -> str:
     lines = [f"# Diagnosis of `{d.case_name}`", ""]
     al = j["alignment"]
     lines += ["## Alignment (recording artefacts, not physics)", "",
-              f"- logger time offset: {al['time_offset_s']} s", "",
+              f"- logger time offset: {al['time_offset_s']} s",
+              *([f"- spindle angle of tooth 0 at the first force sample: {al['spindle_angle_deg']} deg"]
+                if "spindle_angle_deg" in al else []), "",
               "| channel | scale | offset | noise floor |", "| --- | --- | --- | --- |"]
     for ch, v in al["channels"].items():
         key = ch.replace("_mm", "_fe_um") if ch.endswith("_mm") and not ch.endswith("_ref_mm") else ch
@@ -30,7 +32,8 @@ def report_markdown(d: "Diagnosis") -> str:
     if not j["effects"]:
         lines += ["None: nothing but noise separates the recording from the twin.", ""]
     for e in j["effects"]:
-        lines += [f"### {e['effect']} (axis {e['axis']}), confidence {e['confidence']}", "",
+        where = f"axis {e['axis']}" if "axis" in e else "cutting process"
+        lines += [f"### {e['effect']} ({where}), confidence {e['confidence']}", "",
                   "| parameter | value | 90 % interval |", "| --- | --- | --- |"]
         for k, v in e["parameters"].items():
             ci = e["ci90"].get(k, [v, v])
@@ -110,7 +113,7 @@ def residual_map_png(result: "CaseResult", axis: str, path: Path, effects: list[
     ax[1, 1].plot(t[rows], fe_r[rows], lw=0.6, label="before")
     ax[1, 1].plot(t[rows], after[rows], lw=0.6, label="after")
     for e in effects:
-        if e["axis"] != axis:
+        if e.get("axis") != axis:
             continue
         for w0, w1 in e["where"]["time_s"]:
             ax[1, 1].axvspan(w0, w1, alpha=0.12, color="tab:red")
@@ -154,6 +157,85 @@ def traces_png(result: "CaseResult", axis: str, path: Path) -> Path:
     return atomic_write_bytes(path, data)
 
 
+def cutting_map_png(d: "Diagnosis", path: Path) -> Path:
+    """Cutting residual maps: why each cutting effect was chosen.
+
+    Panels: the force residual against the spindle angle of tooth 0 (mean per
+    5 degree bin, before and after: runout repeats once per revolution, a
+    helix or edge force once per tooth), the force spectra of the longest cut
+    (measured, twin before and after: chatter is a peak off the spindle
+    harmonics), the residual in time with the cutting effects' windows shaded,
+    and the spindle-speed residual against the cutting torque (droop).
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from .cutting_locate import _spectrum
+    from .cutting_merge import spindle_angle_of
+
+    cres = d.cutting
+    data, cols, sim = cres.data, cres.cols, cres.sim
+    rows = cols.rows
+    angle = np.degrees(spindle_angle_of(cres))[rows]
+    inside = data.cuts.mask(data.t.size)[rows]
+    fig, ax = plt.subplots(2, 2, figsize=(12, 8))
+    bins = np.arange(0.0, 365.0, 5.0)
+    centre = 0.5 * (bins[1:] + bins[:-1])
+    k = np.clip(np.digitize(angle, bins) - 1, 0, centre.size - 1)
+    for j, (label, ls) in enumerate((("before", "-"), ("after", "--"))):
+        for c, name, color in ((0, "fx", "tab:blue"), (1, "fy", "tab:orange")):
+            model = sim.fx[rows, j] if c == 0 else sim.fy[rows, j]
+            r = data.measured[rows, c] - model
+            mean = np.array([r[(k == i) & inside].mean() if np.any((k == i) & inside) else np.nan
+                             for i in range(centre.size)])
+            ax[0, 0].plot(centre, mean, ls=ls, color=color, label=f"{name} {label}")
+    ax[0, 0].axhline(0.0, color="k", lw=0.5)
+    ax[0, 0].set(xlabel="spindle angle of tooth 0 [deg]", ylabel="mean force residual [N]",
+                 title="force residual vs spindle angle (cuts)")
+    ax[0, 0].legend(fontsize=7, ncol=2)
+    i0, i1 = max(data.cuts.bounds, key=lambda b: b[1] - b[0])
+    tt = data.t[i0:i1]
+    for y, label, lw in ((data.measured[i0:i1, 0], "measured", 0.9), (sim.fx[i0:i1, 0], "twin before", 0.7),
+                         (sim.fx[i0:i1, 1], "twin after", 0.7)):
+        f, p, _ = _spectrum(tt, y)
+        ax[0, 1].semilogy(f, np.maximum(p, 1e-12), lw=lw, label=label)
+    for e in d.effects:
+        if e["effect"] == "chatter":
+            ax[0, 1].axvline(e["parameters"]["frequency_Hz"], color="tab:red", ls=":", label="chatter")
+    ax[0, 1].set(xlabel="frequency [Hz]", ylabel="fx power", title="force spectrum, longest cut")
+    ax[0, 1].legend(fontsize=7)
+    t = data.t[rows]
+    ax[1, 0].plot(t, data.measured[rows, 1] - sim.fy[rows, 0], lw=0.4, label="fy before")
+    ax[1, 0].plot(t, data.measured[rows, 1] - sim.fy[rows, 1], lw=0.4, label="fy after")
+    for e in d.effects:
+        if "axis" in e:
+            continue
+        for w0, w1 in e["where"]["time_s"]:
+            ax[1, 0].axvspan(w0, w1, alpha=0.1, color="tab:red")
+    ax[1, 0].set(xlabel="t [s] (logger clock)", ylabel="force residual [N]",
+                 title="residual in time (cutting effects shaded)")
+    ax[1, 0].legend(fontsize=7)
+    if cres.droop_rows is not None:
+        _, tq, res = cres.droop_rows
+        ax[1, 1].scatter(tq, res, s=2)
+        k_d = cres.model.get("spindle_droop", {}).get("rpm_per_Nm")
+        if k_d:
+            xs = np.linspace(0.0, float(np.max(tq)), 10)
+            ax[1, 1].plot(xs, -k_d * xs, color="tab:red", label=f"-{k_d:.1f} rpm/N.m")
+            ax[1, 1].legend(fontsize=7)
+        ax[1, 1].set(xlabel="cutting torque [N.m]", ylabel="spindle_rpm - command [rpm]",
+                     title="spindle speed vs torque (droop)")
+    else:
+        ax[1, 1].text(0.5, 0.5, "no spindle_rpm", ha="center")
+    fig.suptitle(f"{d.case_name}: cutting residual maps")
+    fig.tight_layout()
+    data_png = _png(fig)
+    plt.close(fig)
+    return atomic_write_bytes(path, data_png)
+
+
 def write_outputs(d: "Diagnosis", out: Path, plots: bool = True) -> dict[str, Path]:
     """Write every output file of a diagnosis into ``out`` (atomically)."""
     files = {
@@ -163,6 +245,8 @@ def write_outputs(d: "Diagnosis", out: Path, plots: bool = True) -> dict[str, Pa
     }
     if d.holdout:
         files["holdout"] = atomic_write_json(out / "holdout.json", d.holdout)
+    if plots and d.cutting is not None:
+        files["cutting_map"] = cutting_map_png(d, out / "cutting_map.png")
     if plots:
         for k, result in enumerate(d.results):
             tag = "" if k == 0 else "_holdout"

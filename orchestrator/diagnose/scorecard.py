@@ -8,7 +8,8 @@ hidden one), median relative parameter error and the share of the residual
 power above the noise floor that the diagnosed model removes
 (``(rms_before^2 - rms_after^2) / (rms_before^2 - noise^2)``, channels with
 ``rms_before > 1.2 noise``), into ``OUT_DIR/scorecard.json`` and
-``OUT_DIR/scorecard.md``.
+``OUT_DIR/scorecard.md``. With ``--cutting``: the cutting-process scorecard
+(:mod:`.scorecard_cutting`).
 """
 from __future__ import annotations
 
@@ -163,10 +164,17 @@ def main() -> None:  # pragma: no cover - a study, run by hand
     parser.add_argument("out")
     parser.add_argument("--seeds", type=int, default=3)
     parser.add_argument("--clean-seeds", type=int, default=10)
+    parser.add_argument("--cutting", action="store_true",
+                        help="the cutting-process scorecard (scorecard_cutting.json/.md) instead of the drives'")
     args = parser.parse_args()
     from ..cli import emit  # the command line's one output point
 
-    rows = score(Path(args.out), args.seeds, args.clean_seeds)
+    if args.cutting:
+        from .scorecard_cutting import score_cutting
+
+        rows = score_cutting(Path(args.out), args.seeds, args.clean_seeds)
+    else:
+        rows = score(Path(args.out), args.seeds, args.clean_seeds)
     emit(json.dumps(rows, indent=2))
 
 

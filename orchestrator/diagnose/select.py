@@ -32,7 +32,9 @@ MIN_SHARE = 0.05
 
 #: Coefficients that must be positive to be physical.
 POSITIVE = {("backlash", "width_um"), ("screw_compliance", "compliance_um_per_N"),
-            ("reversal_friction", "peak_N"), ("servo_delay", "delay_ms")}
+            ("reversal_friction", "peak_N"), ("servo_delay", "delay_ms"),
+            ("helix_angle", "scale"), ("edge_force", "kte_N_per_mm"), ("tool_deflection", "compliance_um_per_N"),
+            ("tool_wear", "rate_percent_per_min"), ("spindle_droop", "rpm_per_Nm")}
 
 
 @dataclass

@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Mapping
+from typing import Callable, Mapping
 
 import numpy as np
 
@@ -49,8 +49,12 @@ _P = ("kp", "kv", "ki", "kvff", "imax", "kf", "mass",
 
 
 @njit
-def _axis_kernel(ref: np.ndarray, p: np.ndarray, tv: float, ratio: int, out: np.ndarray) -> None:
-    """Simulate one axis at the velocity-loop ticks; ``out[k] = (x_motor, x_table, i_cmd, v)`` after tick k."""
+def _axis_kernel(ref: np.ndarray, p: np.ndarray, tv: float, ratio: int, out: np.ndarray, dist: np.ndarray) -> None:
+    """Simulate one axis at the velocity-loop ticks; ``out[k] = (x_motor, x_table, i_cmd, v)`` after tick k.
+
+    ``dist[k]`` is an external force resisting positive motion during tick k (the cutting force on the
+    workpiece), N.
+    """
     n = ref.shape[0]
     kp, kv, ki, kvff, imax, kf, mass = p[0], p[1], p[2], p[3], p[4], p[5], p[6]
     fc_p, fs_p, vs_p, mu_p, fc_n, fs_n, vs_n, mu_n = p[7], p[8], p[9], p[10], p[11], p[12], p[13], p[14]
@@ -101,7 +105,7 @@ def _axis_kernel(ref: np.ndarray, p: np.ndarray, tv: float, ratio: int, out: np.
             extra = 0.0
             if rdecay > 0.0:
                 extra = rpeak * math.exp(-travel / rdecay)
-            load = grav + spring * x
+            load = grav + spring * x + dist[k]
             if rper > 0.0:
                 load -= ramp * math.sin(2.0 * math.pi * x / rper)
             f = u - load
@@ -241,7 +245,8 @@ class TruthRun:
 
 
 def simulate_truth(machine: Machine, nc: Recording, effects: Mapping[str, Mapping[str, Mapping[str, float]]],
-                   axes: tuple[str, ...] = ("x", "y", "z"), ref_filter_s: float = 0.0) -> TruthRun:
+                   axes: tuple[str, ...] = ("x", "y", "z"), ref_filter_s: float = 0.0,
+                   disturbance: Mapping[str, Callable[[np.ndarray], np.ndarray]] | None = None) -> TruthRun:
     """Run the independent truth servo + drive on the commanded positions of an NC run.
 
     Parameters
@@ -257,6 +262,9 @@ def simulate_truth(machine: Machine, nc: Recording, effects: Mapping[str, Mappin
     ref_filter_s : float
         Extra moving-average filter of this length on the commands: the machine's
         controller interpolates differently from the twin's NC kernel (0 = same).
+    disturbance : mapping axis -> callable, optional
+        ``f(tick_end_times)`` -> external force on the axis during each tick [N] (the cutting
+        force on the workpiece, resisting positive motion).
     """
     servo = machine.si("servo")
     tv = float(servo["velocity_loop_period"])
@@ -275,7 +283,9 @@ def simulate_truth(machine: Machine, nc: Recording, effects: Mapping[str, Mappin
         r = np.interp(tick, t_nc, samples)
         p = axis_parameters(machine, a, effects.get(a, {}), x0=float(r[0]))
         out = np.zeros((n, 4))
-        _axis_kernel(r, p, tv, ratio, out)
+        dist = (np.asarray(disturbance[a](tick + tv), dtype=float) if disturbance and a in disturbance
+                else np.zeros(n))
+        _axis_kernel(r, p, tv, ratio, out, dist)
         refs[a], motor[a], table[a], current[a] = r, out[:, 0], out[:, 1], out[:, 2]
     idx = np.clip(np.searchsorted(t_nc, tick + tv, side="right") - 1, 0, t_nc.size - 1)
     return TruthRun(tick + tv, tick, refs, motor, table, current, np.asarray(nc["line"], dtype=float)[idx])

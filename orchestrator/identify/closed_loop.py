@@ -151,6 +151,7 @@ def run_servo_ticks(
     tv: float,
     n_ticks: int,
     outputs: tuple[str, ...] = ("position",),
+    disturbance: dict[str, np.ndarray] | None = None,
 ) -> dict[str, dict[str, np.ndarray]]:
     """Step a set-up MCU and its drives tick by tick against given reference positions.
 
@@ -165,6 +166,8 @@ def run_servo_ticks(
         Ticks to run.
     outputs : tuple of str
         Drive outputs to record besides the MCU current command.
+    disturbance : dict axis -> ndarray, shape (n_ticks,), optional
+        Disturbance force of the axis during each tick, N (e.g. a recorded cutting force).
 
     Returns
     -------
@@ -194,6 +197,8 @@ def run_servo_ticks(
         mcu.do_step(t, tv)
         for a in axes:
             drives[a].values["current_cmd"][...] = mv[f"{a}_current_cmd"]
+            if disturbance is not None and a in disturbance:
+                drives[a].values["disturbance_force"][...] = disturbance[a][k]
             drives[a].do_step(t, tv)
         record(k + 1)
     return traces
