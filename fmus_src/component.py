@@ -95,6 +95,16 @@ class Component:
     A component may substep internally: ``do_step(t, h)`` with ``h`` larger
     than its own loop period runs several internal periods.
 
+    **Per-member failures.** When some batch members cannot go on (an
+    integrator error, a servo alarm) but the others can, the component calls
+    :meth:`fail_members` with a mask and a reason instead of raising. From
+    then on the real-valued outputs of those members are NaN after every step
+    (they never look good, and a component that freezes them stops spending
+    effort on them); a master collects the reasons with
+    :meth:`take_failures`. When every member has failed there is nothing left
+    to compute and :meth:`fail_members` raises the error, so a single run
+    (``B = 1``) still ends with a clear exception.
+
     Parameters
     ----------
     name : str
@@ -124,6 +134,7 @@ class Component:
         self.values: dict[str, np.ndarray | str] = {}
         self.state = "instantiated"
         self._load_start_values()
+        self._clear_failures()
 
     # ------------------------------------------------------------------ declarations
     def declared_variables(self) -> tuple[Variable, ...]:
@@ -205,13 +216,70 @@ class Component:
             raise ComponentError(f"{self.name}: do_step() called in state {self.state!r}")
         if not h > 0.0:
             raise ComponentError(f"{self.name}: step size must be positive, got {h!r}")
+        self._t_step = t
         self._do_step(t, h)
+        if self._failed_outputs:
+            self._blank_failed_outputs()
 
     def reset(self) -> None:
         """Return to the state right after instantiation (parameters kept)."""
         self._load_start_values()
+        self._clear_failures()
         self._reset()
         self.state = "instantiated"
+
+    # ------------------------------------------------------------------ per-member failures
+    def _clear_failures(self) -> None:
+        self.failed_members = np.zeros(self.batch, dtype=bool)
+        self._pending_failures: list[tuple[np.ndarray, str, float]] = []
+        self._failed_outputs: list[np.ndarray] = []
+        self._t_step = float("nan")
+
+    def fail_members(self, mask: np.ndarray, reason: str, error: type[CncTwinError] = ComponentError) -> None:
+        """Mark batch members as failed; the others carry on.
+
+        Parameters
+        ----------
+        mask : ndarray of bool, shape (B,)
+            Members that fail now (members that already failed are ignored).
+        reason : str
+            What went wrong, starting with the component name (e.g.
+            ``"mcu: SV0411 excess error in motion on X ..."``).
+        error : type of CncTwinError
+            Raised (with ``reason``) when no member is left.
+
+        Raises
+        ------
+        error
+            When every member has failed.
+        """
+        new = np.asarray(mask, dtype=bool) & ~self.failed_members
+        if not new.any():
+            return
+        self.failed_members |= new
+        self._pending_failures.append((np.flatnonzero(new), reason, self._t_step))
+        self._failed_outputs = [arr for v in self.declared_variables() if v.causality == "output"
+                                for arr in (self.values[v.name],) if getattr(arr, "dtype", None) == np.float64]
+        if self.failed_members.all():
+            more = "" if self.batch == 1 else f" (all {self.batch} members have failed)"
+            raise error(f"{reason}{more}")
+
+    def take_failures(self) -> list[tuple[np.ndarray, str, float]]:
+        """Failures recorded since the last call, and clear them.
+
+        Returns
+        -------
+        list of (members, reason, t)
+            ``members``: int array of batch indices; ``reason``: text;
+            ``t``: start of the step in which they failed, s (NaN outside a step).
+        """
+        out, self._pending_failures = self._pending_failures, []
+        return out
+
+    def _blank_failed_outputs(self) -> None:
+        """Real outputs of failed members are NaN (called after every step once a member failed)."""
+        for arr in self._failed_outputs:
+            arr[self.failed_members] = np.nan
 
     def terminate(self) -> None:
         """End the simulation; the instance can no longer be stepped."""

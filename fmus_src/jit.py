@@ -37,3 +37,17 @@ def njit(fn: F) -> F:
         return numba.njit(cache=True)(fn)
     except RuntimeError:  # "cannot cache function ...: no locator available" (read-only install)
         return numba.njit(fn)
+
+
+def njit_inline(fn: F) -> F:
+    """:func:`njit` with ``inline="always"``: the function is inlined into its compiled callers (numba IR level).
+
+    For small helpers shared by several hot loops, where a call across compiled
+    functions would cost more than the work (the floating-point operations are unchanged).
+    """
+    if numba is None:  # pragma: no cover
+        return fn
+    try:
+        return numba.njit(cache=True, inline="always")(fn)
+    except RuntimeError:  # no cache locator, as in njit
+        return numba.njit(inline="always")(fn)

@@ -22,7 +22,8 @@ def _cmd_identify(args: argparse.Namespace) -> int:
         if args.kind != "servo":
             raise SystemExit("cnctwin: error: --machine applies to servo only (friction and cutting use the case's)")
         options["machine"] = args.machine
-    fit = identify(args.kind, args.cases, out=args.out, method=args.method, seed=args.seed, **options)
+    fit = identify(args.kind, args.cases, out=args.out, method=args.method, seed=args.seed, resume=args.resume,
+                   **options)
     report = fit.report()
     report.pop("segments", None)
     emit(json.dumps(report, indent=2))
@@ -53,12 +54,14 @@ def add_parsers(subparsers: argparse._SubParsersAction) -> None:
                               help="fit friction, servo scale factors or cutting coefficients to recordings")
     p.add_argument("kind", choices=("friction", "servo", "cutting"))
     p.add_argument("cases", nargs="+", metavar="CASE_DIR", help="case folders with case.toml and recording.csv")
-    p.add_argument("--out", required=True, help="result folder (machine.toml, report.json, plots)")
+    p.add_argument("--out", required=True, help="result folder (machine.toml, report.json, plots, checkpoints/)")
     p.add_argument("--method", choices=("default", "paper-ga"), default="default",
                    help="optimiser: fast least squares (default) or the paper's genetic algorithm")
     p.add_argument("--seed", type=int, default=0, help="random seed of the genetic algorithm")
     p.add_argument("--axes", nargs="+", choices=("x", "y", "z"), help="axes to identify (default: all that move)")
     p.add_argument("--machine", help="servo only: machine file with the identified friction (default: the case's)")
+    p.add_argument("--resume", action="store_true",
+                   help="continue the killed job from its checkpoints in --out (same cases, method, seed, options)")
     p.set_defaults(func=_cmd_identify)
 
     p = subparsers.add_parser("experiment", help="write an identification program and case folder")

@@ -33,6 +33,7 @@ _AXIS_KEYS = {
     "position_gain_per_s", "velocity_p_gain_A_per_m_per_s", "velocity_i_gain_A_per_m",
     "position_scale", "velocity_p_scale", "velocity_i_scale",
     "velocity_feedforward", "acceleration_feedforward",
+    "excess_error_in_motion_mm", "excess_error_at_stop_mm",
 }
 _FRICTION_KEYS = {"coulomb_N", "static_N", "stribeck_velocity_m_per_s", "viscous_Ns_per_m"}
 #: Effects the twin leaves out in the paper's baseline (all 0 = off); written by `cnctwin diagnose`.
@@ -41,6 +42,14 @@ _EFFECT_KEYS = {
     "ripple_amplitude_N", "ripple_period_mm", "screw_stiffness_N_per_um", "backlash_width_um",
     "pitch_slope_um_per_m", "pitch_amplitude_um", "pitch_period_mm", "thermal_drift_rate_um_per_min",
     "servo_delay_ms",
+}
+
+#: Cutting-process effects the twin leaves out in the paper's baseline (all 0 = off; see the
+#: "Cutting load" section of README.md for the component parameters they map to).
+_CUTTING_EFFECT_KEYS = {
+    "eccentricity_um", "phase_deg", "helix_deg", "kte_N_per_mm", "kre_N_per_mm", "tool_stiffness_N_per_um",
+    "wear_rate_percent_per_min", "spindle_droop_rpm_per_Nm", "chatter_frequency_Hz", "chatter_damping_ratio",
+    "chatter_stiffness_N_per_um",
 }
 
 #: Allowed keys per section. Section names are dotted paths; ``*`` matches any name.
@@ -59,6 +68,7 @@ SCHEMA: dict[str, set[str]] = {
     **{f"axis.{a}.friction.{d}": set(_FRICTION_KEYS) for a in AXES for d in ("positive", "negative")},
     **{f"axis.{a}.effects": set(_EFFECT_KEYS) for a in AXES},
     "material.*": {"kt_N_per_m2", "ke"},
+    "cutting.effects": set(_CUTTING_EFFECT_KEYS),
     "cost": {
         "tool_price_KRW", "tool_change_time_s", "labor_KRW_per_s", "depreciation_KRW_per_s",
         "taylor_n", "taylor_C",
@@ -66,7 +76,7 @@ SCHEMA: dict[str, set[str]] = {
 }
 
 #: Keys that may be left out of a machine file (the component default is used).
-OPTIONAL_SECTIONS: set[str] = {"machine", "material.*", *(f"axis.{a}.effects" for a in AXES)}
+OPTIONAL_SECTIONS: set[str] = {"machine", "material.*", *(f"axis.{a}.effects" for a in AXES), "cutting.effects"}
 
 
 class MachineFileError(CncTwinError):

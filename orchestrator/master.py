@@ -14,8 +14,12 @@ Before a component steps, its connected inputs are refreshed:
 * ``"jacobi"``: from the outputs as they were at the start of the tick.
 
 The run ends when the stop signal (e.g. ``"nck.done"``) is true for every
-batch member, or at the time limit. Numerical divergence (NaN or inf on a
-connection) and component failures end the run with ``success = False``, a
+batch member, or at the time limit. A batch member fails alone, with a reason
+in ``RunResult.failures``, when it diverges (NaN or inf on a connection, a
+value outside ``limits``) or when a component fails it (a servo alarm, an
+integrator error: :meth:`fmus_src.component.Component.fail_members`, collected
+after every communication step); the other members run on. When every member
+has failed, or a component raises, the run ends with ``success = False``, a
 message naming the component and time, and the recording so far kept.
 """
 from __future__ import annotations
@@ -82,6 +86,10 @@ class MasterSettings:
     limits : dict, optional
         ``{"component.variable": (low, high)}`` in the variable's unit: a value
         outside marks the batch member as diverged (e.g. a runaway axis).
+    compiled : bool
+        Run the step loop compiled (:mod:`orchestrator.compiled`) when every
+        component is covered by it (all-native twins); same results bit for
+        bit. False: always the Python loop.
     """
 
     step: float = 1e-3
@@ -92,6 +100,7 @@ class MasterSettings:
     decimation: int = 1
     check_every: int = 50
     limits: dict[str, tuple[float, float]] = field(default_factory=dict)
+    compiled: bool = True
 
     def __post_init__(self) -> None:
         if not (self.step > 0 and math.isfinite(self.step)):
@@ -173,10 +182,13 @@ class RunResult:
     stopped_at : ndarray, shape (B,)
         Time each member met the stop condition, s (NaN if it never did).
     failed : ndarray of bool, shape (B,)
-        Members that diverged (non-finite values or outside ``limits``); the
-        other members of a batch run on.
+        Members that diverged (non-finite values or outside ``limits``), that a
+        component failed (alarm, integrator error) or that did not reach the stop
+        signal by the time limit; the other members of a batch run on.
     failures : list of str or None
-        Why each member failed (None for members that did not).
+        Why each member failed (None for members that did not): ``"diverged at
+        t = ... s: ..."``, ``"failed at t = ... s: <component>: ..."`` or ``"did not
+        reach ... by the time limit ..."``.
     """
 
     recording: Recording
@@ -287,10 +299,34 @@ class Master:
                 self._failures[b] = f"diverged at t = {t:.6f} s: {reference} {what}"
                 log.warning("member %d %s", b, self._failures[b])
             self._failed |= bad
+        self._raise_if_all_failed()
+
+    def _raise_if_all_failed(self) -> None:
+        """Raise :class:`SimulationError` with the first reason when no member is left."""
         if self._failed.all():
             first = next(f for f in self._failures if f)
             members = "" if self.system.batch == 1 else f" (all {self.system.batch} members; first: member {self._failures.index(first)})"
             raise SimulationError(f"simulation {first}{members}")
+
+    def _collect_member_failures(self, raise_when_all: bool = True) -> None:
+        """Move the failures the components recorded (``take_failures``) into ``failed`` / ``failures``.
+
+        Raises
+        ------
+        SimulationError
+            When every member has failed (and ``raise_when_all``).
+        """
+        found = False
+        for component in self._reporting:
+            for members, reason, t_fail in component.take_failures():
+                for b in members:
+                    if not self._failed[b]:
+                        self._failures[b] = f"failed at t = {t_fail:.6f} s: {reason}"
+                        log.warning("member %d %s", b, self._failures[b])
+                        self._failed[b] = True
+                        found = True
+        if found and raise_when_all:
+            self._raise_if_all_failed()
 
     def _terminate_all(self) -> None:
         for name in self.order:
@@ -317,6 +353,12 @@ class Master:
             With ``success = False`` and the recording up to the failure when
             a component fails or the simulation diverges.
         """
+        if self.settings.compiled:  # compiled loop (issue 9); None when a component is not covered
+            from .compiled import run_compiled
+
+            result = run_compiled(self)
+            if result is not None:
+                return result
         s = self.settings
         system = self.system
         comps = system.components
@@ -359,6 +401,8 @@ class Master:
             self._terminate_all()
             raise
         self._resolve_wires()
+        # components with the per-member failure channel (native ones; an FMU raises instead)
+        self._reporting = [comps[name] for name in self.order if callable(getattr(comps[name], "take_failures", None))]
         recorder = _Recorder(
             [(ch, comps[comp].values, var, f, u) for ch, _, var, f, u, comp in probes], batch, max(capacity, 2)
         )
@@ -402,6 +446,10 @@ class Master:
                             comps[name].do_step(t_tick, h_i)
                 k += 1
                 t = s.t0 + k * h
+                for component in self._reporting:
+                    if component._pending_failures:  # noqa: SLF001 - cheap check every step
+                        self._collect_member_failures()
+                        break
                 if k % s.check_every == 0:
                     self._check_divergence(t)
                 if k % s.decimation == 0:
@@ -415,11 +463,17 @@ class Master:
             success = False
             message = str(exc) if isinstance(exc, SimulationError) else f"simulation failed at t = {t:.6f} s: {exc}"
             log.error("%s", message)
+            if not isinstance(exc, SimulationError):  # a component gave up on the (rest of the) batch
+                self._collect_member_failures(raise_when_all=False)
+                for b in np.flatnonzero(~self._failed):
+                    self._failures[b] = message
+                self._failed[:] = True
         finally:
             self._terminate_all()
         recording = recorder.recording(success, message, system.name)
         if success and self._failed.any():
-            message += f"; {int(self._failed.sum())} of {batch} members diverged"
+            diverged = all(f is None or f.startswith("diverged") for f in self._failures)
+            message += f"; {int(self._failed.sum())} of {batch} members {'diverged' if diverged else 'failed'}"
         return RunResult(recording, success, message, k, t, stopped_at, self._failed.copy(), list(self._failures))
 
 

@@ -6,7 +6,7 @@ components and wires them by variable name::
     nck.{a}_ref ──► mcu.{a}_ref          mcu.{a}_current_cmd ──► {a}_drive.current_cmd
     {a}_drive.position ──► mcu.{a}_position, cutting.{a}_position
     {a}_drive.velocity ──► mcu.{a}_velocity
-    nck.spindle_speed ──► cutting.spindle_speed
+    nck.spindle_speed ──► cutting.spindle_speed   (spindle_rpm is recorded from cutting.spindle_speed_actual)
     cutting.fx_mean / fy_mean ──► x_drive / y_drive.disturbance_force   (Fd = +F on the workpiece)
 
 The servo loop (MCU and drives) runs at the velocity-loop period inside the
@@ -58,6 +58,10 @@ class TwinOptions:
         S (the optimiser); members must stay within 0.5 mm of that path.
     engagement : EngagementTable, optional
         A precomputed table for ``cutting_mode="path"`` (reuse it across calls).
+    drive_integrator : {"exponential", "rk4"}
+        ``DriveAxis.integrator`` of the three drives: one exponential substep per
+        velocity-loop tick with RK4 near stick (default; within 1e-10 m of RK4 on the
+        bench part, see :mod:`fmus_src.servo.exponential_numba`), or the RK4 reference.
     """
 
     step: float = 1e-3
@@ -65,6 +69,7 @@ class TwinOptions:
     cutting: bool = True
     cutting_mode: Literal["zmap", "path"] = "zmap"
     engagement: EngagementTable | None = field(default=None, compare=False, repr=False)
+    drive_integrator: Literal["exponential", "rk4"] = "exponential"  # = DEFAULT_DRIVE_INTEGRATOR
 
 
 def _declared(component_cls: type, mapping: Mapping[str, object]) -> dict[str, object]:
@@ -98,23 +103,45 @@ def _effects(machine: Machine, axis: str) -> dict[str, float | str]:
     return machine.si(section) if machine.has_section(section) else {}
 
 
+#: ``DriveAxis.integrator`` of the twin's drives (and of the servo replays, which are the twin's loop).
+DEFAULT_DRIVE_INTEGRATOR = "exponential"
+
+
 def drive_parameters(machine: Machine, axis: str) -> dict[str, object]:
-    """Drive-axis parameters (SI) of one axis from a machine file."""
+    """Drive-axis parameters (SI) of one axis from a machine file (integrator: :data:`DEFAULT_DRIVE_INTEGRATOR`)."""
     params: dict[str, object] = dict(machine.si(f"axis.{axis}"))
     for direction in ("positive", "negative"):
         params.update({f"{k}_{direction}": v for k, v in machine.si(f"axis.{axis}.friction.{direction}").items()})
     params.update(_effects(machine, axis))
+    params["integrator"] = DEFAULT_DRIVE_INTEGRATOR
     return _declared(DriveAxis, params)
 
 
+#: ``[cutting.effects]`` key (unit suffix stripped by ``Machine.si``) -> CuttingLoad parameter.
+CUTTING_EFFECT_PARAMETERS: dict[str, str] = {
+    "eccentricity": "runout_eccentricity", "phase": "runout_phase", "helix": "helix_angle",
+    "kte": "edge_force_tangential", "kre": "edge_force_radial", "tool_stiffness": "tool_stiffness",
+    "wear_rate": "wear_rate", "spindle_droop": "spindle_droop", "chatter_frequency": "chatter_frequency",
+    "chatter_damping_ratio": "chatter_damping", "chatter_stiffness": "chatter_stiffness",
+}
+
+
+def cutting_effect_parameters(machine: Machine) -> dict[str, float]:
+    """The optional ``[cutting.effects]`` section as CuttingLoad parameters (SI; empty for the paper's baseline)."""
+    if not machine.has_section("cutting.effects"):
+        return {}
+    return {CUTTING_EFFECT_PARAMETERS[k]: float(v) for k, v in machine.si("cutting.effects").items()}
+
+
 def cutting_parameters(case: Case) -> dict[str, object]:
-    """Cutting-load parameters (SI) from a case (tool, stock, material)."""
+    """Cutting-load parameters (SI) from a case (tool, stock, material, ``[cutting.effects]``)."""
     params: dict[str, object] = {
         "tool_diameter": case.tool.diameter_mm * 1e-3,
         "flutes": case.tool.flutes,
     }
     if case.material:
         params.update(case.machine.si(f"material.{case.material}"))
+    params.update(cutting_effect_parameters(case.machine))
     if case.stock is not None:
         for i, a in enumerate(AXES):
             params[f"stock_{a}_min"] = case.stock.min_mm[i] * 1e-3
@@ -173,7 +200,8 @@ def build_twin(
         nck.set_program_text(program_text, str(case.program))
     mcu = MCU("mcu", batch=batch, **mcu_parameters(machine))
     drives = {
-        a: DriveAxis(f"{a}_drive", batch=batch, initial_position=start[i], **drive_parameters(machine, a))
+        a: DriveAxis(f"{a}_drive", batch=batch, initial_position=start[i],
+                     **{**drive_parameters(machine, a), "integrator": options.drive_integrator})
         for i, a in enumerate(AXES)
     }
     system = System("cnctwin")
@@ -191,7 +219,7 @@ def build_twin(
     if options.cutting and case.stock is not None:
         if options.cutting_mode == "path":
             cutting = PathCuttingLoad("cutting", batch=batch, **cutting_parameters(case))
-            cutting.attach_table(options.engagement or engagement_table(case, options))
+            cutting.attach_table(options.engagement or engagement_table(case, options, program_text))
         elif options.cutting_mode == "zmap":
             cutting = CuttingLoad("cutting", batch=batch, **cutting_parameters(case))
         else:
@@ -230,7 +258,7 @@ TWIN_CHANNELS: tuple[tuple[str, str, str], ...] = (
     *((f"{a}_mm", f"{a}_drive.table_position", "mm") for a in AXES),   # = motor-side position without effects
     *((f"{a}_tcmd_A", f"mcu.{a}_current_cmd", "A") for a in AXES),
     ("spindle_ref_rpm", "nck.spindle_ref", "rpm"),
-    ("spindle_rpm", "nck.spindle_speed", "rpm"),
+    ("spindle_rpm", "cutting.spindle_speed_actual", "rpm"),   # nck.spindle_speed without cutting (_FALLBACK)
     ("fx_N", "cutting.fx", "N"),
     ("fy_N", "cutting.fy", "N"),
     ("fc_N", "cutting.fc", "N"),
@@ -251,6 +279,22 @@ _CONSUMER_OF: dict[str, str] = {
 }
 
 
+#: Source of a channel when its usual source is absent (no cutting component, or a cutting FMU
+#: without the output: the spindle runs at the NC kernel's speed).
+_FALLBACK: dict[str, str] = {"cutting.spindle_speed_actual": "nck.spindle_speed"}
+
+
+def _provides(system: System, reference: str) -> bool:
+    comp, var = reference.split(".")
+    if comp not in system.components:
+        return False
+    try:
+        system.components[comp].variable(var)
+    except CncTwinError:
+        return False
+    return True
+
+
 def twin_probes(system: System) -> list[Probe]:
     """The twin's recording channels that ``system`` can provide.
 
@@ -261,6 +305,8 @@ def twin_probes(system: System) -> list[Probe]:
     feeds = {c.target: c.source for c in system.connections}
     probes = []
     for channel, reference, unit in TWIN_CHANNELS:
+        if reference in _FALLBACK and not _provides(system, reference):
+            reference = _FALLBACK[reference]
         comp, var = reference.split(".")
         if comp not in system.components:
             continue

@@ -19,6 +19,7 @@ def result(tmp_path_factory):
     settings = BenchSettings.quick()
     settings.twin_seconds = 0.3
     settings.batch_seconds = 0.05
+    settings.compare_seconds = 0.05
     settings.length_seconds = (0.05, 0.1)
     settings.population_sizes = (1, 10)
     settings.population_seconds = 0.05
@@ -33,13 +34,21 @@ def test_keys(result):
     assert {"machine", "settings", "native_twin", "fused", "c_fmu", "native_ring", "pythonfmu", "scaling",
             "master_us_per_step", "ratios", "targets", "bench_wall_s"} <= set(result)
     assert result["machine"]["nproc"] >= 1 and result["machine"]["cpu"]
-    assert set(result["native_twin"]) == {"single", "single_air", "batch_10", "batch_100"}
+    assert set(result["native_twin"]) == {"single", "single_air", "single_rk4", "single_python_master",
+                                          "single_zmap", "batch_10", "batch_100"}
+    twin = result["native_twin"]
+    assert twin["single"]["compiled_loop"] and twin["batch_100"]["compiled_loop"]
+    assert not twin["single_python_master"]["compiled_loop"] and not twin["single_zmap"]["compiled_loop"]
+    assert twin["single_rk4"]["integrator"] == "rk4" and twin["single_zmap"]["cutting_mode"] == "zmap"
     assert set(result["fused"]) == {"single", "batch_10", "batch_100"}
     for path in ("master", "fast_loop", "plain_fmpy"):
         assert path in result["c_fmu"] and path in result["pythonfmu"]
     assert {"native_twin_single", "fused_single", "native_ring_master", "c_fmu_master", "c_fmu_fast_loop",
             "c_fmu_plain_fmpy", "pythonfmu_master", "pythonfmu_fast_loop", "pythonfmu_plain_fmpy",
-            "native_twin_batch_100", "fused_batch_100"} <= set(result["master_us_per_step"])
+            "native_twin_batch_100", "fused_batch_100", "native_twin_single_python_master",
+            "native_twin_single_rk4", "native_twin_single_zmap"} <= set(result["master_us_per_step"])
+    assert {"python_master_over_compiled_loop", "rk4_over_exponential_drives", "zmap_over_path_cutting"} <= set(
+        result["ratios"])
     assert {"native_single_rt_factor", "native_population_100_rt_factor", "c_fmu_fast_loop_us_per_step"} <= set(
         result["targets"])
 

@@ -13,6 +13,7 @@ import pytest
 from fmus_src.servo.drive import DriveAxis
 from orchestrator import Master, MasterSettings, System
 from orchestrator.fmu import FMUComponent, available_components, build_fmus
+from orchestrator.twin import DEFAULT_DRIVE_INTEGRATOR
 
 RTOL = 1e-9
 
@@ -31,7 +32,7 @@ def _assert_same(a: np.ndarray, b: np.ndarray, what: str) -> None:
 def test_drive_alone_native_vs_fmu_is_identical(fmus):
     h, n = 250e-6, 1200
     fmu = FMUComponent(fmus["DriveAxis"], name="x_drive", parameters={"initial_position": -0.02})
-    nat = DriveAxis("x_drive", initial_position=-0.02)
+    nat = DriveAxis("x_drive", initial_position=-0.02, integrator=DEFAULT_DRIVE_INTEGRATOR)  # as the FMU's start
     fmu.setup(0.0)
     nat.setup(0.0)
     outputs = nat.names("output")
@@ -52,7 +53,7 @@ def test_drive_alone_native_vs_fmu_is_identical(fmus):
 
 def test_population_of_fmu_instances_equals_one_batched_native_component(fmus):
     masses = np.array([400.0, 600.0, 900.0])
-    nat = DriveAxis("x_drive", batch=3, mass=masses)
+    nat = DriveAxis("x_drive", batch=3, mass=masses, integrator=DEFAULT_DRIVE_INTEGRATOR)
     members = [FMUComponent(fmus["DriveAxis"], name=f"x_drive_{i}", parameters={"mass": m})
                for i, m in enumerate(masses)]
     nat.setup(0.0)

@@ -268,3 +268,32 @@ def test_binary_case_and_machine_files_are_project_errors(tmp_path, which):
         bad.write_bytes(b"[nck]\n\xff\xfe")
         with pytest.raises(CncTwinError, match="machine.toml"):
             load_machine(bad)
+
+
+# ------------------------------------------------------------------------------------------ users of validation
+def mismatched_case(good: Path) -> tuple[Path, int]:
+    """A case folder (paper program) whose recording names a line the program does not have."""
+    folder = good.parent
+    (folder / "program.nc").write_text(PROGRAM_TEXT, encoding="utf-8")
+    (folder / "case.toml").write_text('program = "program.nc"\nrecording = "recording.csv"\n\n'
+                                      '[tool]\ndiameter_mm = 6.0\nflutes = 2\n\n[machine]\nparameters = "default"\n')
+    n = len(PROGRAM_TEXT.splitlines())
+    rewrite(good, "line", 3, str(n + 1))
+    return folder, n
+
+
+@pytest.mark.parametrize("kind", ["friction", "servo", "cutting"])
+def test_identification_rejects_the_recording_of_another_program(good, kind):
+    from orchestrator.identify import IdentificationError, identify
+
+    folder, n = mismatched_case(good)
+    with pytest.raises(IdentificationError, match=rf"^{good}: column 'line', row 4 .*line {n + 1} does not exist"):
+        identify(kind, [folder])
+
+
+def test_diagnosis_rejects_the_recording_of_another_program(good):
+    from orchestrator.diagnose import DiagnosisError, diagnose
+
+    folder, n = mismatched_case(good)
+    with pytest.raises(DiagnosisError, match=rf"^{good}: column 'line', row 4 .*line {n + 1} does not exist"):
+        diagnose(folder)

@@ -16,6 +16,13 @@ substeps, crossings and friction of every member in one call, outputs written
 in place); ``DriveAxis.use_compiled = False`` (class or instance attribute,
 read at every step) selects the numpy reference
 :func:`fmus_src.servo.stick_slip.advance`. Both update the same state arrays.
+
+Each member integrates with its own internal substep (its ``integration_step``
+capped by its own Stribeck time scale, :func:`stribeck_step_cap`), so a member
+gives bit for bit the result of its solo run whatever the rest of the batch.
+A member whose stick/slip step fails (see :mod:`.stick_slip`) is failed alone
+(:meth:`~fmus_src.component.Component.fail_members`) and frozen; a single run
+(``B = 1``) raises :class:`ServoError`.
 """
 from __future__ import annotations
 
@@ -29,8 +36,9 @@ from ..jit import NUMBA_AVAILABLE
 from .effects import TableState, axis_load, reversal_friction, table_position, update_travel
 from .errors import ServoError
 from .friction import StribeckParameters
-from .stick_slip import SlipState, advance, friction_force
-from .stick_slip_numba import OK, advance_kernel, pack_parameters, raise_reference_error
+from .stick_slip import OK, SlipState, advance, failure_reason, friction_force, substeps
+from .exponential_numba import select_kernel
+from .stick_slip_numba import pack_parameters
 
 #: Default internal step [s]. With the Table 1 parameters the fastest time
 #: scale of the table is the Stribeck growth rate (Fs - Fc) / (vs Ms) <= 530 1/s
@@ -44,7 +52,7 @@ DEFAULT_INTEGRATION_STEP = 125e-6
 #: growth rate is max(0, (Fs - Fc) / vs - mu_v) / Ms, the largest positive eigenvalue of the sliding
 #: dynamics. Inactive for Table 1 values (cap >= 480 us); it keeps a GA's extreme trial parameters
 #: (vs = 0.1 mm/s, Fs - Fc = 700 N, 600 kg: cap ~ 21 us) about as accurate as the paper's, at the
-#: price of more substeps for the whole batch.
+#: price of more substeps for that member only.
 STRIBECK_STEP_FACTOR = 0.25
 
 
@@ -52,8 +60,8 @@ def _p(name: str, unit: str, start: float, description: str) -> Variable:
     return Variable(name, "parameter", unit, start, description)
 
 
-def stribeck_step_cap(friction: StribeckParameters, mass: np.ndarray) -> float:
-    """Largest internal step [s] with (Stribeck growth rate) x step <= ``STRIBECK_STEP_FACTOR`` (whole batch).
+def stribeck_step_cap(friction: StribeckParameters, mass: np.ndarray) -> np.ndarray:
+    """Largest internal step [s] of each member with (Stribeck growth rate) x step <= ``STRIBECK_STEP_FACTOR``.
 
     Parameters
     ----------
@@ -61,15 +69,20 @@ def stribeck_step_cap(friction: StribeckParameters, mass: np.ndarray) -> float:
         Both branches, shape (B,).
     mass : ndarray, shape (B,)
         Moving mass [kg].
+
+    Returns
+    -------
+    ndarray, shape (B,)
+        The cap [s]; ``inf`` for a member without a growing Stribeck mode.
     """
-    rates = [
+    worst = np.maximum(
         np.maximum(0.0, (friction.static_pos - friction.coulomb_pos) / friction.stribeck_velocity_pos
                    - friction.viscous_pos) / mass,
         np.maximum(0.0, (friction.static_neg - friction.coulomb_neg) / friction.stribeck_velocity_neg
                    - friction.viscous_neg) / mass,
-    ]
-    worst = float(max(np.max(r) for r in rates))
-    return math.inf if worst == 0.0 else STRIBECK_STEP_FACTOR / worst
+    )
+    with np.errstate(divide="ignore"):
+        return np.where(worst == 0.0, math.inf, STRIBECK_STEP_FACTOR / worst)
 
 
 class DriveAxis(Component):
@@ -95,6 +108,10 @@ class DriveAxis(Component):
         _p("initial_position", "m", 0.0, "table position at t0 (at rest, in stick)"),
         _p("integration_step", "s", DEFAULT_INTEGRATION_STEP,
            "largest internal RK4 substep (further capped by the Stribeck growth rate)"),
+        # --- integrator hook (issue 9, fmus_src/servo/exponential_numba.py)
+        Variable("integrator", "parameter", "1", "rk4",
+                 "compiled drive integrator: rk4 (reference) | exponential (one exponential substep per tick, "
+                 "RK4 near stick); the numpy reference (use_compiled False) is always RK4", "String"),
         # effect terms (diagnosis); 0 = off = the paper's baseline, see fmus_src.servo.effects
         _p("gravity_force", "N", 0.0, "unbalanced weight Fg of a vertical axis (> 0 pulls towards negative positions)"),
         _p("gravity_spring", "N/m", 0.0, "counterbalance spring rate: load Fg + k_g x"),
@@ -207,7 +224,10 @@ class DriveAxis(Component):
         )
         self._mass = v["mass"].copy()
         self._kf = self._force_constant()
-        self._step = min(float(np.min(v["integration_step"])), stribeck_step_cap(self._friction, self._mass))
+        #: internal substep limit of each member [s], shape (B,)
+        self._step = np.ascontiguousarray(np.minimum(v["integration_step"], stribeck_step_cap(self._friction, self._mass)))
+        self._status = np.zeros(self.batch, dtype=np.int8)
+        self._kernel = select_kernel(str(v["integrator"]), self.name)  # integrator hook (issue 9)
         self._state = SlipState(
             position=v["initial_position"].astype(float).copy(),
             velocity=np.zeros(self.batch),
@@ -239,20 +259,31 @@ class DriveAxis(Component):
         friction, params = self._step_friction()
         if self.use_compiled:
             v, s = self.values, self._state
-            status = advance_kernel(v["current_cmd"], disturbance, params, s.position, s.velocity,
-                                    s.direction, float(h), self._step, v["motor_force"], v["position"],
-                                    v["velocity"], v["friction_force"])
-            if status != OK:
-                raise_reference_error(s, self._net_force(disturbance), self._mass, friction, h, self._step, status,
-                                      self.name)
+            status = self._kernel(v["current_cmd"], disturbance, params, s.position, s.velocity,
+                                  s.direction, float(h), self._step, v["motor_force"], v["position"],
+                                  v["velocity"], v["friction_force"], self._status)
         else:
             force = self._net_force(disturbance)
-            try:
-                ff = advance(self._state, force, self._mass, friction, h, self._step)
-            except ServoError as err:
-                raise ServoError(f"{self.name}: {err}") from err
+            ff = advance(self._state, force, self._mass, friction, h, self._step, status=self._status)
             self._publish(ff)
+            status = OK if not self._status.any() else int(self._status[np.flatnonzero(self._status)[0]])
+        if status != OK:
+            self._fail_stick_slip(h)
         self._update_table(old_position, (t + h) - self.t0)
+
+    def _fail_stick_slip(self, h: float) -> None:
+        """Fail the members whose stick/slip step failed (state unchanged), then freeze them (NaN state)."""
+        bad = self._status != OK
+        _, dt = substeps(h, self._step)
+        for b in np.flatnonzero(bad):
+            reason = f"{self.name}: {failure_reason(int(self._status[b]), float(dt[b]))}"
+            mask = np.zeros(self.batch, dtype=bool)
+            mask[b] = True
+            self.fail_members(mask, reason, ServoError)
+        s = self._state
+        s.position[bad] = np.nan
+        s.velocity[bad] = np.nan
+        s.direction[bad] = 0
 
     def _reset(self) -> None:
         self.__dict__.pop("_state", None)

@@ -14,6 +14,15 @@ axes and members in one call, outputs written in place); with
 it runs the numpy reference of :mod:`fmus_src.servo.control`. Both share the
 state block, so the switch may even be flipped between steps.
 
+Excess following-error alarm (FANUC SV0411 in motion / SV0410 at stop,
+parameters No. 1828 / No. 1829): ``{a}_excess_error_in_motion`` and
+``{a}_excess_error_at_stop`` (0 = off). After each step, a member whose
+following error ``|ref - position|`` on some axis exceeds the limit of its
+state (see :mod:`fmus_src.servo.control`) is failed with a reason naming the
+alarm, the axis, the error and the limit
+(:meth:`~fmus_src.component.Component.fail_members`); a single run raises
+:class:`ServoError`.
+
 Timing convention: all ticks inside one ``do_step`` use the inputs set before
 the call (values at ``t``). The outputs after the call are those of the last
 tick, i.e. the command a drive applies during the *next* communication
@@ -29,7 +38,8 @@ import numpy as np
 
 from ..component import Component, Variable
 from ..jit import NUMBA_AVAILABLE
-from .control import CascadeGains, CascadeState, position_loop, velocity_loop
+from .control import (CascadeGains, CascadeState, ExcessErrorLimits, excess_error_alarm, position_loop,
+                      settle_ticks, velocity_loop)
 from .control_numba import mcu_kernel
 from .effects import DelayLine
 from .errors import ServoError
@@ -55,7 +65,16 @@ _AXIS_PARAMETERS: tuple[tuple[str, str, dict[str, float], str], ...] = (
     ("screw_lead", "m", {"x": 0.012, "y": 0.012, "z": 0.012}, "ball-screw lead Lb (acceleration feed-forward)"),
     ("servo_delay", "s", {"x": 0.0, "y": 0.0, "z": 0.0},
      "extra pure delay of the current command inside the loop (diagnosis effect; 0 = off)"),
+    # off by default in the bare component (unit tests drive it with arbitrary errors); the machine file sets them
+    ("excess_error_in_motion", "m", {"x": 0.0, "y": 0.0, "z": 0.0},
+     "excess following-error limit while the reference moves (FANUC No. 1828, alarm SV0411; 0 = off)"),
+    ("excess_error_at_stop", "m", {"x": 0.0, "y": 0.0, "z": 0.0},
+     "excess following-error limit once the reference has stopped (FANUC No. 1829, alarm SV0410; 0 = off)"),
 )
+
+#: Alarm names and FANUC parameter numbers by "at stop" flag.
+_ALARMS = {False: ("SV0411 excess error in motion", "excess_error_in_motion", 1828),
+           True: ("SV0410 excess error at stop", "excess_error_at_stop", 1829)}
 
 
 def _declare() -> tuple[Variable, ...]:
@@ -92,7 +111,9 @@ class MCU(Component):
     Per axis ``a`` in x, y, z: parameters ``{a}_position_gain`` ... ``{a}_screw_lead``
     (see ``MCU.variables``), inputs ``{a}_ref``, ``{a}_position``, ``{a}_velocity``, outputs
     ``{a}_current_cmd``, ``{a}_velocity_cmd``; shared ``position_loop_period``,
-    ``velocity_loop_period``. Defaults are the values of ``default.toml``.
+    ``velocity_loop_period``. Defaults are the values of ``default.toml``, except the
+    excess-error limits ``{a}_excess_error_in_motion`` / ``{a}_excess_error_at_stop``: 0 (off)
+    unless set (the twin sets them from the machine file).
     """
 
     variables = _declare()
@@ -132,11 +153,21 @@ class MCU(Component):
         )
         self._gain_block = self._gains.block()
         self._state = CascadeState.initial(self._stack("ref"))
+        for name in ("excess_error_in_motion", "excess_error_at_stop"):
+            arr = self._stack(name)
+            if not np.all(np.isfinite(arr) & (arr >= 0.0)):
+                raise ServoError(f"{self.name}: {{x,y,z}}_{name} must be finite and >= 0 (0 = off), got {arr!r}")
+        self._limit_block = ExcessErrorLimits(
+            in_motion=self._stack("excess_error_in_motion"), at_stop=self._stack("excess_error_at_stop"),
+            settle_ticks=settle_ticks(self._gains.position, self._tp),
+        ).block()
+        self._limits = ExcessErrorLimits(*self._limit_block)  # views: the kernel and the reference share them
+        self._alarm = np.zeros(self.batch, dtype=np.int8)
         v = self.values
         self._kernel_io = (
             *(v[f"{a}_ref"] for a in AXES), *(v[f"{a}_position"] for a in AXES), *(v[f"{a}_velocity"] for a in AXES),
             v["in_position_width"], *(v[f"{a}_current_cmd"] for a in AXES), *(v[f"{a}_velocity_cmd"] for a in AXES),
-            v["in_position"],
+            v["in_position"], self._limit_block, self._alarm,
         )
         self._next_tick = 0
         self._last_h: float | None = None
@@ -198,7 +229,8 @@ class MCU(Component):
     def _step_ticks(self, t: float, h: float) -> None:
         k0, n = self._ticks(t, h)
         if self.use_compiled:
-            mcu_kernel(k0, n, self._ratio, self._tp, self._tv, self._gain_block, self._state.block, *self._kernel_io)
+            n_alarm = mcu_kernel(k0, n, self._ratio, self._tp, self._tv, self._gain_block, self._state.block,
+                                 *self._kernel_io)
         else:
             ref = self._stack("ref")
             pos = self._stack("position")
@@ -208,7 +240,27 @@ class MCU(Component):
                     position_loop(self._state, self._gains, ref, pos, self._tp)
                 velocity_loop(self._state, self._gains, vel, self._tv)
             self._publish()
+            self._alarm[...] = excess_error_alarm(self._state, self._limits, ref, pos)
+            n_alarm = int(np.count_nonzero(self._alarm))
         self._next_tick = k0 + n
+        if n_alarm:
+            self._raise_alarms()
+
+    def _raise_alarms(self) -> None:
+        """Fail the members with an excess-error alarm (code ``1 + 2 axis + at_stop``), naming axis, error, limit."""
+        for b in np.flatnonzero(self._alarm):
+            if self.failed_members[b]:
+                continue
+            code = int(self._alarm[b]) - 1
+            axis, at_stop = AXES[code // 2], bool(code % 2)
+            alarm, key, number = _ALARMS[at_stop]
+            error = abs(float(self.values[f"{axis}_ref"][b]) - float(self.values[f"{axis}_position"][b]))
+            limit = float(self.values[f"{axis}_{key}"][b])
+            mask = np.zeros(self.batch, dtype=bool)
+            mask[b] = True
+            self._limit_block[:2, :, b] = 0.0  # an alarmed member is not checked again
+            self.fail_members(mask, f"{self.name}: {alarm} on {axis.upper()}: following error {error * 1e3:.4g} mm "
+                                    f"exceeds {axis}_{key} = {limit * 1e3:g} mm (FANUC No. {number})", ServoError)
 
     def _reset(self) -> None:
         self.__dict__.pop("_state", None)

@@ -17,6 +17,8 @@ _MCU_AXIS_KEYS = (
     "velocity_i_scale", "velocity_feedforward", "acceleration_feedforward", "peak_current", "mass",
     "torque_constant", "screw_lead",
 )
+#: Optional per-axis MCU keys (the component default applies when a section lacks them).
+_MCU_OPTIONAL_AXIS_KEYS = ("excess_error_in_motion", "excess_error_at_stop")
 _FRICTION_KEYS = ("coulomb", "static", "stribeck_velocity", "viscous")
 
 
@@ -28,7 +30,8 @@ def mcu_parameters(
     Parameters
     ----------
     axes : mapping
-        Axis letter -> SI section of ``[axis.<a>]``.
+        Axis letter -> SI section of ``[axis.<a>]`` (the excess-error limits
+        ``excess_error_in_motion`` / ``excess_error_at_stop`` are taken when present).
     servo : mapping, optional
         SI section ``[servo]`` (``position_loop_period``, ``velocity_loop_period``).
 
@@ -41,6 +44,9 @@ def mcu_parameters(
     for a, section in axes.items():
         for key in _MCU_AXIS_KEYS:
             out[f"{a}_{key}"] = float(section[key])
+        for key in _MCU_OPTIONAL_AXIS_KEYS:
+            if key in section:
+                out[f"{a}_{key}"] = float(section[key])
     if servo is not None:
         for key in ("position_loop_period", "velocity_loop_period"):
             out[key] = float(servo[key])

@@ -45,6 +45,41 @@ CROSSING_TIME_RTOL = 1e-12
 #: Iteration cap of the crossing search (Illinois converges in ~10); exceeding it is an error.
 CROSSING_MAX_ITER = 200
 
+#: Per-member status codes of a step (also returned by the compiled kernel).
+OK, BACKWARD_BREAK_AWAY, CROSSING_NOT_CONVERGED = 0, 1, 2
+
+
+def substeps(h: float, max_step: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
+    """Number and length of the equal internal substeps of an interval ``h``, per member.
+
+    Parameters
+    ----------
+    h : float
+        Interval [s], > 0.
+    max_step : float or ndarray, shape (B,)
+        Largest substep of each member [s].
+
+    Returns
+    -------
+    n_sub : ndarray of int, shape (B,) (or scalar shape for a scalar ``max_step``)
+        ``max(1, ceil(h / max_step))`` (with a 1e-12 relative allowance, so ``h = k max_step`` gives ``k``).
+    dt : ndarray, same shape
+        ``h / n_sub`` [s].
+    """
+    n_sub = np.maximum(1, np.ceil(h / np.asarray(max_step, dtype=float) * (1.0 - 1e-12))).astype(np.int64)
+    return n_sub, h / n_sub
+
+
+def failure_reason(status: int, dt: float) -> str:
+    """Text of a failed member's step (status :data:`BACKWARD_BREAK_AWAY` or :data:`CROSSING_NOT_CONVERGED`)."""
+    if status == BACKWARD_BREAK_AWAY:
+        return (f"stick/slip integrator: a table breaking away from rest moved backwards within one substep "
+                f"of {dt!r} s; expected integration_step small against the Stribeck time scale")
+    if status == CROSSING_NOT_CONVERGED:
+        return (f"zero-velocity crossing search did not converge in {CROSSING_MAX_ITER} iterations "
+                f"(substep {dt!r} s); expected |v| <= {CROSSING_VELOCITY_TOL} m/s")
+    return f"stick/slip integrator: unknown status {status}"
+
 
 @dataclass
 class SlipState:
@@ -88,13 +123,14 @@ def _break_away(force: np.ndarray, static_pos: np.ndarray, static_neg: np.ndarra
 
 
 def _locate_crossing(
-    x0: np.ndarray, v0: np.ndarray, dt: float, v1: np.ndarray, force: np.ndarray,
+    x0: np.ndarray, v0: np.ndarray, dt: np.ndarray, v1: np.ndarray, force: np.ndarray,
     inv_mass: np.ndarray, branch: DirectedFriction, d: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Time ``tau`` in (0, dt] where the RK4 solution from ``(x0, v0)`` reaches ``v = 0``.
 
     Illinois (modified regula falsi) on ``phi(tau) = d * v_rk4(tau)``, with
-    ``phi(0) > 0 >= phi(dt)``; all arrays are the crossing subset, shape (n,).
+    ``phi(0) > 0 >= phi(dt)``; all arrays are the crossing subset, shape (n,),
+    ``dt`` included (each member's own substep).
 
     Returns
     -------
@@ -102,15 +138,12 @@ def _locate_crossing(
         Crossing time after the substep start [s].
     x_c : ndarray, shape (n,)
         Position at the crossing [m].
-
-    Raises
-    ------
-    ServoError
-        If the search does not converge within ``CROSSING_MAX_ITER`` iterations.
+    converged : ndarray of bool, shape (n,)
+        False for members whose search did not converge within ``CROSSING_MAX_ITER`` iterations.
     """
     lo = np.zeros_like(v0)
     f_lo = d * v0
-    hi = np.full_like(v0, dt)
+    hi = np.array(dt, dtype=float, copy=True)
     f_hi = d * v1
     tau = hi.copy()
     done = f_hi == 0.0
@@ -138,19 +171,13 @@ def _locate_crossing(
         f_hi = np.where(go_left, fc, f_hi)
         side = np.where(go_right, 1, np.where(go_left, -1, side)).astype(np.int8)
         done = new_done
-    else:
-        if not done.all():
-            raise ServoError(
-                f"zero-velocity crossing search did not converge in {CROSSING_MAX_ITER} iterations "
-                f"(substep {dt!r} s); expected |v| <= {CROSSING_VELOCITY_TOL} m/s"
-            )
     x_c, _ = _rk4(x0, v0, tau, force, inv_mass, branch, d)
-    return tau, x_c
+    return tau, x_c, done
 
 
 def advance(
     state: SlipState, force: np.ndarray, mass: np.ndarray, friction: StribeckParameters,
-    h: float, max_step: np.ndarray | float,
+    h: float, max_step: np.ndarray | float, status: np.ndarray | None = None,
 ) -> np.ndarray:
     """Advance ``state`` in place by ``h`` under the constant net force ``force``.
 
@@ -158,6 +185,8 @@ def advance(
     ----------
     state : SlipState
         Positions, velocities and stick/slip directions, shape (B,); updated in place.
+        A member whose position is NaN (a failed member, see ``status``) is frozen:
+        it is not integrated; its velocity and friction force are NaN.
     force : ndarray, shape (B,)
         Net applied force ``u - Fd`` [N], held over the interval.
     mass : ndarray, shape (B,)
@@ -167,10 +196,15 @@ def advance(
     h : float
         Interval length [s], > 0.
     max_step : float or ndarray, shape (B,)
-        Largest internal substep [s]; the interval is cut into
-        ``ceil(h / min(max_step))`` equal substeps. The substep is shared by the
-        whole batch (the smallest value wins), so give all members the same
-        value if batch members must reproduce single runs bit for bit.
+        Largest internal substep of each member [s]; member ``b`` cuts the
+        interval into ``ceil(h / max_step[b])`` equal substeps
+        (:func:`substeps`), so a member's result does not depend on the
+        other members of the batch.
+    status : ndarray of int8, shape (B,), optional
+        When given, a member whose step fails gets its status code
+        (:data:`BACKWARD_BREAK_AWAY`, :data:`CROSSING_NOT_CONVERGED`; :data:`OK`
+        otherwise), keeps its state unchanged, and the others carry on: no
+        exception. Without it, any failure raises :class:`ServoError`.
 
     Returns
     -------
@@ -181,19 +215,23 @@ def advance(
     Raises
     ------
     ServoError
-        If a member at rest that breaks away ends its first substep moving
-        backwards (the substep is too long for its friction parameters).
+        Without ``status``: if a member at rest that breaks away ends its first
+        substep moving backwards (the substep is too long for its friction
+        parameters), or if a zero-velocity crossing search does not converge.
     """
-    step = float(np.min(max_step))
-    n_sub = max(1, int(np.ceil(h / step * (1.0 - 1e-12))))
-    dt = h / n_sub
+    n_sub, dt = substeps(h, np.broadcast_to(np.asarray(max_step, dtype=float), np.shape(force)))
     inv_mass = 1.0 / mass
-    x, v, d = state.position, state.velocity, state.direction
-    for _ in range(n_sub):
-        at_rest = v == 0.0
+    x0, v0, d0 = state.position, state.velocity, state.direction
+    x, v, d = x0, v0, d0
+    frozen = np.isnan(x0)
+    failed = np.zeros(x0.shape, dtype=bool)
+    codes = np.zeros(x0.shape, dtype=np.int8)
+    for j in range(int(np.max(n_sub, initial=1))):
+        live = (j < n_sub) & ~frozen & ~failed
+        at_rest = live & (v == 0.0)
         if at_rest.any():
             d = np.where(at_rest, _break_away(force, friction.static_pos, friction.static_neg), d).astype(np.int8)
-        slip = d != 0
+        slip = live & (d != 0)
         if not slip.any():
             continue
         branch = friction.select(d)
@@ -202,38 +240,58 @@ def advance(
         crossed = slip & (d * v1 <= 0.0)
         bad = crossed & (dv0 <= 0.0)
         if bad.any():
-            raise ServoError(
-                f"stick/slip integrator: a table breaking away from rest moved backwards within one substep "
-                f"of {dt!r} s; expected integration_step small against the Stribeck time scale "
-                f"(members {np.nonzero(bad)[0].tolist()})"
-            )
+            if status is None:
+                first = int(np.flatnonzero(bad)[0])
+                raise ServoError(f"{failure_reason(BACKWARD_BREAK_AWAY, float(dt[first]))} "
+                                 f"(members {np.nonzero(bad)[0].tolist()})")
+            codes[bad] = BACKWARD_BREAK_AWAY
+            failed |= bad
+            slip &= ~bad
+            crossed &= ~bad
         x_new = np.where(slip, x1, x)
         v_new = np.where(slip, v1, v)
         if crossed.any():
             idx = np.nonzero(crossed)[0]
             sub = branch.take(idx)
             f_i, im_i, d_i = force[idx], inv_mass[idx], d[idx]
-            tau, x_c = _locate_crossing(x[idx], v[idx], dt, v1[idx], f_i, im_i, sub, d_i)
+            tau, x_c, converged = _locate_crossing(x[idx], v[idx], dt[idx], v1[idx], f_i, im_i, sub, d_i)
+            if not converged.all():
+                lost = idx[~converged]
+                if status is None:
+                    raise ServoError(failure_reason(CROSSING_NOT_CONVERGED, float(dt[lost[0]])))
+                codes[lost] = CROSSING_NOT_CONVERGED
+                failed[lost] = True
             d_new = _break_away(f_i, friction.static_pos[idx], friction.static_neg[idx])
-            rest = dt - tau
+            rest = dt[idx] - tau
             x_out = x_c.copy()
             v_out = np.zeros_like(x_c)
             rev = (d_new != 0) & (rest > 0.0)
             if rev.any():
-                j = np.nonzero(rev)[0]
-                gidx = idx[j]
-                br2 = friction.take(gidx).select(d_new[j])
-                d2 = d_new[j]
-                xr, vr = _rk4(x_c[j], np.zeros(j.size), rest[j], force[gidx], inv_mass[gidx], br2, d2)
-                x_out[j] = xr
-                v_out[j] = vr
+                j_rev = np.nonzero(rev)[0]
+                gidx = idx[j_rev]
+                br2 = friction.take(gidx).select(d_new[j_rev])
+                d2 = d_new[j_rev]
+                xr, vr = _rk4(x_c[j_rev], np.zeros(j_rev.size), rest[j_rev], force[gidx], inv_mass[gidx], br2, d2)
+                x_out[j_rev] = xr
+                v_out[j_rev] = vr
             x_new[idx] = x_out
             v_new[idx] = v_out
             d = d.copy()
             d[idx] = d_new
         x, v = x_new, v_new
+    if failed.any():  # failed members keep the state they had before the call
+        x = np.where(failed, x0, x)
+        v = np.where(failed, v0, v)
+        d = np.where(failed, d0, d).astype(np.int8)
+    if status is not None:
+        status[...] = codes
+    if frozen.any():
+        v = np.where(frozen, np.nan, v)
     state.position, state.velocity, state.direction = x, v, d
-    return friction_force(state, force, friction)
+    ff = friction_force(state, force, friction)
+    if frozen.any():
+        ff = np.where(frozen, np.nan, ff)
+    return ff
 
 
 def friction_force(state: SlipState, force: np.ndarray, friction: StribeckParameters) -> np.ndarray:

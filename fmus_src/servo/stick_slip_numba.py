@@ -20,10 +20,11 @@ import math
 
 import numpy as np
 
-from ..jit import njit
+from ..jit import njit, njit_inline
 from .errors import ServoError
 from .friction import StribeckParameters
-from .stick_slip import CROSSING_MAX_ITER, CROSSING_TIME_RTOL, CROSSING_VELOCITY_TOL, SlipState
+from .stick_slip import (BACKWARD_BREAK_AWAY, CROSSING_MAX_ITER, CROSSING_NOT_CONVERGED, CROSSING_TIME_RTOL,
+                         CROSSING_VELOCITY_TOL, OK, SlipState)
 from .stick_slip import advance as reference_advance
 
 #: Rows of the packed parameter array (shape ``(N_PARAMETERS, B)``) taken by :func:`advance_kernel`.
@@ -34,8 +35,8 @@ PARAMETER_ROWS = (
 )
 N_PARAMETERS = len(PARAMETER_ROWS)
 
-#: Status codes returned by :func:`advance_kernel`.
-OK, BACKWARD_BREAK_AWAY, CROSSING_NOT_CONVERGED = 0, 1, 2
+#: Status codes of :func:`advance_kernel` (those of the reference, :mod:`.stick_slip`).
+STATUS_CODES = (OK, BACKWARD_BREAK_AWAY, CROSSING_NOT_CONVERGED)
 
 
 def pack_parameters(friction: StribeckParameters, mass: np.ndarray, force_constant: np.ndarray) -> np.ndarray:
@@ -139,12 +140,33 @@ def _locate_crossing(x0: float, v0: float, dt: float, v1: float, force: float, i
 
 
 # ------------------------------------------------------------------------------------------ kernel
+@njit_inline
+def commit_state(position: np.ndarray, velocity: np.ndarray, direction: np.ndarray, position_out: np.ndarray,
+                 velocity_out: np.ndarray, new_direction: np.ndarray) -> None:
+    """Copy the step's results into the drive state, in place, after every member is done (outputs may alias).
+
+    Parameters
+    ----------
+    position, velocity : ndarray, shape (B,)
+        State [m], [m/s], overwritten.
+    direction : ndarray of int8, shape (B,)
+        Stick/slip state, overwritten.
+    position_out, velocity_out, new_direction : ndarray, shape (B,)
+        The values at ``t + h``.
+    """
+    for b in range(position.shape[0]):
+        position[b] = position_out[b]
+        velocity[b] = velocity_out[b]
+        direction[b] = new_direction[b]
+
+
 @njit
 def advance_kernel(
     current_cmd: np.ndarray, disturbance: np.ndarray, params: np.ndarray,
     position: np.ndarray, velocity: np.ndarray, direction: np.ndarray,
-    h: float, max_step: float,
+    h: float, max_step: np.ndarray,
     motor_force_out: np.ndarray, position_out: np.ndarray, velocity_out: np.ndarray, friction_out: np.ndarray,
+    status_out: np.ndarray,
 ) -> int:
     """One drive step of every batch member (compiled).
 
@@ -155,39 +177,51 @@ def advance_kernel(
     params : ndarray, shape (12, B)
         :func:`pack_parameters`.
     position, velocity : ndarray of float64, shape (B,)
-        State [m], [m/s]; updated in place **only when the step succeeds**.
+        State [m], [m/s]; updated in place, except for members that fail.
+        A member whose position is NaN (failed earlier) is frozen: not
+        integrated, outputs NaN.
     direction : ndarray of int8, shape (B,)
         Stick/slip state (0, +1, -1); updated likewise.
     h : float
         Step [s], > 0.
-    max_step : float
-        Largest internal substep [s]; ``ceil(h / max_step)`` equal substeps, as the reference.
+    max_step : ndarray, shape (B,)
+        Largest internal substep of each member [s]; member ``b`` takes
+        ``ceil(h / max_step[b])`` equal substeps, as the reference.
     motor_force_out, position_out, velocity_out, friction_out : ndarray, shape (B,)
-        Written in place: ``u`` [N], ``x`` [m], ``v`` [m/s], ``Ff`` [N] at ``t + h``.
-        May be the state arrays themselves only if the caller does not need the
-        state preserved on failure.
+        Written in place: ``u`` [N], ``x`` [m], ``v`` [m/s], ``Ff`` [N] at ``t + h``
+        (a failed member: its unchanged state). May be the state arrays themselves.
+    status_out : ndarray of int8, shape (B,)
+        Written in place: :data:`OK`, :data:`BACKWARD_BREAK_AWAY` or
+        :data:`CROSSING_NOT_CONVERGED` per member.
 
     Returns
     -------
     int
-        :data:`OK`, or :data:`BACKWARD_BREAK_AWAY` / :data:`CROSSING_NOT_CONVERGED`
-        (the first member that failed stops the call; the state is then unchanged,
-        the outputs partly written).
+        :data:`OK` when every member succeeded, else the status of the first failed member.
     """
     n = position.shape[0]
-    n_sub = max(1, int(math.ceil(h / max_step * (1.0 - 1e-12))))
-    dt = h / n_sub
     new_dir = np.empty(n, dtype=np.int8)
+    first = OK
     for b in range(n):
         u = current_cmd[b] * params[0, b]
         motor_force_out[b] = u
+        status_out[b] = OK
+        x = position[b]
+        v = velocity[b]
+        d = float(direction[b])
+        if math.isnan(x):  # frozen (failed) member
+            position_out[b] = x
+            velocity_out[b] = math.nan
+            friction_out[b] = math.nan
+            new_dir[b] = direction[b]
+            continue
         force = u - disturbance[b]
         inv_mass = params[1, b]
         fs_pos = params[6, b]
         fs_neg = params[11, b]
-        x = position[b]
-        v = velocity[b]
-        d = float(direction[b])
+        n_sub = max(1, int(math.ceil(h / max_step[b] * (1.0 - 1e-12))))
+        dt = h / n_sub
+        code = OK
         for _ in range(n_sub):
             if v == 0.0:
                 d = _break_away(force, fs_pos, fs_neg)
@@ -198,11 +232,13 @@ def advance_kernel(
                           params[r + 3, b])
             if d * v1 <= 0.0:  # crossed (or reached) zero velocity within the substep
                 if d * v <= 0.0:
-                    return BACKWARD_BREAK_AWAY
+                    code = BACKWARD_BREAK_AWAY
+                    break
                 tau, x_c, ok = _locate_crossing(x, v, dt, v1, force, inv_mass, d, params[r, b], params[r + 1, b],
                                                 params[r + 2, b], params[r + 3, b])
                 if not ok:
-                    return CROSSING_NOT_CONVERGED
+                    code = CROSSING_NOT_CONVERGED
+                    break
                 d_new = _break_away(force, fs_pos, fs_neg)
                 rest = dt - tau
                 x = x_c
@@ -215,6 +251,13 @@ def advance_kernel(
             else:
                 x = x1
                 v = v1
+        if code != OK:  # this member keeps its state; the others carry on
+            status_out[b] = code
+            if first == OK:
+                first = code
+            x = position[b]
+            v = velocity[b]
+            d = float(direction[b])
         if d == 0.0:
             ff = min(max(force, -fs_neg), fs_pos)
         else:
@@ -224,19 +267,16 @@ def advance_kernel(
         velocity_out[b] = v
         friction_out[b] = ff
         new_dir[b] = np.int8(d)
-    for b in range(n):
-        position[b] = position_out[b]
-        velocity[b] = velocity_out[b]
-        direction[b] = new_dir[b]
-    return OK
+    commit_state(position, velocity, direction, position_out, velocity_out, new_dir)
+    return first
 
 
 def raise_reference_error(state: SlipState, force: np.ndarray, mass: np.ndarray, friction: StribeckParameters,
-                          h: float, max_step: float, status: int, owner: str) -> None:
+                          h: float, max_step: np.ndarray | float, status: int, owner: str) -> None:
     """Raise the reference's :class:`ServoError`, prefixed with ``owner``, for a failed kernel step.
 
-    The kernel stops at the first failing member; re-running the reference on
-    a copy gives the detailed message (all failing members, the substep).
+    Re-running the reference on a copy gives the detailed message (all
+    failing members, the substep).
     """
     probe = SlipState(state.position.copy(), state.velocity.copy(), state.direction.copy())
     try:
@@ -256,15 +296,19 @@ def advance(
 
     ``state`` arrays are updated in place (float64 position / velocity,
     int8 direction, C-contiguous). Raises the reference's
-    :class:`~fmus_src.servo.errors.ServoError` on failure.
+    :class:`~fmus_src.servo.errors.ServoError` on failure (state unchanged).
     """
     force = np.ascontiguousarray(force, dtype=float)
     params = pack_parameters(friction, np.asarray(mass, dtype=float), np.ones_like(force))
-    step = float(np.min(max_step))
+    step = np.ascontiguousarray(np.broadcast_to(np.asarray(max_step, dtype=float), force.shape))
+    before = SlipState(state.position.copy(), state.velocity.copy(), state.direction.copy())
     ff = np.empty_like(force)
     xo, vo, uo = np.empty_like(force), np.empty_like(force), np.empty_like(force)
+    codes = np.zeros(force.shape, dtype=np.int8)
     status = advance_kernel(force, np.zeros_like(force), params, state.position, state.velocity, state.direction,
-                            float(h), step, uo, xo, vo, ff)
+                            float(h), step, uo, xo, vo, ff, codes)
     if status != OK:
-        raise_reference_error(state, force, mass, friction, h, step, status, "stick_slip_numba.advance")
+        state.position[...], state.velocity[...], state.direction[...] = \
+            before.position, before.velocity, before.direction
+        raise_reference_error(before, force, mass, friction, h, step, status, "stick_slip_numba.advance")
     return ff

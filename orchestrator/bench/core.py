@@ -24,6 +24,7 @@ from ..errors import CncTwinError
 from ..master import Master, MasterSettings
 from .cfmu import build_lag_fmu, lag_ring
 from .fused import prepare_fused, reference_run
+from ..twin import TwinOptions, engagement_table
 from .native import bench_case, time_fused, time_twin
 from .systems import build_servo_fmus, native_lag_ring, plain_fmpy_loop, servo_fmu_system
 
@@ -45,6 +46,9 @@ class BenchSettings:
         Simulated time of the single native twin run (the 30 s program), s.
     batch_seconds : float
         Simulated time of the batched runs (populations 10 and 100), s.
+    compare_seconds : float
+        Simulated time of the single runs that compare paths: Python master loop, RK4 drives,
+        Z-map cutting (the last one runs on the Python master), s.
     batches : tuple of int
         Population sizes of the batched runs.
     length_seconds : tuple of float
@@ -64,7 +68,8 @@ class BenchSettings:
     """
 
     twin_seconds: float = 30.0
-    batch_seconds: float = 3.0
+    batch_seconds: float = 30.0
+    compare_seconds: float = 5.0
     batches: tuple[int, ...] = (10, 100)
     length_seconds: tuple[float, ...] = (2.5, 5.0, 10.0)
     population_sizes: tuple[int, ...] = (1, 3, 10, 30, 100)
@@ -77,8 +82,9 @@ class BenchSettings:
     @classmethod
     def quick(cls) -> BenchSettings:
         """A run of well under a minute (figures are then rough)."""
-        return cls(twin_seconds=1.0, batch_seconds=0.2, length_seconds=(0.25, 0.5), population_sizes=(1, 10),
-                   population_seconds=0.2, ring_steps=1000, servo_steps=20, fused_seconds=1.0)
+        return cls(twin_seconds=2.0, batch_seconds=2.0, compare_seconds=2.0, length_seconds=(0.5, 1.0),
+                   population_sizes=(1, 10), population_seconds=0.5, ring_steps=1000, servo_steps=20,
+                   fused_seconds=2.0)
 
 
 def machine_info() -> dict:
@@ -97,7 +103,16 @@ def machine_info() -> dict:
     return {
         "nproc": os.cpu_count(), "cpu": cpu, "python": platform.python_version(), "numpy": np.__version__,
         "numba": numba.__version__, "fmpy": fmpy.__version__, "platform": platform.platform(),
+        "load_average": _load(),
     }
+
+
+def _load() -> float:
+    """1-minute load average (other jobs on the machine), NaN where unknown."""
+    try:
+        return float(os.getloadavg()[0])
+    except (AttributeError, OSError):
+        return math.nan
 
 
 def _slope(run: Callable[[int], None], n: int) -> dict:
@@ -194,16 +209,28 @@ def run_bench(settings: BenchSettings | None = None, quick: bool = False,
     case = bench_case()
     t_start = time.perf_counter()
 
-    # --- native twin: warm-up (numba caches, imports), single, batched
-    say("native twin: warm-up")
-    time_twin(case, 1, 0.05)
-    say(f"native twin: single, {s.twin_seconds:g} s")
-    twin = {"single": time_twin(case, 1, s.twin_seconds)}
+    # --- native twin: engagement table (once per program), warm-up (numba caches, imports), single, batched
+    say("native twin: engagement table along the program path (once per program)")
+    t_table = time.perf_counter()
+    table = engagement_table(case, TwinOptions())
+    out["engagement_table_s"] = time.perf_counter() - t_table
+    say("native twin: warm-up (compiles or loads the numba caches)")
+    for compiled in (True, False):
+        for integrator in ("exponential", "rk4"):
+            time_twin(case, 1, 0.05, engagement=table, compiled=compiled, integrator=integrator)
+    time_twin(case, 1, 0.05, cutting_mode="zmap")
+    say(f"native twin: single, {s.twin_seconds:g} s (compiled loop, exponential drives, path-mode cutting)")
+    twin = {"single": time_twin(case, 1, s.twin_seconds, engagement=table)}
     say(f"native twin: single air cut (no cutting load), {s.twin_seconds:g} s")
     twin["single_air"] = time_twin(case, 1, s.twin_seconds, cutting=False)
+    for key, what, kwargs in (("single_rk4", "RK4 drives", {"integrator": "rk4"}),
+                              ("single_python_master", "Python master loop", {"compiled": False}),
+                              ("single_zmap", "Z-map cutting (Python master)", {"cutting_mode": "zmap"})):
+        say(f"native twin: single, {what}, {s.compare_seconds:g} s")
+        twin[key] = time_twin(case, 1, s.compare_seconds, engagement=table, **kwargs)
     for b in s.batches:
         say(f"native twin: batch {b}, {s.batch_seconds:g} s")
-        twin[f"batch_{b}"] = time_twin(case, b, s.batch_seconds)
+        twin[f"batch_{b}"] = time_twin(case, b, s.batch_seconds, engagement=table)
     out["native_twin"] = twin
 
     # --- fused reference (same case, same lengths, batch sizes)
@@ -237,9 +264,9 @@ def run_bench(settings: BenchSettings | None = None, quick: bool = False,
 
     # --- growth with program length and population size
     say("scaling with program length")
-    lengths = [time_twin(case, 1, sec) for sec in s.length_seconds]
+    lengths = [time_twin(case, 1, sec, engagement=table) for sec in s.length_seconds]
     say("scaling with population size")
-    pops = [time_twin(case, b, s.population_seconds) for b in s.population_sizes]
+    pops = [time_twin(case, b, s.population_seconds, engagement=table) for b in s.population_sizes]
     fit = _fit_line([r["sim_s"] for r in lengths], [r["wall_s"] for r in lengths])
     per_member = [r["wall_s"] / r["batch"] for r in pops]
     out["scaling"] = {
@@ -258,6 +285,9 @@ def run_bench(settings: BenchSettings | None = None, quick: bool = False,
     us = {
         "native_twin_single": twin["single"]["us_per_step"],
         "native_twin_single_air": twin["single_air"]["us_per_step"],
+        "native_twin_single_rk4": twin["single_rk4"]["us_per_step"],
+        "native_twin_single_python_master": twin["single_python_master"]["us_per_step"],
+        "native_twin_single_zmap": twin["single_zmap"]["us_per_step"],
         "fused_single": fused["single"]["us_per_step"],
         "native_ring_master": out["native_ring"]["master"]["us_per_step"],
         "c_fmu_master": c["master"]["us_per_step"],
@@ -278,6 +308,9 @@ def run_bench(settings: BenchSettings | None = None, quick: bool = False,
     ratios = {
         "native_twin_over_fused_single": ratio(us["native_twin_single"], us["fused_single"]),
         "native_twin_single_cutting_over_air": ratio(us["native_twin_single"], us["native_twin_single_air"]),
+        "python_master_over_compiled_loop": ratio(us["native_twin_single_python_master"], us["native_twin_single"]),
+        "rk4_over_exponential_drives": ratio(us["native_twin_single_rk4"], us["native_twin_single"]),
+        "zmap_over_path_cutting": ratio(us["native_twin_single_zmap"], us["native_twin_single"]),
         "c_fmu_plain_fmpy_over_fast_loop": ratio(us["c_fmu_plain_fmpy"], us["c_fmu_fast_loop"]),
         "c_fmu_master_over_fast_loop": ratio(us["c_fmu_master"], us["c_fmu_fast_loop"]),
         "c_fmu_master_over_plain_fmpy": ratio(us["c_fmu_master"], us["c_fmu_plain_fmpy"]),
@@ -305,6 +338,7 @@ def run_bench(settings: BenchSettings | None = None, quick: bool = False,
         for k, (v, t, op) in targets.items()
     }
     out["bench_wall_s"] = time.perf_counter() - t_start
+    out["load_average_end"] = _load()
     return out
 
 
@@ -312,7 +346,10 @@ def format_table(result: dict) -> str:
     """A plain-text table of :func:`run_bench`'s main figures."""
     m = result["machine"]
     lines = [f"cnctwin bench — {m['cpu']}, nproc {m['nproc']}, Python {m['python']}, numba {m['numba']}, "
-             f"fmpy {m['fmpy']}{' (quick: rough figures)' if result.get('quick') else ''}", ""]
+             f"fmpy {m['fmpy']}{' (quick: rough figures)' if result.get('quick') else ''}",
+             f"load average {m.get('load_average', math.nan):.2f} at start, "
+             f"{result.get('load_average_end', math.nan):.2f} at end; engagement table built once in "
+             f"{result.get('engagement_table_s', math.nan):.2f} s", ""]
     lines.append(f"{'run':<34}{'B':>5}{'sim s':>8}{'wall s':>9}{'x real time':>13}{'us/step':>11}")
     for label, group in (("native twin", result["native_twin"]), ("fused reference", result["fused"])):
         for key, r in group.items():

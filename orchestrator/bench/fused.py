@@ -4,10 +4,12 @@ A lower bound for the cost of a twin step: everything the native twin does
 between two NC samples, but without a master, without Python per step and
 without component adapters. :func:`fused_servo_loop` (numba) advances all
 members through ``n_steps`` communication steps; per step it runs the
-velocity-loop ticks of the MCU (:func:`fmus_src.servo.control_numba.mcu_kernel`)
-and of the three drives (:func:`fmus_src.servo.stick_slip_numba.advance_kernel`)
-in the twin's order (MCU, X, Y, Z drive per tick; the NC sample of the
-current period held over the ticks), then applies a simple cutting load.
+velocity-loop ticks of the MCU (:func:`fmus_src.servo.control_numba.axis_member`,
+member by member) and of the three drives (the twin's integrator:
+:func:`fmus_src.servo.exponential_numba.exponential_member` or
+:func:`fmus_src.servo.stick_slip_numba.advance_kernel`) in the twin's order
+(MCU, X, Y, Z drive per tick; the NC sample of the current period held over the ticks),
+then applies a simple cutting load.
 
 What is precomputed (outside the timed loop), :func:`prepare_fused`:
 
@@ -37,9 +39,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fmus_src.servo.control_numba import mcu_kernel
-from fmus_src.servo.stick_slip_numba import OK, advance_kernel
 from fmus_src.jit import njit
+from fmus_src.jit_cache import guard_cache
+from fmus_src.servo import control_numba, exponential_numba, stick_slip, stick_slip_numba
+from fmus_src.servo.control_numba import axis_member
+from fmus_src.servo.exponential_numba import exponential_member
+from fmus_src.servo.stick_slip_numba import OK, advance_kernel
 
 from ..case import Case
 from ..errors import CncTwinError
@@ -55,11 +60,11 @@ MIN_MOVE = 1e-12
 @njit
 def fused_servo_loop(
     n_steps: int, n_ticks: int, ratio: int, tp: float, tv: float, h_tick: float,
-    gains: np.ndarray, mcu_state: np.ndarray, width: np.ndarray,
+    gains: np.ndarray, mcu_state: np.ndarray, width: np.ndarray, limits: np.ndarray,
     drive_params: np.ndarray, max_steps: np.ndarray,
     position: np.ndarray, velocity: np.ndarray, direction: np.ndarray,
     ref: np.ndarray, force_ref: np.ndarray, move_ref: np.ndarray, force0: np.ndarray,
-    out_position: np.ndarray, out_current: np.ndarray,
+    out_position: np.ndarray, out_current: np.ndarray, exponential: bool,
 ) -> int:
     """Run ``n_steps`` twin steps of the servo loop of every member (compiled).
 
@@ -71,14 +76,18 @@ def fused_servo_loop(
         Position-loop period / velocity-loop period.
     tp, tv, h_tick : float
         Position- and velocity-loop periods and the drive step per tick, s.
-    gains, mcu_state : ndarray, shape (6, 3, B)
-        MCU gain block and state block (state updated in place).
+    gains : ndarray, shape (6, 3, B)
+        MCU gain block.
+    mcu_state : ndarray, shape (7, 3, B)
+        MCU state block (updated in place).
+    limits : ndarray, shape (3, 3, B)
+        MCU excess-error limit block (alarms are not reported: the fused loop is a timing reference).
     width : ndarray, shape (B,)
         In-position width, m.
     drive_params : ndarray, shape (3, 12, B)
         Packed drive parameters per axis.
-    max_steps : ndarray, shape (3,)
-        Largest internal drive substep per axis, s.
+    max_steps : ndarray, shape (3, B)
+        Largest internal drive substep per axis and member, s.
     position, velocity : ndarray, shape (3, B)
         Drive state (updated in place), m and m/s.
     direction : ndarray of int8, shape (3, B)
@@ -93,6 +102,9 @@ def fused_servo_loop(
         Disturbance force during the first step, N (updated in place: the last one).
     out_position, out_current : ndarray, shape (n_steps + 1, 3, B)
         Drive position (m) and current command (A) at ``t0 + k h`` (row 0 written by the caller).
+    exponential : bool
+        Drives by :func:`~fmus_src.servo.exponential_numba.exponential_member` (the twin's default
+        integrator) instead of the RK4 kernel.
 
     Returns
     -------
@@ -104,11 +116,11 @@ def fused_servo_loop(
     pos_out = np.empty((3, B))
     vel_out = np.empty((3, B))
     cur = np.empty((3, B))
-    vcmd = np.empty((3, B))
     motor = np.empty(B)
     ffric = np.empty(B)
     dist = np.zeros((3, B))
-    in_pos = np.zeros(B, dtype=np.bool_)
+    member_status = np.zeros(B, dtype=np.int8)
+    tp2 = tp * tp
     for i in range(3):
         for b in range(B):
             pos_out[i, b] = position[i, b]
@@ -122,15 +134,30 @@ def fused_servo_loop(
             for b in range(B):
                 refs[i, b] = ref[k, i]
         for j in range(n_ticks):
-            mcu_kernel(k * n_ticks + j, 1, ratio, tp, tv, gains, mcu_state,
-                       refs[0], refs[1], refs[2], pos_out[0], pos_out[1], pos_out[2],
-                       vel_out[0], vel_out[1], vel_out[2], width,
-                       cur[0], cur[1], cur[2], vcmd[0], vcmd[1], vcmd[2], in_pos)
+            for b in range(B):  # the MCU's control law, member by member (no alarms: a timing reference)
+                for i in range(3):
+                    cur[i, b] = axis_member(k * n_ticks + j, 1, ratio, tp, tv, tp2, gains, mcu_state, i, b,
+                                            refs[i, b], pos_out[i, b], vel_out[i, b])[0]
             for i in range(3):
-                status = advance_kernel(cur[i], dist[i], drive_params[i], position[i], velocity[i], direction[i],
-                                        h_tick, max_steps[i], motor, pos_out[i], vel_out[i], ffric)
-                if status != OK:
-                    return status
+                if exponential:
+                    for b in range(B):
+                        p = drive_params[i]
+                        u, x, v, d, ff, status = exponential_member(
+                            cur[i, b], dist[i, b], p[0, b], p[1, b], p[2, b], p[3, b], p[4, b], p[5, b], p[6, b],
+                            p[7, b], p[8, b], p[9, b], p[10, b], p[11, b], position[i, b], velocity[i, b],
+                            float(direction[i, b]), h_tick, max_steps[i, b])
+                        if status != OK:
+                            return status
+                        position[i, b] = x
+                        velocity[i, b] = v
+                        direction[i, b] = np.int8(d)
+                        pos_out[i, b] = x
+                        vel_out[i, b] = v
+                else:
+                    status = advance_kernel(cur[i], dist[i], drive_params[i], position[i], velocity[i], direction[i],
+                                            h_tick, max_steps[i], motor, pos_out[i], vel_out[i], ffric, member_status)
+                    if status != OK:
+                        return status
         # simple cutting load from the precomputed engagement, applied in the next step
         for b in range(B):
             dx = pos_out[0, b] - out_position[k, 0, b]
@@ -146,6 +173,10 @@ def fused_servo_loop(
         force0[0, b] = dist[0, b]
         force0[1, b] = dist[1, b]
     return 0
+
+
+# the cached loop links the kernels' code: recompile it when their modules change
+guard_cache(fused_servo_loop, control_numba, stick_slip, stick_slip_numba, exponential_numba)
 
 
 @dataclass
@@ -191,16 +222,17 @@ class FusedProblem:
         CncTwinError
             The drive kernel failed (status named).
         """
-        mcu_state, width, params, max_steps, pos, vel, dirn, cur0 = (np.array(a, copy=True) for a in self._state0)
-        n_ticks, ratio, tp, tv, h_tick = self._scalars
+        mcu_state, width, limits, params, max_steps, pos, vel, dirn, cur0 = (
+            np.array(a, copy=True) for a in self._state0)
+        n_ticks, ratio, tp, tv, h_tick, exponential = self._scalars
         out_pos = np.empty((self.n_steps + 1, 3, self.batch))
         out_cur = np.empty((self.n_steps + 1, 3, self.batch))
         out_pos[0] = pos
         out_cur[0] = cur0
         force0 = np.zeros((2, self.batch))
         status = fused_servo_loop(self.n_steps, n_ticks, ratio, tp, tv, h_tick, self._gains, mcu_state, width,
-                                  params, max_steps, pos, vel, dirn, self.ref, self.force_ref, self.move_ref,
-                                  force0, out_pos, out_cur)
+                                  limits, params, max_steps, pos, vel, dirn, self.ref, self.force_ref, self.move_ref,
+                                  force0, out_pos, out_cur, exponential)
         if status != 0:
             raise CncTwinError(f"fused reference: drive kernel failed with status {status}")
         return out_pos, out_cur
@@ -287,14 +319,18 @@ def prepare_fused(case: Case, n_steps: int, batch: int = 1, step: float = 1e-3, 
     # internal blocks of the components (read once; the fused loop runs the same kernels on copies)
     gains = mcu._gain_block  # noqa: SLF001
     state0 = (
-        mcu._state.block, mcu.values["in_position_width"],  # noqa: SLF001
+        mcu._state.block, mcu.values["in_position_width"], mcu._limit_block,  # noqa: SLF001
         np.stack([d._params for d in drives]),  # noqa: SLF001
-        np.array([d._step for d in drives]),  # noqa: SLF001
+        np.stack([d._step for d in drives]),  # noqa: SLF001
         np.stack([d._state.position for d in drives]), np.stack([d._state.velocity for d in drives]),  # noqa: SLF001
         np.stack([d._state.direction for d in drives]),  # noqa: SLF001
         np.stack([mcu.values[f"{a}_current_cmd"] for a in AXES]),
     )
-    scalars = (n_ticks, int(mcu._ratio), float(mcu._tp), float(mcu._tv), step / n_ticks)  # noqa: SLF001
+    integrators = {str(d.values["integrator"]) for d in drives}
+    if len(integrators) != 1:
+        raise CncTwinError(f"fused reference: the drives must share one integrator, got {sorted(integrators)}")
+    scalars = (n_ticks, int(mcu._ratio), float(mcu._tp), float(mcu._tv), step / n_ticks,  # noqa: SLF001
+               integrators == {"exponential"})
     for comp in twin.system.components.values():
         comp.terminate()
     return FusedProblem(n_steps, step, batch, ref, force, move, scalars, np.ascontiguousarray(gains), state0)

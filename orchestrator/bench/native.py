@@ -1,15 +1,19 @@
-"""Timing of the native twin (all four components, Python master) and of the fused reference."""
+"""Timing of the native twin (all four components; compiled or Python master loop) and of the fused reference."""
 from __future__ import annotations
 
+import logging
 import time
 from pathlib import Path
 
 import numpy as np
 
+from fmus_src.cutting.table import EngagementTable
+
 from ..case import Case
+from ..compiled import compiled_support
 from ..master import Master, MasterSettings
 from ..simulate import resolve_case
-from ..twin import TwinOptions, build_twin
+from ..twin import TwinOptions, build_twin, engagement_table
 
 #: The benchmark program: the paper-like part without the tool change (cutting from about 1.5 s).
 BENCH_PROGRAM = Path(__file__).resolve().parent / "bench_part.nc"
@@ -22,7 +26,9 @@ def bench_case() -> Case:
     return resolve_case(program=BENCH_PROGRAM, case=BENCH_CASE)
 
 
-def time_twin(case: Case, batch: int, seconds: float, cutting: bool = True, step: float = 1e-3) -> dict:
+def time_twin(case: Case, batch: int, seconds: float, cutting: bool = True, step: float = 1e-3,
+              cutting_mode: str = "path", engagement: EngagementTable | None = None, compiled: bool = True,
+              integrator: str = "exponential") -> dict:
     """Run the native twin for ``seconds`` of simulated time and time it.
 
     Parameters
@@ -37,27 +43,50 @@ def time_twin(case: Case, batch: int, seconds: float, cutting: bool = True, step
         Include the cutting load.
     step : float
         Communication step, s.
+    cutting_mode : {"path", "zmap"}
+        Cutting load from the engagement table along the program path, or from a Z-map per member.
+    engagement : EngagementTable, optional
+        The table of ``cutting_mode="path"`` (built once by the caller; built here otherwise, untimed).
+    compiled : bool
+        ``MasterSettings.compiled``: the compiled loop where it covers the system.
+    integrator : {"exponential", "rk4"}
+        ``TwinOptions.drive_integrator``.
 
     Returns
     -------
     dict
         ``batch``, ``sim_s`` (simulated time per member), ``steps``, ``build_s`` (assembly),
         ``wall_s`` (run incl. set-up), ``rt_factor`` (``B · sim_s / wall_s``, aggregate),
-        ``us_per_step`` (wall per communication step of the batch), ``us_per_member_step``.
+        ``us_per_step`` (wall per communication step of the batch), ``us_per_member_step``,
+        ``compiled_loop`` (whether the compiled loop ran), ``cutting_mode``, ``integrator``.
     """
+    if cutting and cutting_mode == "path" and engagement is None and case.stock is not None:
+        engagement = engagement_table(case, TwinOptions(step=step))
     t_build = time.perf_counter()
-    twin = build_twin(case, batch=batch, options=TwinOptions(step=step, cutting=cutting))
+    options = TwinOptions(step=step, cutting=cutting, cutting_mode=cutting_mode, engagement=engagement,
+                          drive_integrator=integrator)
+    twin = build_twin(case, batch=batch, options=options)
     build = time.perf_counter() - t_build
-    settings = MasterSettings(step=step, time_limit=seconds, stop_when=twin.stop_when, limits=twin.limits or {})
-    t0 = time.perf_counter()
-    run = Master(twin.system, settings, twin.probes).run()
-    wall = time.perf_counter() - t0
+    settings = MasterSettings(step=step, time_limit=seconds, stop_when=twin.stop_when, limits=twin.limits or {},
+                              compiled=compiled)
+    master = Master(twin.system, settings, twin.probes)
+    compiled_loop = compiled and compiled_support(master) is None
+    quiet = logging.getLogger("orchestrator")  # a timing run that ends at its time limit is not news
+    level = quiet.level
+    quiet.setLevel(logging.CRITICAL)
+    try:
+        t0 = time.perf_counter()
+        run = master.run()
+        wall = time.perf_counter() - t0
+    finally:
+        quiet.setLevel(level)
     sim = run.t_end - settings.t0
     return {
         "batch": batch, "cutting": twin.cutting is not None, "sim_s": sim, "steps": run.steps,
         "build_s": build, "wall_s": wall, "rt_factor": batch * sim / wall,
         "us_per_step": wall / max(run.steps, 1) * 1e6, "us_per_member_step": wall / max(run.steps, 1) / batch * 1e6,
-        "success": run.success, "message": run.message,
+        "success": run.success, "message": run.message, "compiled_loop": compiled_loop,
+        "cutting_mode": cutting_mode if twin.cutting is not None else "none", "integrator": integrator,
     }
 
 

@@ -49,6 +49,7 @@ from .common import fitted_machine, provenance, write_outputs
 from .data import CaseData, check_columns, load_inputs
 from .errors import IdentificationError
 from .ga import paper_objective, run_ga
+from .journal import Journal
 
 #: Kt of the unit runs, N/m2 (a realistic magnitude keeps every threshold of the component meaningful).
 KT_UNIT = 1.0e9
@@ -245,17 +246,23 @@ def _parabola_min(x: np.ndarray, y: np.ndarray) -> float:
     return float(x[j] + np.clip(shift, -1.0, 1.0) * (x[1] - x[0]))
 
 
-def _prepare(d: CaseData, phases: int, smooth_s: float, position_lag_s: float) -> _Prepared:
+def _prepare(d: CaseData, phases: int, smooth_s: float, position_lag_s: float, journal: Journal,
+             index: int = 0) -> _Prepared:
     rec = d.recording
+
+    def unit_runs(angles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:func:`basis_forces` of this case, journaled (a resumed job reads them back)."""
+        return journal.memo("cutting.basis_forces", (index, angles, smooth_s, position_lag_s),
+                            lambda: basis_forces(d, angles, smooth_s, position_lag_s))
+
     _, forces = _columns(d)
     meas = {"fx": np.asarray(rec["fx_N"], float), "fy": np.asarray(rec["fy_N"], float)} if "fx_N" in forces \
         else {"fc": np.asarray(rec["fc_N"], float)}
-    lag = position_lag_s
     flutes = int(d.case.tool.flutes)
     pitch = 2.0 * math.pi / flutes
     step = pitch / phases
     grid = np.arange(-1, phases + 1) * step  # coarse scan, wrapped by one step on each side
-    a, b = basis_forces(d, grid[1:-1], smooth_s, lag)
+    a, b = unit_runs(grid[1:-1])
     engaged = np.any(np.abs(a).sum(axis=2) > 0.0, axis=1)
     if int(engaged.sum()) < 10:
         raise IdentificationError(
@@ -265,14 +272,14 @@ def _prepare(d: CaseData, phases: int, smooth_s: float, position_lag_s: float) -
     sse = _scan(meas, a, b, engaged)
     centre = grid[1 + int(np.argmin(sse))]
     fine = centre + np.linspace(-step, step, 9)  # fine scan around the best coarse phase
-    a, b = basis_forces(d, fine, smooth_s, lag)
+    a, b = unit_runs(fine)
     phase = float(np.mod(_parabola_min(fine, _scan(meas, a, b, engaged)), pitch))
     # final run at the phase and at +-BOUNDARY_PHASE: a sample whose engagement changes within that margin
     # sits on a tooth entry/exit (a force jump) and is dropped; a few microns of position error or a
     # slightly wrong phase would otherwise swap full force and zero there
     margins = np.array([0.0, -BOUNDARY_PHASE, BOUNDARY_PHASE])
     for refine in range(PHASE_REFINEMENTS + 1):
-        a3, b3 = basis_forces(d, phase + margins, smooth_s, lag)
+        a3, b3 = unit_runs(phase + margins)
         inside = np.abs(a3).sum(axis=2) > 0.0
         robust = inside.all(axis=1)
         if int(robust.sum()) < 10:
@@ -311,6 +318,7 @@ def identify_cutting(
     phases: int = 12,
     smooth_s: float = 0.021,
     position_lag_s: float = 0.0,
+    journal: Journal | None = None,
 ) -> CuttingFit:
     """Identify the cutting coefficients Kt, Ke of the case's material.
 
@@ -332,6 +340,9 @@ def identify_cutting(
         Age of the position the recorded force belongs to, s (default 0: the
         twin's convention, cutting load stepped after the drives). It only
         matters at tooth entry/exit (a few µm of path).
+    journal : Journal, optional
+        Records each batched cutting run (phase scans) and the GA for checkpoints and resume
+        (see :func:`orchestrator.identify.identify`).
 
     Returns
     -------
@@ -339,7 +350,8 @@ def identify_cutting(
     """
     start = time.perf_counter()
     data = load_inputs(cases)
-    prepared = [_prepare(d, phases, smooth_s, position_lag_s) for d in data]
+    journal = journal or Journal()
+    prepared = [_prepare(d, phases, smooth_s, position_lag_s, journal, i) for i, d in enumerate(data)]
     use_xy = all("fx" in p.measured for p in prepared)
 
     def stack(fn) -> np.ndarray:
@@ -386,8 +398,9 @@ def identify_cutting(
                 )
                 kt, ke = kt_fixed, ke_prior
     elif method == "paper-ga":
-        res = run_ga(lambda x: paper_objective(fc_meas[None, :] - fc_model(x[:, 0], x[:, 1])),
-                     np.array([0.1, 0.0]), np.array([10.0, 2.0]), PAPER_GENERATIONS, PAPER_FITNESS_LIMIT, seed=seed)
+        res = journal.memo("cutting.ga", (seed, fc_meas, a_all, b_all), lambda: run_ga(
+            lambda x: paper_objective(fc_meas[None, :] - fc_model(x[:, 0], x[:, 1])),
+            np.array([0.1, 0.0]), np.array([10.0, 2.0]), PAPER_GENERATIONS, PAPER_FITNESS_LIMIT, seed=seed))
         kt, ke, iterations = float(res.x[0]), float(res.x[1]), res.generations
     else:
         raise IdentificationError(f"unknown cutting method {method!r}; expected 'default' or 'paper-ga'")

@@ -1,8 +1,10 @@
 """Loading and checking the recordings an identification needs.
 
-Every fit reads its cases through :func:`load_inputs`, which checks the
-columns it needs, refuses NaN inside them and gives one
-:class:`~orchestrator.identify.errors.IdentificationError` naming the file.
+Every fit reads its cases through :func:`load_inputs`, which checks each
+recording against its program (:func:`orchestrator.validation.validate_recording`:
+plausible values, ``line`` numbers that are blocks of the program, a duration
+that fits it), checks the columns it needs, refuses NaN inside them and gives
+one :class:`~orchestrator.identify.errors.IdentificationError` naming the file.
 """
 from __future__ import annotations
 
@@ -14,6 +16,8 @@ import numpy as np
 
 from ..case import Case, load_case
 from ..recording import Recording, RecordingError
+from ..twin import nck_parameters
+from ..validation import validate_recording
 from .errors import IdentificationError
 
 
@@ -47,12 +51,14 @@ def as_case(item: str | Path | Case) -> Case:
 
 
 def load_recording(case: Case) -> Recording:
-    """Read the case's recording (``recording`` field of ``case.toml``).
+    """Read the case's recording (``recording`` field of ``case.toml``) and check it against the program.
 
     Raises
     ------
     IdentificationError
-        The case names no recording or the file does not exist.
+        The case names no recording, the file does not exist or is malformed, or
+        it does not belong to the case's program (:func:`~orchestrator.validation.validate_recording`:
+        the message names the file, the column and the row).
     """
     if case.recording is None:
         raise IdentificationError(
@@ -65,9 +71,11 @@ def load_recording(case: Case) -> Recording:
             "save the log there, columns per shared/spec/recording.md)"
         )
     try:
-        return Recording.read_csv(case.recording)
+        recording = Recording.read_csv(case.recording)
+        validate_recording(recording, case.program, nc_parameters=nck_parameters(case.machine))
     except RecordingError as exc:
         raise IdentificationError(str(exc)) from None
+    return recording
 
 
 def check_columns(recording: Recording, columns: Sequence[str], purpose: str) -> None:

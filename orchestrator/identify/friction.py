@@ -20,6 +20,7 @@ from ..machine import Machine
 from .common import fitted_machine, provenance, write_outputs
 from .data import CaseData, axes_in, check_columns, force_per_amp, load_inputs
 from .errors import IdentificationError
+from .journal import Journal
 from .segments import Segment, SegmentSettings, find_segments, require_segments
 from .stribeck import StribeckFit, fit_stribeck
 
@@ -128,6 +129,7 @@ def identify_friction(
     seed: int = 0,
     axes: Sequence[str] | None = None,
     settings: SegmentSettings | None = None,
+    journal: Journal | None = None,
 ) -> FrictionFit:
     """Identify Stribeck friction (Fc, Fs, vs, mu_v) per axis and direction.
 
@@ -145,6 +147,9 @@ def identify_friction(
         Axes to identify (default: every axis that moves at constant velocity).
     settings : SegmentSettings, optional
         Segment detection tuning.
+    journal : Journal, optional
+        Records each Stribeck fit (one per axis and direction) for checkpoints and resume
+        (see :func:`orchestrator.identify.identify`).
 
     Returns
     -------
@@ -158,6 +163,7 @@ def identify_friction(
     start = time.perf_counter()
     settings = settings or SegmentSettings()
     data = load_inputs(cases)
+    journal = journal or Journal()
     wanted, segments = collect_segments(data, axes, settings)
     params: dict[str, dict[str, StribeckFit]] = {}
     for a in wanted:
@@ -166,7 +172,9 @@ def identify_friction(
             segs = [s for s in segments if s.axis == a and s.direction == sign]
             speed = np.array([abs(s.velocity) for s in segs])
             force = np.array([sign * s.force for s in segs])
-            params[a][name] = fit_stribeck(speed, force, method, seed, label=f"{data[0].source}: axis {a} {name}")
+            label = f"{data[0].source}: axis {a} {name}"
+            params[a][name] = journal.memo("friction.stribeck", (speed, force, method, seed, label),
+                                           lambda: fit_stribeck(speed, force, method, seed, label=label))
     names = [d.name for d in data]
     source = provenance(f"friction {method} (Stribeck fit of constant-velocity segments, J = sum e^2 + max|e|)", names)
     updates = {

@@ -44,6 +44,7 @@ from .common import fitted_machine, provenance, write_outputs
 from .data import CaseData, check_columns, load_inputs
 from .errors import IdentificationError
 from .ga import paper_objective, run_ga_lockstep
+from .journal import Journal
 from .segments import SegmentSettings, find_segments
 
 FACTORS = ("position_scale", "velocity_p_scale", "velocity_i_scale")
@@ -198,6 +199,7 @@ def identify_servo(
     machine: str | Path | Machine | None = None,
     weights: tuple[float, float] | None = None,
     max_iterations: int = 30,
+    journal: Journal | None = None,
 ) -> ServoFit:
     """Identify the servo scale factors Spp, Svp, Svi per axis.
 
@@ -219,6 +221,10 @@ def identify_servo(
         of the measured following error and current of each axis.
     max_iterations : int
         Iteration cap of the default optimiser.
+    journal : Journal, optional
+        Records the result of every batched replay (residuals and Jacobian of a
+        least-squares evaluation, fitness of a GA generation) for checkpoints
+        and resume (see :func:`orchestrator.identify.identify`).
 
     Returns
     -------
@@ -236,6 +242,7 @@ def identify_servo(
         w[a] = weights or (1.0 / max(float(np.sqrt(np.mean(e_all ** 2))), 1e-3),
                            1.0 / max(float(np.sqrt(np.mean(c_all ** 2))), 1e-3))
     counter = {"sims": 0}
+    journal = journal or Journal()
 
     def residuals(scales: dict[str, np.ndarray], summed: bool = False) -> dict[str, np.ndarray]:
         """Weighted residuals per axis, shape (B, m_a)."""
@@ -243,20 +250,25 @@ def identify_servo(
         for s in series:
             sub = {a: scales[a] for a in s.ref}
             e_sim, c_sim = _simulate(base, s, sub)
-            counter["sims"] += 1
             for a in s.ref:
                 de = w[a][0] * (s.e[a][:, None] - e_sim[a]).T
                 dc = w[a][1] * (s.cur[a][:, None] - c_sim[a]).T
                 parts[a].append(de + dc if summed else np.concatenate([de, dc], axis=1))
         return {a: np.concatenate(p, axis=1) for a, p in parts.items()}
 
+    def journaled(stage: str, key: object, compute):
+        """One batched replay of every case, read back from the journal when a resumed job already did it."""
+        counter["sims"] += len(series)
+        return journal.memo(stage, key, compute)
+
     if method == "default":
-        scales, iterations = _fit_least_squares(base, series, used, residuals, max_iterations)
+        scales, iterations = _fit_least_squares(base, series, used, residuals, max_iterations, journaled)
     elif method == "paper-ga":
-        scales, iterations = _fit_ga(used, residuals, seed)
+        scales, iterations = _fit_ga(used, residuals, seed, journaled)
     else:
         raise IdentificationError(f"unknown servo method {method!r}; expected 'default' or 'paper-ga'")
 
+    counter["sims"] += len(series)
     final = residuals({a: scales[a][None, :] for a in used})
     fitness, rms = {}, {}
     for a in used:
@@ -267,6 +279,7 @@ def identify_servo(
                   "current_A": float(np.sqrt(np.mean(r[half:] ** 2)) / w[a][1])}
     traces = []
     for s in series:
+        counter["sims"] += 1
         e_sim, c_sim = _simulate(base, s, {a: scales[a][None, :] for a in s.ref})
         traces.append({"case": s.data.name, "t": s.t, "ref_mm": {a: s.ref[a] * 1e3 for a in s.ref},
                        "e_meas": s.e, "e_sim": {a: e_sim[a][:, 0] for a in s.ref},
@@ -281,7 +294,7 @@ def identify_servo(
     )
 
 
-def _fit_least_squares(base, series, used, residuals, max_iterations) -> tuple[dict[str, np.ndarray], int]:
+def _fit_least_squares(base, series, used, residuals, max_iterations, journaled) -> tuple[dict[str, np.ndarray], int]:
     z0 = np.concatenate([[np.log(_initial_spp(base, series, a)), 0.0, 0.0] for a in used])
     step = 1e-3
     cache: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
@@ -289,22 +302,26 @@ def _fit_least_squares(base, series, used, residuals, max_iterations) -> tuple[d
     def evaluate(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         key = np.round(z, 12).tobytes()
         if key not in cache:
-            scales = {}
-            for i, a in enumerate(used):
-                zz = np.tile(z[3 * i:3 * i + 3], (4, 1))
-                zz[1:] += step * np.eye(3)
-                scales[a] = np.exp(zz)
-            r = residuals(scales)
-            vec = np.concatenate([r[a][0] for a in used])
-            jac = np.zeros((vec.size, z.size))
-            row = 0
-            for i, a in enumerate(used):
-                m = r[a].shape[1]
-                jac[row:row + m, 3 * i:3 * i + 3] = ((r[a][1:] - r[a][0]) / step).T
-                row += m
             cache.clear()
-            cache[key] = (vec, jac)
+            cache[key] = journaled("servo.least_squares", np.round(z, 12), lambda: residuals_and_jacobian(z))
         return cache[key]
+
+    def residuals_and_jacobian(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Residual vector at ``z`` and its forward-difference Jacobian: one batched replay of 4 members."""
+        scales = {}
+        for i, a in enumerate(used):
+            zz = np.tile(z[3 * i:3 * i + 3], (4, 1))
+            zz[1:] += step * np.eye(3)
+            scales[a] = np.exp(zz)
+        r = residuals(scales)
+        vec = np.concatenate([r[a][0] for a in used])
+        jac = np.zeros((vec.size, z.size))
+        row = 0
+        for i, a in enumerate(used):
+            m = r[a].shape[1]
+            jac[row:row + m, 3 * i:3 * i + 3] = ((r[a][1:] - r[a][0]) / step).T
+            row += m
+        return vec, jac
 
     lo, hi = np.log(BOUNDS[0]), np.log(BOUNDS[1])
     z0 = np.clip(z0, lo + 1e-6, hi - 1e-6)
@@ -313,7 +330,7 @@ def _fit_least_squares(base, series, used, residuals, max_iterations) -> tuple[d
     return {a: np.exp(sol.x[3 * i:3 * i + 3]) for i, a in enumerate(used)}, int(sol.nfev)
 
 
-def _fit_ga(used, residuals, seed) -> tuple[dict[str, np.ndarray], int]:
+def _fit_ga(used, residuals, seed, journaled) -> tuple[dict[str, np.ndarray], int]:
     bounds = [(np.full(3, BOUNDS[0]), np.full(3, BOUNDS[1])) for _ in used]
     def evaluate(xs: list[np.ndarray]) -> list[np.ndarray]:
         # an axis whose GA has stopped gets filler members (factors 1), evaluated and ignored
@@ -323,5 +340,9 @@ def _fit_ga(used, residuals, seed) -> tuple[dict[str, np.ndarray], int]:
         r = residuals(scales, summed=True)
         return [paper_objective(r[a])[: x.shape[0]] for a, x in zip(used, xs)]
 
-    results = run_ga_lockstep(evaluate, bounds, PAPER_GENERATIONS, PAPER_FITNESS_LIMIT, seed=seed)
+    def evaluate_generation(xs: list[np.ndarray]) -> list[np.ndarray]:
+        """The fitness of one generation of every axis's GA (journaled: the small fitness arrays only)."""
+        return journaled("servo.ga_generation", list(xs), lambda: evaluate(xs))
+
+    results = run_ga_lockstep(evaluate_generation, bounds, PAPER_GENERATIONS, PAPER_FITNESS_LIMIT, seed=seed)
     return {a: res.x for a, res in zip(used, results)}, max(res.generations for res in results)
