@@ -194,11 +194,52 @@ def test_spindle_acceleration_time_from_standstill():
 
 def test_spindle_speed_change_costs_derived_time():
     # From S2000 (settled) to S5000: wait until |w - 5000| <= 0.05 * 5000 -> (3000 - 250) rpm / 4000 rpm/s
-    # = 0.6875 s; the path stops at the S block either way, so the cost is duration(S5000) - duration(S2000).
+    # = 0.6875 s. S2050 is a change within the arrival tolerance (50 <= 0.05 * 2050): it stops the path but
+    # waits 0 s, so the wait alone is duration(S5000) - duration(S2050).
     base = "S2000 M3\nG4 P3000\nG1 X10 F600\nS{}\nG1 X20\nM30\n"
-    t_same = plan(base.format(2000)).duration_[0]
+    t_stop = plan(base.format(2050)).duration_[0]
     t_up = plan(base.format(5000)).duration_[0]
-    assert t_up - t_same == pytest.approx((3000 - 0.05 * 5000) / 4000, abs=1.5 * TS)
+    assert t_up - t_stop == pytest.approx((3000 - 0.05 * 5000) / 4000, abs=1.5 * TS)
+
+
+# Bell-shaped acc/dec (a = 2 m/s2, tc = 32 ms) at 600 mm/min = 0.01 m/s < a tc: a speed change 0 <-> v takes
+# t_change = 2 sqrt(v tc / a) and covers v t_change / 2, so a move from rest to rest lasts L/v + t_change
+# (test_bell_shaped_move_time). A stop between two collinear lines therefore costs exactly one more t_change.
+T_CHANGE_600 = 2.0 * math.sqrt(0.01 * 0.032 / 2.0)  # 25.3 ms
+
+
+def test_repeated_s_word_does_not_stop_the_path():
+    # An S word repeating the speed in effect changes no command: no stop, no wait. The two 10 mm lines are
+    # one 20 mm move: motion lasts L/v + t_change + 16 ms (filter), the same as without the S word.
+    base = "S2000 M3\nG4 P1000\nG1 X10 F600\n{}G1 X20\nM30\n"
+    plain, repeated = plan(base.format("")), plan(base.format("S2000\n"))
+    assert repeated.duration_[0] == plain.duration_[0]
+    start = int(np.argmax(repeated.plan_.feed[0] > 0)) - 1
+    assert motion_end(repeated) - start == n_ceil(0.02 / 0.01 + T_CHANGE_600) + 16
+    assert np.all(repeated.plan_.feed[0, start + 100: start + 1900] == pytest.approx(0.01))  # never slows down
+    # an S word on the second line itself, and M3 repeated with the same S, change nothing either
+    assert plan(base.format("").replace("G1 X20", "G1 X20 S2000")).duration_[0] == plain.duration_[0]
+    assert plan(base.format("M3 S2000\n")).duration_[0] == plain.duration_[0]
+
+
+def test_changed_s_word_stops_the_path_for_one_more_speed_change():
+    # S2050 changes the command (within the arrival tolerance, so no wait): the path stops, one more t_change
+    base = "S2000 M3\nG4 P1000\nG1 X10 F600\n{}G1 X20\nM30\n"
+    t_plain = plan(base.format("")).duration_[0]
+    t_changed = plan(base.format("S2050\n")).duration_[0]
+    assert t_changed - t_plain == pytest.approx(T_CHANGE_600, abs=1.5 * TS)
+
+
+def test_repeated_s_word_is_decided_per_batch_member():
+    # Spindle overrides of line 4 (the S word): member 0 repeats 2000 rpm, member 1 commands 2050 rpm.
+    # Member 0 plans as the program without the S word, member 1 stops for one more t_change.
+    text = "S2000 M3\nG4 P1000\nG1 X10 F600\nS2000\nG1 X20\nM30\n"
+    k = NCKernel(batch=2, program_text=text)
+    k.set_overrides(spindle={4: np.array([2000.0, 2050.0]) * 2 * math.pi / 60})
+    k.setup(0.0)
+    t_plain = plan(text.replace("S2000\nG1 X20", "G1 X20")).duration_[0]
+    assert k.duration_[0] == t_plain
+    assert k.duration_[1] - t_plain == pytest.approx(T_CHANGE_600, abs=1.5 * TS)
 
 
 def test_spindle_clamped_and_stopped_at_program_end():

@@ -142,6 +142,55 @@ def test_operators_stay_on_grid_and_move_whole_lines():
                 assert tuple(kids[k, m, 2 * j: 2 * j + 2]) in pair
 
 
+class _FixedOperator:
+    """A random generator whose choice of mutation operator (``integers(7)``) is fixed."""
+
+    def __init__(self, op, seed=0):
+        self.op, self.rng = op, np.random.default_rng(seed)
+
+    def integers(self, n, *args, **kwargs):
+        return self.op if n == 7 else self.rng.integers(n, *args, **kwargs)
+
+    def __getattr__(self, name):
+        return getattr(self.rng, name)
+
+
+def test_mutation_to_the_load_limit_uses_the_chip_load_rule():
+    """Operator 5: F = fz_ref S (u Flim) / load_ref with u in [0.9, 1], rounded down to 10 mm/min."""
+    from orchestrator.optimize.problem import LinewiseMutation
+
+    problem = _toy_problem()
+    X = np.tile([310.0, 6000.0], (40, 5))
+    Y = LinewiseMutation()._do(problem, X, random_state=_FixedOperator(5))
+    # line 0 (90 N at 305 mm/min, 6000 rpm): F at the limit = 305 * 60 / 90 = 203.3 mm/min -> 180..200
+    # line 1 (30 N): 610 -> top of the range 500 at u >= 0.82; line 4 (no load): the top of the range
+    bounds = {0: (180.0, 200.0), 1: (500.0, 500.0), 2: (270.0, 300.0), 3: (270.0, 300.0), 4: (500.0, 500.0)}
+    changed = 0
+    for row in Y:
+        assert np.all(row[1::2] == 6000.0)  # spindle speeds untouched
+        for j, (lo, hi) in bounds.items():
+            if row[2 * j] != 310.0:
+                assert lo <= row[2 * j] <= hi
+                changed += 1
+    assert changed >= 40  # at least one line per individual
+
+
+def test_mutation_to_one_spindle_speed_keeps_each_feed_per_tooth():
+    """Operator 6: every line takes one line's S, each feed scaled by S_new / S_old (same chip load)."""
+    from orchestrator.optimize.problem import LinewiseMutation
+
+    problem = _toy_problem()
+    spindles = np.array([3000.0, 4000.0, 5000.0, 6000.0, 2000.0])
+    feeds = np.array([150.0, 200.0, 250.0, 300.0, 100.0])  # 0.025 mm/tooth everywhere
+    X = np.tile(np.stack([feeds, spindles], axis=1).ravel(), (20, 1))
+    Y = LinewiseMutation()._do(problem, X, random_state=_FixedOperator(6))
+    for row in Y:
+        s = row[1]
+        assert s in spindles and np.all(row[1::2] == s)
+        # F = 0.025 mm * 2 flutes * S... i.e. feeds / spindles = 0.05 on every line, within the range
+        np.testing.assert_allclose(row[0::2], np.clip(0.05 * s, 100.0, 500.0), atol=5.0)
+
+
 def test_failed_and_penalised_objectives():
     from orchestrator.optimize.evaluate import Evaluation
     from orchestrator.optimize.problem import FAILED, objectives

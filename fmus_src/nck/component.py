@@ -22,6 +22,7 @@ from .interpreter import InterpreterSettings, interpret
 from .overrides import insert_spindle_commands, resolve_values
 from .params import NCParams
 from .planner import BatchPlan, build_schedule, plan_batch
+from .sampling import sample_position
 from .source import read_program
 
 #: Number of tool length offset parameters ``tool_length_1 .. tool_length_N`` (H1..HN).
@@ -191,13 +192,7 @@ class NCKernel(Component):
 
     def _write(self, kf: float) -> None:
         plan = self.plan_
-        K = plan.feed.shape[1]
-        kf = min(max(kf, 0.0), K - 1.0)
-        k0 = int(np.floor(kf + 1e-9))
-        frac = kf - k0
-        if frac < 1e-9:
-            frac = 0.0
-        k1 = min(k0 + 1, K - 1)
+        k0, k1, frac = sample_position(float(kf), plan.feed.shape[1])
         r = self._rows
         pos = plan.position[:, k0]
         feed = plan.feed[:, k0]

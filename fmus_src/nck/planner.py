@@ -17,7 +17,13 @@ kernel plans everything at setup, sampled at the interpolation period Ts:
    tool change and program end, spindle speed arrival before the next chain
    of feed blocks, ``tool_change_time`` for M6.
 
-Every spindle command and tool change stops the path (the chain ends at rest).
+A spindle command that changes the commanded speed (or direction), M5 and a
+tool change stop the path (the chain ends at rest). A spindle command that
+leaves the command as it is (an S word repeating the speed in effect, as the
+optimiser writes on every cutting line) is no command at all: no speed-arrival
+wait and no stop; the feed blocks around it form one chain. Whether a command
+changes anything depends on the member's spindle overrides, so each member
+plans on its own variant of the schedule (:meth:`Schedule.without`).
 
 The whole reference is held in memory, so a plan is limited to
 :data:`MAX_PLAN_SAMPLES` interpolation periods. Before each item is sampled, a
@@ -29,7 +35,7 @@ naming the block instead of exhausting memory.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Sequence
 
 import numpy as np
@@ -37,7 +43,7 @@ import numpy as np
 from .blocks import (
     Arc, Block, Coolant, Dwell, Linear, ProgramEnd, Rapid, SpindleSpeed, SpindleStop, ToolChange,
 )
-from .errors import GCodeError
+from .errors import GCodeError, NCParameterError
 from .filters import apply_fir, box_lengths, filter_extension
 from .geometry import ChainGeometry, chain_geometry
 from .interpolator import Segment, interpolate_chain, interpolate_rapid
@@ -65,15 +71,80 @@ class Item:
 
 @dataclass(frozen=True)
 class Schedule:
-    """The program cut into items (shared by all batch members)."""
+    """The program cut into items (shared by all batch members).
+
+    Attributes
+    ----------
+    blocks : tuple of Block
+    items : tuple of Item
+    initial : ndarray (3,)
+        Machine position before the program (m).
+    file : str
+        Program name for error messages.
+    skipped : frozenset of int
+        Indices of spindle commands left out of the items (they change nothing).
+    """
 
     blocks: tuple[Block, ...]
     items: tuple[Item, ...]
     initial: np.ndarray
     file: str = "<text>"
+    skipped: frozenset[int] = frozenset()
+    _variants: dict = field(default_factory=dict, repr=False, compare=False)
+
+    def without(self, skipped: frozenset[int]) -> "Schedule":
+        """This schedule with the spindle commands ``skipped`` left out (cached per set).
+
+        Parameters
+        ----------
+        skipped : frozenset of int
+            Block indices of :class:`SpindleSpeed` commands that do not change the command
+            (:func:`unchanged_spindle_commands`).
+        """
+        if skipped == self.skipped:
+            return self
+        if skipped not in self._variants:
+            self._variants[skipped] = build_schedule(self.blocks, self.initial, self.file, skipped)
+        return self._variants[skipped]
 
 
-def build_schedule(blocks: Sequence[Block], initial: Sequence[float], file: str = "<text>") -> Schedule:
+def spindle_command(block: SpindleSpeed, speed: float, max_speed: float) -> float:
+    """Signed spindle command (rad/s) of a spindle block at ``speed`` (rad/s), clamped to ``max_speed``."""
+    return block.direction * min(float(speed), max_speed)
+
+
+def unchanged_spindle_commands(blocks: Sequence[Block], speeds: np.ndarray, max_speed: float) -> frozenset[int]:
+    """Indices of spindle commands that leave the commanded speed as it is.
+
+    Parameters
+    ----------
+    blocks : sequence of Block
+    speeds : ndarray (n_blocks,)
+        Speed of each spindle command (rad/s) of one member, NaN elsewhere.
+    max_speed : float
+        Spindle speed clamp (rad/s).
+
+    Returns
+    -------
+    frozenset of int
+        Block indices of :class:`SpindleSpeed` commands whose signed, clamped command equals the one in
+        effect (0 before the first command and after M5).
+    """
+    cmd = 0.0
+    out = []
+    for i, b in enumerate(blocks):
+        if isinstance(b, SpindleSpeed):
+            new = spindle_command(b, speeds[i], max_speed)
+            if new == cmd:
+                out.append(i)
+            cmd = new
+        elif isinstance(b, SpindleStop):
+            cmd = 0.0
+    return frozenset(out)
+
+
+def build_schedule(blocks: Sequence[Block], initial: Sequence[float], file: str = "<text>",
+                   skipped: frozenset[int] = frozenset()) -> Schedule:
     """Cut a block list into items.
 
     Parameters
@@ -83,7 +154,18 @@ def build_schedule(blocks: Sequence[Block], initial: Sequence[float], file: str 
     initial : (3,) machine position before the program (m).
     file : str
         Program name for error messages.
+    skipped : frozenset of int, optional
+        Indices of spindle commands that change nothing: left out, so they neither stop the path nor wait.
+
+    Raises
+    ------
+    NCParameterError
+        If ``skipped`` names a block that is not a :class:`SpindleSpeed`.
     """
+    for i in skipped:
+        if not isinstance(blocks[i], SpindleSpeed):
+            raise NCParameterError(f"{file}: block {i} (line {blocks[i].line}) is not a spindle command; "
+                                   "only spindle commands can be skipped")
     items: list[Item] = []
     chain: list[int] = []
 
@@ -95,6 +177,8 @@ def build_schedule(blocks: Sequence[Block], initial: Sequence[float], file: str 
             chain.clear()
 
     for i, b in enumerate(blocks):
+        if i in skipped:
+            continue
         if isinstance(b, (Linear, Arc)):
             chain.append(i)
             continue
@@ -108,7 +192,7 @@ def build_schedule(blocks: Sequence[Block], initial: Sequence[float], file: str 
     flush()
     # coolant items inside a chain were appended before the chain: order by first block index
     items.sort(key=lambda it: it.blocks[0])
-    return Schedule(tuple(blocks), tuple(items), np.asarray(initial, dtype=float), file)
+    return Schedule(tuple(blocks), tuple(items), np.asarray(initial, dtype=float), file, frozenset(skipped))
 
 
 def _length(b: Block) -> float:
@@ -212,6 +296,7 @@ def plan_member(schedule: Schedule, params: NCParams, feeds: np.ndarray, speeds:
     -------
     MemberPlan
     """
+    schedule = schedule.without(unchanged_spindle_commands(schedule.blocks, speeds, params.spindle_max_speed))
     ts = params.interpolation_period
     sc = SpeedChange(params.accel_before_interp, params.accel_change_time_before_interp)
     cut_boxes = box_lengths(params.cutting_time_constant, params.cutting_filter, ts)
@@ -274,7 +359,7 @@ def plan_member(schedule: Schedule, params: NCParams, feeds: np.ndarray, speeds:
         elif item.kind in ("spindle", "stop"):
             line_cp.append((k, b.line))
             if item.kind == "spindle":
-                cmd = b.direction * min(float(speeds[item.blocks[0]]), params.spindle_max_speed)  # type: ignore[union-attr]
+                cmd = spindle_command(b, speeds[item.blocks[0]], params.spindle_max_speed)  # type: ignore[arg-type]
             else:
                 cmd = 0.0
             w = spindle_now(k)

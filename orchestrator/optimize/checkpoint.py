@@ -8,49 +8,24 @@ the same result as an uninterrupted run with the same seed.
 """
 from __future__ import annotations
 
-import pickle
 from pathlib import Path
 from typing import Any
 
-from ..atomic import atomic_write_bytes
+from ..checkpoint import checkpoint_dir, read_checkpoints, read_pickle, write_pickle
+from ..checkpoint import write_checkpoint as _write_checkpoint
 from .errors import OptimizeError
+
+__all__ = ["FORMAT", "checkpoint_dir", "latest_checkpoint", "read_pickle", "write_checkpoint", "write_pickle"]
 
 FORMAT = 1
 
 
-def checkpoint_dir(out: Path) -> Path:
-    """Folder of the checkpoints inside the output folder."""
-    return Path(out) / "checkpoints"
-
-
 def write_checkpoint(out: Path, generation: int, state: dict[str, Any]) -> Path:
     """Write generation ``generation`` atomically; returns the file."""
-    data = pickle.dumps({"format": FORMAT, "generation": generation, **state}, protocol=pickle.HIGHEST_PROTOCOL)
-    return atomic_write_bytes(checkpoint_dir(out) / f"gen_{generation:04d}.pkl", data)
+    return _write_checkpoint(out, f"gen_{generation:04d}", {"generation": generation, **state}, FORMAT)
 
 
 def latest_checkpoint(out: Path) -> dict[str, Any] | None:
     """The newest readable checkpoint in ``out``, or None when there is none."""
-    files = sorted(checkpoint_dir(out).glob("gen_*.pkl"), reverse=True)
-    for path in files:
-        try:
-            with path.open("rb") as handle:
-                state = pickle.load(handle)
-        except (OSError, EOFError, pickle.UnpicklingError, AttributeError, ValueError):
-            continue  # a checkpoint from an older version or damaged: try the previous one
-        if state.get("format") != FORMAT:
-            raise OptimizeError(f"{path}: checkpoint format {state.get('format')!r}, expected {FORMAT}")
-        state["path"] = path
-        return state
-    return None
-
-
-def write_pickle(path: Path, obj: Any) -> Path:
-    """Pickle ``obj`` to ``path`` atomically."""
-    return atomic_write_bytes(Path(path), pickle.dumps(obj, protocol=pickle.HIGHEST_PROTOCOL))
-
-
-def read_pickle(path: Path) -> Any:
-    """Read a pickle written by :func:`write_pickle`."""
-    with Path(path).open("rb") as handle:
-        return pickle.load(handle)
+    states = read_checkpoints(out, "gen_*.pkl", FORMAT, OptimizeError, newest_only=True)
+    return states[0] if states else None

@@ -23,7 +23,8 @@ Rules (documented for machinists)
   tool retracts, rapids and plunges; only the remainder of the ramp (the NC
   kernel's speed-arrival wait) costs time. Every cutting line always gets its
   S word (also when unchanged), so the simulated and the written program are
-  the same program.
+  the same program. An S word that repeats the speed in effect costs nothing:
+  the NC kernel neither stops the path nor waits for it.
 """
 from __future__ import annotations
 

@@ -179,13 +179,24 @@ class LinewiseCrossover(Crossover):
 class LinewiseMutation(Mutation):
     """Mutate whole lines: each line with probability ``1/L`` (at least one line per individual).
 
-    A mutated line gets one of: a Gaussian step of its feed (σ = 15 % of the
-    range), a Gaussian step of its spindle speed, the spindle speed of the
-    previous cutting line with the feed scaled to keep the feed per tooth
-    (removing a spindle change and its ramp at about the same load), the feed
-    and speed of a neighbouring line, or feed and speed scaled together by a
-    log-normal factor (σ = 15 %: same feed per tooth, so about the same load).
+    A mutated line gets one of (equally likely):
+
+    0. a Gaussian step of its feed (σ = 15 % of the range);
+    1. a Gaussian step of its spindle speed;
+    2. the spindle speed of the previous cutting line with the feed scaled to keep the feed per tooth
+       (removing a spindle change and its ramp at about the same load);
+    3. the feed and speed of a neighbouring line;
+    4. feed and speed scaled together by a log-normal factor (σ = 15 %: same feed per tooth, so about the same
+       load);
+    5. the feed that puts the line at ``U(boundary)`` of the load limit at its spindle speed
+       (:meth:`.context.ProblemContext.chip_load_feeds`: the force of Eq. 10–13 is linear in the feed per tooth,
+       so the optimum of either objective lies on the load limit);
+    6. its spindle speed for *every* line, each line's feed scaled to keep its feed per tooth (no spindle change
+       left, about the same loads); this ends the individual's mutation.
     """
+
+    #: Range of the load fraction of operator 5.
+    boundary: tuple[float, float] = (0.9, 1.0)
 
     def __init__(self, prob: float = 1.0, sigma: float = 0.15) -> None:
         super().__init__(prob=prob)
@@ -203,7 +214,17 @@ class LinewiseMutation(Mutation):
             if lines.size == 0:
                 lines = np.array([random_state.integers(L)])
             for j in lines.tolist():
-                op = random_state.integers(5)
+                op = random_state.integers(7)
+                if op == 5 and problem.ctx.original_load_N.size == L:  # to the load limit at this line's S
+                    fraction = random_state.uniform(*self.boundary)
+                    step_f = problem.ctx.ranges.feed_step  # rounded down: the load estimate is linear, not exact
+                    X[i, 2 * j] = np.floor(problem.ctx.chip_load_feeds(X[i, 1::2], fraction)[j] / step_f) * step_f
+                    continue
+                if op == 6 and L > 1:  # this line's S everywhere, same feed per tooth on every line
+                    s = X[i, 2 * j + 1]
+                    X[i, 0::2] *= s / X[i, 1::2]
+                    X[i, 1::2] = s
+                    break
                 if op == 0:
                     X[i, 2 * j] += random_state.normal(0.0, self.sigma * span_f)
                 elif op == 1:

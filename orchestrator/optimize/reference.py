@@ -79,9 +79,11 @@ def build_reference(case: Case, program_text: str | None = None, ranges: Ranges 
         individuals are marked failed; see :mod:`.evaluate`).
     cutting_mode : {"path", "zmap"}
         ``"path"`` (default): the engagement along the program's path is
-        computed once and reused by every evaluation (several times faster;
-        per-line peak loads equal the Z-map model's to 0.01 N on the bundled
-        part). ``"zmap"``: every individual removes material from its own stock.
+        computed once and reused by every evaluation of the search (several
+        times faster; largest loads within 0.1 N of the Z-map model's on the
+        bundled parts, which :func:`~.run.optimize` uses for its final
+        re-simulation). ``"zmap"``: every individual removes material from its
+        own stock.
     """
     if case.stock is None:
         raise OptimizeError(f"{case.source or case.program}: the case has no [stock]; nothing is cut, nothing to optimise")

@@ -11,16 +11,18 @@ Paper's reference (``method="paper"``)
     ``fitness_limit``). Values are snapped to the same grid so that both
     methods write the same kind of program.
 
-The chosen program is re-simulated on its own (B = 1, rewritten text): the
-``after`` figures are those of the written program. With the default method a
-candidate that exceeds the load limit in this re-simulation is skipped for the
-next best (and the original program is kept when none passes).
+The chosen program is re-simulated on its own (B = 1, rewritten text) with
+the Z-map cutting model (material removed from the stock, not the search's
+path-mode engagement): the ``after`` figures are those of the written
+program. With the default method a candidate that exceeds the load limit in
+this re-simulation is skipped for the next best (and the original program is
+kept when none of the best five passes).
 """
 from __future__ import annotations
 
 import sys
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any, Callable
 
@@ -290,7 +292,8 @@ def _candidates(ctx, cache: dict, settings: OptimizeSettings) -> tuple[list[tupl
 
 
 def _resimulate(ctx, text: str):
-    run = run_twin(ctx, None, None, 1, channels=None, program_text=text)
+    """The written program alone (B = 1) on the Z-map cutting model, not the search's path-mode engagement."""
+    run = run_twin(replace(ctx, engagement=None), None, None, 1, channels=None, program_text=text)
     return figures(ctx, run, 1), run.recording
 
 
