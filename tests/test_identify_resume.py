@@ -84,7 +84,7 @@ def test_servo_job_killed_after_its_first_checkpoint_resumes_to_the_same_result(
     assert first.exists(), proc.stderr.read().decode() if proc.stderr else ""
     assert not (tmp_path / "report.json").exists()  # killed mid-job
     done = len(checkpoints(tmp_path))
-    assert 1 <= done < len(checkpoints(straight_out))
+    assert 0 < done < len(checkpoints(straight_out))
     resumed = identify("servo", [folder], out=tmp_path, machine=str(machine), resume=True)
     same_report(resumed, straight)
     assert resumed.scales_ == straight.scales_ and resumed.fitness_ == straight.fitness_
