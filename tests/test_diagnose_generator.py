@@ -69,3 +69,14 @@ def test_recorder_offset_resolution_and_missing_channels(nc_run):
     assert 0.0016 < dt.min() and dt.max() < 0.0018  # 1.7 ms with 0.1 ms jitter
     np.testing.assert_allclose(rec["z_mm"] * 1e3, np.round(rec["z_mm"] * 1e3), atol=1e-6)  # 1 µm encoder
     np.testing.assert_allclose(rec["z_tcmd_A"] * 100, np.round(rec["z_tcmd_A"] * 100), atol=1e-6)
+
+
+def test_rms_gap_closed_is_the_share_of_residual_power_above_noise_removed():
+    from types import SimpleNamespace
+
+    from orchestrator.diagnose.scorecard import rms_gap_closed
+
+    # a: 5 -> 3 over a noise floor of 1: (25 - 9) / (25 - 1) = 2/3; b sits on the noise floor; c is not recorded
+    d = SimpleNamespace(rms_before={"a": 5.0, "b": 1.1}, rms_after={"a": 3.0, "b": 1.0}, noise={"a": 1.0, "b": 1.0})
+    assert rms_gap_closed(d, ("a", "b", "c")) == pytest.approx(2.0 / 3.0)
+    assert rms_gap_closed(d, ("b",)) is None

@@ -133,14 +133,9 @@ def score(out: Path, seeds: int = 3, clean_seeds: int = 10) -> dict:
                         if v != 0.0 and k in e["parameters"] and not k.startswith("period"):
                             errors.append(abs(e["parameters"][k] - v) / abs(v))
             false_pos += len(names - set(effects))
-            # share of the residual power above the noise floor removed, on the channels that had any
-            shares = []
-            for c in ("z_fe_um", "z_tcmd_A"):
-                before, after, noise = d.rms_before[c], d.rms_after[c], d.noise[c]
-                if before > 1.2 * noise:
-                    shares.append((before ** 2 - after ** 2) / (before ** 2 - noise ** 2))
-            if shares:
-                closed.append(float(np.mean(shares)))
+            gap = rms_gap_closed(d, ("z_fe_um", "z_tcmd_A"))
+            if gap is not None:
+                closed.append(gap)
         rows[name] = {"runs": n, "detected": found / n if effects else None,
                       "false_effects_per_run": false_pos / n,
                       "median_relative_parameter_error": float(np.median(errors)) if errors else None,
@@ -157,6 +152,31 @@ def score(out: Path, seeds: int = 3, clean_seeds: int = 10) -> dict:
                      f"{r['max_time_offset_error_ms']:.3f} ms |")
     atomic_write_text(out / "scorecard.md", "\n".join(lines) + "\n")
     return rows
+
+
+def rms_gap_closed(d, channels: tuple[str, ...]) -> float | None:
+    """Mean share of the residual power above the noise floor that the diagnosis removed.
+
+    Parameters
+    ----------
+    d : Diagnosis
+        Its ``rms_before``, ``rms_after`` and ``noise`` per channel.
+    channels : tuple of str
+        Channels to score; those missing or with a residual within 1.2 x the noise floor are left out.
+
+    Returns
+    -------
+    float or None
+        ``mean((before**2 - after**2) / (before**2 - noise**2))``, or None when no channel had a residual.
+    """
+    shares = []
+    for c in channels:
+        if c not in d.rms_before:
+            continue
+        before, after, noise = d.rms_before[c], d.rms_after[c], d.noise[c]
+        if before > 1.2 * noise:
+            shares.append((before ** 2 - after ** 2) / (before ** 2 - noise ** 2))
+    return float(np.mean(shares)) if shares else None
 
 
 def main() -> None:  # pragma: no cover - a study, run by hand

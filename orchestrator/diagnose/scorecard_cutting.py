@@ -23,6 +23,7 @@ import numpy as np
 from ..atomic import atomic_write_json, atomic_write_text
 from .core import diagnose
 from .cutting_case import SHORT_PROGRAM, write_cutting_case
+from .scorecard import rms_gap_closed
 from .truth_cutting import Dynamometer
 
 #: Cutting scenarios near the detection limit of a 2.4 s recording with 1 N dynamometer noise.
@@ -82,15 +83,9 @@ def score_cutting(out: Path, seeds: int = 3, clean_seeds: int = 10) -> dict:
             unexplained += bool(d.unexplained)
             errors += parameter_errors(d.effects, effects, d.alignment.get("spindle_angle_deg", 0.0),
                                        math.degrees(truth["spindle_angle_at_first_force_sample_rad"]))
-            shares = []
-            for c in ("fx_N", "fy_N", "spindle_rpm"):
-                if c not in d.rms_before:
-                    continue
-                before, after, noise = d.rms_before[c], d.rms_after[c], d.noise[c]
-                if before > 1.2 * noise:
-                    shares.append((before ** 2 - after ** 2) / (before ** 2 - noise ** 2))
-            if shares:
-                closed.append(float(np.mean(shares)))
+            gap = rms_gap_closed(d, ("fx_N", "fy_N", "spindle_rpm"))
+            if gap is not None:
+                closed.append(gap)
         rows[name] = {"runs": n, "detected": found_all / n if effects else None,
                       "false_effects_per_run": false_pos / n, "runs_with_unexplained": unexplained / n,
                       "median_relative_parameter_error": float(np.median(errors)) if errors else None,
