@@ -4,6 +4,8 @@ Public API
 ----------
 optimize, OptimizeSettings, OptimizeResult
     Problem → Algorithm → Termination → Result, with checkpoints, workers and Dask.
+check_front_zmap
+    Pareto front points re-checked with their written programs on the Z-map cutting model.
 evaluate_population, Evaluation
     B individuals in one batched twin call.
 build_reference, ProblemContext, Ranges
@@ -18,9 +20,9 @@ from .errors import OptimizeError
 from .evaluate import Evaluation, evaluate_population
 from .problem import LineProblem
 from .reference import Reference, build_reference
-from .run import OptimizeResult, OptimizeSettings, optimize
+from .run import OptimizeResult, OptimizeSettings, check_front_zmap, optimize
 
 __all__ = [
     "Evaluation", "LineProblem", "OptimizeError", "OptimizeResult", "OptimizeSettings", "ProblemContext", "Ranges",
-    "Reference", "build_reference", "evaluate_population", "optimize",
+    "Reference", "build_reference", "check_front_zmap", "evaluate_population", "optimize",
 ]

@@ -38,7 +38,8 @@ def report_dict(result, ctx, settings) -> dict[str, Any]:
         "program": str(ctx.case.program),
         "case": str(ctx.case.source or ctx.case.folder),
         "settings": {**identity, "gens": settings.gens, "workers": settings.workers,
-                     "dask": None if settings.dask is None else str(settings.dask)},
+                     "dask": None if settings.dask is None else str(settings.dask),
+                     "check_front": bool(settings.check_front)},
         "cutting_line_rule": f"feed move removing >= {settings.min_removed_mm3:g} mm3 in the reference run",
         "removed_mm3_by_line": {str(k): v for k, v in sorted(ctx.removed_mm3.items())},
         "before": result.before,
@@ -64,6 +65,20 @@ def _envelope(x: np.ndarray, n: int) -> np.ndarray:
 
     padded = np.concatenate([np.full(n - 1, x[0]), x])
     return sliding_window_view(padded, n).max(axis=1)
+
+
+def _plot_front(ax, front: list[dict[str, Any]]) -> None:
+    """The front in the search's figures: filled markers pass the Z-map check, hollow ones exceed the limit."""
+    t = np.array([p["cycle_time_s"] for p in front], float)
+    c = np.array([p["cost_KRW"] for p in front], float)
+    status = [p.get("zmap_feasible") for p in front]
+    ax.plot(t, c, "-", color="tab:blue", lw=0.8)
+    ok = np.array([v is not False for v in status])
+    checked = any(v is not None for v in status)
+    ax.plot(t[ok], c[ok], "o", color="tab:blue",
+            label="feasible non-dominated" + (" (Z-map checked)" if checked else ""))
+    if not ok.all():
+        ax.plot(t[~ok], c[~ok], "o", mfc="none", mec="tab:red", mew=1.5, ms=8, label="over the limit in Z-map")
 
 
 def report_png(result, path: Path, title: str = "", load_limit_N: float | None = None) -> Path:
@@ -115,8 +130,7 @@ def report_png(result, path: Path, title: str = "", load_limit_N: float | None =
     ax_conv.set_ylabel("objective")
     ax_conv.legend()
     if result.front:
-        ax_front.plot([p["cycle_time_s"] for p in result.front], [p["cost_KRW"] for p in result.front], "o-",
-                      label="feasible non-dominated")
+        _plot_front(ax_front, result.front)
     for d, label, marker in ((result.before, "original", "s"), (result.after, "optimised", "*")):
         if d.get("cycle_time_s") is not None:
             ax_front.plot(d["cycle_time_s"], d["cost_KRW"], marker, ms=10, label=label)
