@@ -24,6 +24,14 @@ Per member and step ``[t, t + h]``:
 4. **Peak** — ``Fc`` at the ``n`` substep instants (table at each instant)
    and at every entry/exit instant inside a substep (engaged side), as the
    Z-map mode.
+
+Cost: a step whose stations hold no material above the tool's lowest point
+(:func:`material_near`) skips the substeps, with the same outputs. In the
+substeps one ``sin``/``cos`` pair per instant is computed; the teeth and the
+substep end are rotations of it (:func:`tooth_rotations`, the span), and the
+integrals reuse the sines and cosines of their ends, so only entry/exit angles
+and zero-chip crossings call ``sin``/``cos`` (within a few units in the last
+place of direct calls).
 """
 from __future__ import annotations
 
@@ -187,39 +195,6 @@ def locate(
 
 
 @njit
-def _add_integral(
-    kt: float, ke: float, depth: float, dx: float, dy: float, pa: float, pb: float, radius: float, omega: float,
-    scale: float, acc: np.ndarray,
-) -> None:
-    """``acc += scale * integral over [pa, pb] of (Fx, Fy, torque, MRR) d phi`` (as :func:`.force.interval_mean_quantities`)."""
-    h_a = dx * math.sin(pa) + dy * math.cos(pa)
-    h_b = dx * math.sin(pb) + dy * math.cos(pb)
-    if h_a < 0.0 and h_b < 0.0:
-        return
-    psi = math.atan2(dy, dx)
-    zero = pa + ((-psi - pa) % math.pi)
-    lo = pa if (h_a >= 0.0 or h_b < 0.0) else min(zero, pb)
-    if h_b >= 0.0:
-        hi = pb
-    elif h_a > 0.0:
-        hi = min(zero, pb)
-    else:
-        hi = pa
-    if hi <= lo:
-        return
-    s_lo, c_lo, s_hi, c_hi = math.sin(lo), math.cos(lo), math.sin(hi), math.cos(hi)
-    s2_lo, s2_hi = 2.0 * s_lo * c_lo, 2.0 * s_hi * c_hi
-    i_hcos = dx * 0.5 * (s_hi * s_hi - s_lo * s_lo) + dy * (0.5 * (hi - lo) + 0.25 * (s2_hi - s2_lo))
-    i_hsin = dx * (0.5 * (hi - lo) - 0.25 * (s2_hi - s2_lo)) + dy * 0.5 * (s_hi * s_hi - s_lo * s_lo)
-    i_h = -dx * (c_hi - c_lo) + dy * (s_hi - s_lo)
-    k = scale * kt * depth
-    acc[0] += -k * (i_hcos + ke * i_hsin)
-    acc[1] += k * (i_hsin - ke * i_hcos)
-    acc[2] += k * radius * i_h
-    acc[3] += scale * depth * radius * omega * i_h
-
-
-@njit
 def _depth_at(phi: float, ia: np.ndarray, ib: np.ndarray, it: np.ndarray, cnt: int, bottom: float) -> float:
     """Axial depth at immersion angle ``phi`` in ``[0, 2 pi)`` (0 in air); interval ends inclusive."""
     best = 0.0
@@ -235,21 +210,69 @@ def _depth_at(phi: float, ia: np.ndarray, ib: np.ndarray, it: np.ndarray, cnt: i
     return best
 
 
-@njit
-def force_at(
-    phi0: float, flutes: int, pitch: float, ia: np.ndarray, ib: np.ndarray, it: np.ndarray, cnt: int, bottom: float,
-    fxt: float, fyt: float, kt: float, ke: float,
-) -> tuple[float, float, float, float, int]:
-    """Force on the tool at one instant (tooth 0 at ``phi0``).
+@njit_inline
+def _add_integral(
+    kt: float, ke: float, depth: float, dx: float, dy: float, psi: float, pa: float, pb: float, s_a: float,
+    c_a: float, s_b: float, c_b: float, radius: float, omega: float, scale: float, acc: np.ndarray,
+) -> None:
+    """``acc += scale * integral over [pa, pb] of (Fx, Fy, torque, MRR) d phi`` (as :func:`.force.interval_mean_quantities`).
 
-    Returns
-    -------
-    fx, fy : float
-        Force on the tool, N.
-    depth, chip : float
-        Largest axial depth and chip thickness over engaged teeth, m.
-    engaged : int
-        Teeth in material with a positive chip.
+    Chip thickness clipped at zero. Takes ``psi = atan2(dy, dx)`` and the
+    sines and cosines of ``pa`` and ``pb``; only where the chip thickness
+    changes sign inside ``[pa, pb]`` is a sine and cosine computed (at the
+    zero crossing).
+    """
+    h_a = dx * s_a + dy * c_a
+    h_b = dx * s_b + dy * c_b
+    if h_a < 0.0 and h_b < 0.0:
+        return
+    s_lo, c_lo, s_hi, c_hi = s_a, c_a, s_b, c_b
+    lo = pa
+    hi = pb
+    if not (h_a >= 0.0 or h_b < 0.0):
+        zero = pa + ((-psi - pa) % math.pi)
+        if zero < pb:
+            lo = zero
+            s_lo, c_lo = math.sin(zero), math.cos(zero)
+        else:
+            lo = pb
+            s_lo, c_lo = s_b, c_b
+    if h_b < 0.0:
+        if h_a > 0.0:
+            zero = pa + ((-psi - pa) % math.pi)
+            if zero < pb:
+                hi = zero
+                s_hi, c_hi = math.sin(zero), math.cos(zero)
+        else:
+            hi = pa
+            s_hi, c_hi = s_a, c_a
+    if hi <= lo:
+        return
+    s2_lo, s2_hi = 2.0 * s_lo * c_lo, 2.0 * s_hi * c_hi
+    i_hcos = dx * 0.5 * (s_hi * s_hi - s_lo * s_lo) + dy * (0.5 * (hi - lo) + 0.25 * (s2_hi - s2_lo))
+    i_hsin = dx * (0.5 * (hi - lo) - 0.25 * (s2_hi - s2_lo)) + dy * 0.5 * (s_hi * s_hi - s_lo * s_lo)
+    i_h = -dx * (c_hi - c_lo) + dy * (s_hi - s_lo)
+    k = scale * kt * depth
+    acc[0] += -k * (i_hcos + ke * i_hsin)
+    acc[1] += k * (i_hsin - ke * i_hcos)
+    acc[2] += k * radius * i_h
+    acc[3] += scale * depth * radius * omega * i_h
+
+
+@njit_inline
+def force_at(
+    phi0: float, s0: float, c0: float, tooth: int, flutes: int, pitch: float, rot_c: np.ndarray,
+    rot_s: np.ndarray, ia: np.ndarray, ib: np.ndarray, it: np.ndarray, cnt: int, bottom: float, fxt: float,
+    fyt: float, kt: float, ke: float,
+) -> tuple[float, float, float, float, int]:
+    """Force on the tool at the instant tooth ``tooth`` is at ``phi0`` [rad], given ``s0 = sin(phi0)``, ``c0 = cos(phi0)``.
+
+    Returns ``(fx, fy, depth, chip, engaged)``: force on the tool [N], largest
+    axial depth and chip thickness over engaged teeth [m], teeth in material
+    with a positive chip. Tooth ``j`` is at ``phi0 + ((j - tooth) mod flutes) pitch``; its sine and
+    cosine come from ``(s0, c0)`` rotated by ``rot_c[i] = cos(i pitch)``,
+    ``rot_s[i] = sin(i pitch)`` (no ``sin``/``cos`` call; within a few units
+    in the last place of the direct values).
     """
     fx = 0.0
     fy = 0.0
@@ -259,10 +282,13 @@ def force_at(
     if cnt == 0:
         return fx, fy, dmax, hmax, n_in
     for j in range(flutes):
-        phi = phi0 + j * pitch
+        i = j - tooth
+        if i < 0:
+            i += flutes
+        phi = phi0 + i * pitch
         phi = phi - math.floor(phi / TWO_PI) * TWO_PI
-        s = math.sin(phi)
-        c = math.cos(phi)
+        s = s0 * rot_c[i] + c0 * rot_s[i]
+        c = c0 * rot_c[i] - s0 * rot_s[i]
         hc = fxt * s + fyt * c
         if not hc > 0.0:
             continue
@@ -376,6 +402,43 @@ def write_member(
     st[ST_DIST, m] = dist
 
 
+#: :func:`material_near` codes: no station has an interval; intervals, all below the tool; material to cut.
+NEAR_NONE, NEAR_BELOW, NEAR_CUT = 0, 1, 2
+
+
+@njit_inline
+def material_near(s_a: float, s_b: float, z_low: float, ds: float, count: np.ndarray, top: np.ndarray) -> int:
+    """What :func:`table_at` can return for an arc length between ``s_a`` and ``s_b`` [m] (``NEAR_*``).
+
+    Looks at the stations ``floor(s / ds) - 1 .. floor(s / ds) + 2`` that
+    interpolation and extrapolation read, with one more on each side for
+    rounding. ``NEAR_BELOW``: every interval's top is at or below ``z_low``
+    [m], the lowest tool bottom of the step, so no tooth has an axial depth
+    (tops are interpolated between stations, never beyond them).
+    """
+    last = count.shape[0] - 1
+    lo = max(int(math.floor(min(s_a, s_b) / ds)) - 2, 0)
+    hi = min(int(math.floor(max(s_a, s_b) / ds)) + 3, last)
+    code = NEAR_NONE
+    for i in range(lo, hi + 1):
+        for q in range(count[i]):
+            if top[i, q] > z_low:
+                return NEAR_CUT
+            code = NEAR_BELOW
+    return code
+
+
+@njit
+def tooth_rotations(flutes: int, pitch: float) -> tuple[np.ndarray, np.ndarray]:
+    """``cos(i pitch)`` and ``sin(i pitch)`` for ``i = 0 .. flutes - 1``, shapes (flutes,)."""
+    rot_c = np.empty(flutes)
+    rot_s = np.empty(flutes)
+    for i in range(flutes):
+        rot_c[i] = math.cos(i * pitch)
+        rot_s[i] = math.sin(i * pitch)
+    return rot_c, rot_s
+
+
 @njit
 def path_step(
     h: float, inp: np.ndarray, par: np.ndarray, st: np.ndarray, out: np.ndarray, engaged: np.ndarray,
@@ -422,6 +485,9 @@ def path_step(
     batch = inp.shape[1]
     ia, ib, it, ja, jb, jt = interval_buffers(alpha.shape[1])
     acc = np.zeros(4)
+    rot_c = np.empty(0)
+    rot_s = np.empty(0)
+    rot_flutes = -1
     bad = 0
     for m in range(batch):
         x1, y1, z1 = inp[0, m], inp[1, m], inp[2, m]
@@ -440,11 +506,17 @@ def path_step(
         if n > max_substeps:
             bad += fail_member(status, out, engaged, m, ERR_SUBSTEPS)  # this member fails; the others go on
             continue
+        if flutes != rot_flutes:  # tooth-to-tooth rotations, shared by members with the same flute count
+            rot_c, rot_s = tooth_rotations(flutes, pitch)
+            rot_flutes = flutes
         period = TWO_PI / (flutes * max(om, OMEGA_FLOOR))
         fxt = ddx / h * period
         fyt = ddy / h * period
+        psi = math.atan2(fyt, fxt)
         theta0 = st[ST_THETA, m]
         span = om * h / n
+        c_span = math.cos(span)
+        s_span = math.sin(span)
         acc[:] = 0.0
         peak = 0.0
         f_end_x = 0.0
@@ -452,15 +524,18 @@ def path_step(
         d_end = 0.0
         h_end = 0.0
         n_end = 0
-        any_material = False
-        for k in range(n):
+        near = material_near(s0, s1, max(min(z0, z0 + ddz), z_floor), ds, count, top)
+        any_material = near != NEAR_NONE
+        phi_k = theta0
+        s_k = math.sin(phi_k) if near == NEAR_CUT else 0.0
+        c_k = math.cos(phi_k) if near == NEAR_CUT else 1.0
+        for k in range(n if near == NEAR_CUT else 0):  # no axial depth anywhere in this step: no force
             f_mid = (k + 0.5) / n
             s_mid = s0 + f_mid * (s1 - s0)
             bottom = max(z0 + f_mid * ddz, z_floor)
             cm = table_at(s_mid, ds, count, alpha, beta, top, ia, ib, it)
             if cm > 0:
                 any_material = True
-                phi_k = theta0 + om * h * k / n
                 if span < 1e-9:
                     for j in range(flutes):
                         phi = phi_k + 0.5 * span + j * pitch
@@ -478,6 +553,10 @@ def path_step(
                         pa = phi_k + j * pitch
                         pa = pa - math.floor(pa / TWO_PI) * TWO_PI
                         pb = pa + span
+                        s_a = s_k * rot_c[j] + c_k * rot_s[j]
+                        c_a = c_k * rot_c[j] - s_k * rot_s[j]
+                        s_b = s_a * c_span + c_a * s_span
+                        c_b = c_a * c_span - s_a * s_span
                         for q in range(cm):
                             depth = it[q] - bottom
                             if not depth > 0.0:
@@ -487,24 +566,39 @@ def path_step(
                                 hi = min(pb, ib[q] + shift)
                                 if not hi > lo:
                                     continue
-                                _add_integral(kt, ke, depth, fxt, fyt, lo, hi, radius, om, 1.0 / span, acc)
+                                if lo == pa:
+                                    s_lo, c_lo = s_a, c_a
+                                else:
+                                    s_lo, c_lo = math.sin(lo), math.cos(lo)
+                                if hi == pb:
+                                    s_hi, c_hi = s_b, c_b
+                                else:
+                                    s_hi, c_hi = math.sin(hi), math.cos(hi)
+                                _add_integral(kt, ke, depth, fxt, fyt, psi, lo, hi, s_lo, c_lo, s_hi, c_hi,
+                                                   radius, om, 1.0 / span, acc)
                                 # both ends of the engaged stretch (engaged side): entry/exit instants,
                                 # and boundaries that move past a substep end between two frozen tables
                                 # (not the step start t: it belongs to the previous step)
-                                for edge in (lo, hi):
-                                    if edge == pa and k == 0:
-                                        continue
-                                    if fxt * math.sin(edge) + fyt * math.cos(edge) > 0.0:
-                                        fx, fy, _, _, _ = force_at(edge - j * pitch, flutes, pitch, ia, ib, it, cm,
-                                                                   bottom, fxt, fyt, kt, ke)
-                                        peak = max(peak, math.sqrt(fx * fx + fy * fy))
-            # the instant t + (k + 1) h / n
+                                if not (lo == pa and k == 0) and fxt * s_lo + fyt * c_lo > 0.0:
+                                    fx, fy, _, _, _ = force_at(lo, s_lo, c_lo, j, flutes, pitch, rot_c,
+                                                                       rot_s, ia, ib, it, cm, bottom, fxt, fyt,
+                                                                       kt, ke)
+                                    peak = max(peak, math.sqrt(fx * fx + fy * fy))
+                                if fxt * s_hi + fyt * c_hi > 0.0:
+                                    fx, fy, _, _, _ = force_at(hi, s_hi, c_hi, j, flutes, pitch, rot_c,
+                                                                       rot_s, ia, ib, it, cm, bottom, fxt, fyt,
+                                                                       kt, ke)
+                                    peak = max(peak, math.sqrt(fx * fx + fy * fy))
+            # the instant t + (k + 1) h / n: also the start of the next substep
             f1 = (k + 1.0) / n
+            phi_k = theta0 + om * h * (k + 1) / n
+            s_k = math.sin(phi_k)
+            c_k = math.cos(phi_k)
             cj = table_at(s0 + f1 * (s1 - s0), ds, count, alpha, beta, top, ja, jb, jt)
             if cj > 0:
                 any_material = True
-                fx, fy, dm, hm, ne = force_at(theta0 + om * h * f1, flutes, pitch, ja, jb, jt, cj,
-                                              max(z0 + f1 * ddz, z_floor), fxt, fyt, kt, ke)
+                fx, fy, dm, hm, ne = force_at(phi_k, s_k, c_k, 0, flutes, pitch, rot_c, rot_s, ja, jb,
+                                                      jt, cj, max(z0 + f1 * ddz, z_floor), fxt, fyt, kt, ke)
             else:
                 fx, fy, dm, hm, ne = 0.0, 0.0, 0.0, 0.0, 0
             peak = max(peak, math.sqrt(fx * fx + fy * fy))
