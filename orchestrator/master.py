@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import logging
 import math
+import sys
 from dataclasses import dataclass, field
 from typing import Callable, Literal, Sequence
 
@@ -88,8 +89,10 @@ class MasterSettings:
         outside marks the batch member as diverged (e.g. a runaway axis).
     compiled : bool
         Run the step loop compiled (:mod:`orchestrator.compiled`) when every
-        component is covered by it (all-native twins); same results bit for
-        bit. False: always the Python loop.
+        component is covered by it (all-native twins), or in C through the
+        FMUs' function pointers (:mod:`orchestrator.fmu.master_loop`) when
+        every component is an FMUComponent; same results bit for bit.
+        False: always the Python loop.
     """
 
     step: float = 1e-3
@@ -359,6 +362,12 @@ class Master:
             result = run_compiled(self)
             if result is not None:
                 return result
+            if f"{__package__}.fmu.component" in sys.modules:  # FMUComponents exist only once it is imported
+                from .fmu.master_loop import run_fast_fmu  # all-FMU systems: FastFMULoop (issue 9)
+
+                result = run_fast_fmu(self)
+                if result is not None:
+                    return result
         s = self.settings
         system = self.system
         comps = system.components

@@ -127,9 +127,12 @@ def _slope(run: Callable[[int], None], n: int) -> dict:
             "wall_s": t}
 
 
-def _master_runner(make_system: Callable, probes: tuple[str, ...], h: float = 1e-3) -> Callable[[int], None]:
+def _master_runner(make_system: Callable, probes: tuple[str, ...], h: float = 1e-3,
+                   compiled: bool = True) -> Callable[[int], None]:
+    """The master over a fresh system; ``compiled=False``: its Python loop (else the default: compiled paths)."""
     def run(steps: int) -> None:
-        result = Master(make_system(), MasterSettings(step=h, time_limit=steps * h), list(probes)).run()
+        settings = MasterSettings(step=h, time_limit=steps * h, compiled=compiled)
+        result = Master(make_system(), settings, list(probes)).run()
         if not result.success:
             raise CncTwinError(f"bench: master run failed: {result.message}")
     return run
@@ -162,9 +165,11 @@ def _plain_runner(make_system: Callable, probes: tuple[str, ...], h: float = 1e-
 
 
 def _paths(make_system: Callable, probes: tuple[str, ...], n: int) -> dict:
-    """Master, FastFMULoop and the plain fmpy loop over the same FMUs (each warmed up once)."""
+    """Master (default: its compiled FMU loop), its Python loop, FastFMULoop and the plain fmpy loop (warmed up)."""
     out = {}
-    for key, factory in (("master", _master_runner), ("plain_fmpy", _plain_runner)):
+    python_master = lambda make, probes: _master_runner(make, probes, compiled=False)  # noqa: E731
+    for key, factory in (("master", _master_runner), ("python_master", python_master),
+                         ("plain_fmpy", _plain_runner)):
         runner = factory(make_system, probes)
         runner(max(2, n // 10))  # warm-up
         out[key] = _slope(runner, n)
@@ -291,9 +296,11 @@ def run_bench(settings: BenchSettings | None = None, quick: bool = False,
         "fused_single": fused["single"]["us_per_step"],
         "native_ring_master": out["native_ring"]["master"]["us_per_step"],
         "c_fmu_master": c["master"]["us_per_step"],
+        "c_fmu_python_master": c["python_master"]["us_per_step"],
         "c_fmu_fast_loop": c["fast_loop"]["us_per_step"],
         "c_fmu_plain_fmpy": c["plain_fmpy"]["us_per_step"],
         "pythonfmu_master": p["master"]["us_per_step"],
+        "pythonfmu_python_master": p["python_master"]["us_per_step"],
         "pythonfmu_fast_loop": p["fast_loop"]["us_per_step"],
         "pythonfmu_plain_fmpy": p["plain_fmpy"]["us_per_step"],
     }
@@ -315,6 +322,8 @@ def run_bench(settings: BenchSettings | None = None, quick: bool = False,
         "c_fmu_master_over_fast_loop": ratio(us["c_fmu_master"], us["c_fmu_fast_loop"]),
         "c_fmu_master_over_plain_fmpy": ratio(us["c_fmu_master"], us["c_fmu_plain_fmpy"]),
         "c_fmu_master_over_native_ring_master": ratio(us["c_fmu_master"], us["native_ring_master"]),
+        "c_fmu_python_master_over_master": ratio(us["c_fmu_python_master"], us["c_fmu_master"]),
+        "pythonfmu_python_master_over_master": ratio(us["pythonfmu_python_master"], us["pythonfmu_master"]),
         "pythonfmu_master_over_plain_fmpy": ratio(us["pythonfmu_master"], us["pythonfmu_plain_fmpy"]),
         "pythonfmu_fast_loop_over_plain_fmpy": ratio(us["pythonfmu_fast_loop"], us["pythonfmu_plain_fmpy"]),
     }
@@ -330,6 +339,7 @@ def run_bench(settings: BenchSettings | None = None, quick: bool = False,
         f"native_population_{big}_rt_factor": (twin.get(f"batch_{big}", twin["single"])["rt_factor"],
                                                TARGETS["native_population_100_rt_factor_min"], ">="),
         "c_fmu_fast_loop_us_per_step": (us["c_fmu_fast_loop"], TARGETS["c_fmu_master_us_per_step_max"], "<="),
+        "c_fmu_master_us_per_step": (us["c_fmu_master"], TARGETS["c_fmu_master_us_per_step_max"], "<="),
         "pythonfmu_fast_loop_vs_plain_fmpy": (us["pythonfmu_fast_loop"], us["pythonfmu_plain_fmpy"], "<="),
         "pythonfmu_master_vs_plain_fmpy": (us["pythonfmu_master"], us["pythonfmu_plain_fmpy"], "<="),
     }

@@ -26,10 +26,18 @@ call and operation for operation, so recordings are bit-identical:
   ``(source × connection factor) × to_fmu`` (as :class:`FMUComponent` and
   :class:`~orchestrator.system.System` do).
 
-Only Real variables can be connected or recorded (discrete outputs of an
-:class:`FMUComponent` are refreshed once after the run). A status worse than
+Only Real variables can be connected. Recorded outputs and stop signals may
+also be Boolean or Integer (read with ``fmi2GetBoolean`` / ``fmi2GetInteger``
+after every step of their component); the other discrete outputs of an
+:class:`FMUComponent` are refreshed once after each run, and its unconnected
+discrete inputs keep the values set at initialisation. A run can end early:
+after the first step at which every stop signal is non-zero, or at a check
+step at which a checked output is not finite or outside its bounds (what
+:meth:`orchestrator.master.Master.run` needs to stop where its Python loop
+would, :mod:`orchestrator.fmu.master_loop`). A status worse than
 ``fmi2Warning`` ends the loop; :class:`FMUError` then names the component,
-the FMI function and the time, as :class:`FMUComponent` does.
+the FMI function and the time, as :class:`FMUComponent` does, and
+:attr:`FastFMULoop.partial` holds the steps completed before it.
 """
 from __future__ import annotations
 
@@ -55,9 +63,10 @@ if TYPE_CHECKING:
     from ..system import System
 
 #: FMI functions the loop calls, by the code the C loop reports in a failure.
-FUNCTIONS = ("fmi2SetReal", "fmi2DoStep", "fmi2GetReal")
+FUNCTIONS = ("fmi2SetReal", "fmi2DoStep", "fmi2GetReal", "fmi2GetBoolean", "fmi2GetInteger")
 
 _C_SOURCE = r"""
+#include <math.h>
 #include <stddef.h>
 #include <string.h>
 
@@ -67,6 +76,7 @@ typedef unsigned int fmi2ValueReference;
 typedef fmi2Status (*SetRealF)(fmi2Component, const fmi2ValueReference *, size_t, const double *);
 typedef fmi2Status (*GetRealF)(fmi2Component, const fmi2ValueReference *, size_t, double *);
 typedef fmi2Status (*DoStepF)(fmi2Component, double, double, int);
+typedef fmi2Status (*GetIntF)(fmi2Component, const fmi2ValueReference *, size_t, int *);
 
 typedef struct {
     int n_comp;
@@ -94,8 +104,27 @@ typedef struct {
     int n_rec;
     const int *rec_slot;
     double *rec;                  /* (n_steps + 1) x n_rec, row 0 written by the caller */
-    int err[4];                   /* component, function (0 set, 1 step, 2 get), tick, status */
+    int err[4];                   /* component, function (0 set, 1 step, 2 get, 3 getBoolean, 4 getInteger),
+                                     tick, status */
     long err_step;
+    /* discrete outputs read after each step (recorded or stop signals): slots n_real + i */
+    int n_real;
+    void **get_boolean;
+    void **get_integer;
+    const int *bool_start;        /* Boolean outputs of component c: bool_start[c] .. bool_start[c+1]-1 */
+    const unsigned int *bool_vr;
+    const int *int_start;         /* Integer outputs, slots after all Booleans */
+    const unsigned int *int_vr;
+    int *ibuffer;
+    double *in_last;              /* value (our units) each input received at its last step, -1 sources too */
+    int n_stop;                   /* stop when every stop slot is non-zero after a step */
+    const int *stop_slot;
+    int n_check;                  /* every check_every-th step: a check slot not finite or outside [lo, hi] */
+    int check_every;
+    const int *check_slot;
+    const double *check_lo;
+    const double *check_hi;
+    long k_end;                   /* steps done when cnct_run returned 2 (stop) or 3 (check) */
 } Loop;
 
 static int get_outputs(Loop *L, int c) {
@@ -107,9 +136,26 @@ static int get_outputs(Loop *L, int c) {
     return 0;
 }
 
+static int get_discrete(Loop *L, int c) {
+    int a = L->bool_start[c], b = L->bool_start[c + 1];
+    const int n_bool = L->bool_start[L->n_comp];
+    if (b > a) {
+        fmi2Status s = ((GetIntF)L->get_boolean[c])(L->comp[c], L->bool_vr + a, (size_t)(b - a), L->ibuffer);
+        if (s > 1) { L->err[1] = 3; L->err[3] = s; return 1; }
+        for (int i = a; i < b; ++i) L->slots[L->n_real + i] = L->ibuffer[i - a] ? 1.0 : 0.0;
+    }
+    a = L->int_start[c]; b = L->int_start[c + 1];
+    if (b > a) {
+        fmi2Status s = ((GetIntF)L->get_integer[c])(L->comp[c], L->int_vr + a, (size_t)(b - a), L->ibuffer);
+        if (s > 1) { L->err[1] = 4; L->err[3] = s; return 1; }
+        for (int i = a; i < b; ++i) L->slots[L->n_real + n_bool + i] = (double)L->ibuffer[i - a];
+    }
+    return 0;
+}
+
 int cnct_pull(Loop *L) {
     for (int c = 0; c < L->n_comp; ++c) {
-        if (get_outputs(L, c)) { L->err[0] = c; L->err[2] = -1; L->err_step = 0; return 1; }
+        if (get_outputs(L, c) || get_discrete(L, c)) { L->err[0] = c; L->err[2] = -1; L->err_step = 0; return 1; }
     }
     return 0;
 }
@@ -131,6 +177,7 @@ int cnct_run(Loop *L, long k0, long n_steps, double t0, double h) {
                 if (b > a) {
                     for (int i = a; i < b; ++i) {
                         double v = L->in_src[i] >= 0 ? src[L->in_src[i]] * L->in_factor[i] : L->in_const[i];
+                        L->in_last[i] = v;
                         L->buffer[i - a] = v * L->in_to[i];
                     }
                     s = ((SetRealF)L->set_real[c])(L->comp[c], L->in_vr + a, (size_t)(b - a), L->buffer);
@@ -141,11 +188,27 @@ int cnct_run(Loop *L, long k0, long n_steps, double t0, double h) {
                 }
                 s = ((DoStepF)L->do_step[c])(L->comp[c], t, L->tick_h[e], 1);
                 if (s > 1) { L->err[0] = c; L->err[1] = 1; L->err[2] = j; L->err[3] = s; L->err_step = k; return 1; }
-                if (get_outputs(L, c)) { L->err[0] = c; L->err[2] = j; L->err_step = k; return 1; }
+                if (get_outputs(L, c) || get_discrete(L, c)) {
+                    L->err[0] = c; L->err[2] = j; L->err_step = k; return 1;
+                }
             }
         }
         double *row = L->rec + (size_t)(k - k0 + 1) * (size_t)L->n_rec;
         for (int r = 0; r < L->n_rec; ++r) row[r] = L->slots[L->rec_slot[r]];
+        const long done = k + 1;
+        if (L->n_check > 0 && done % L->check_every == 0) {
+            for (int r = 0; r < L->n_check; ++r) {
+                const double v = L->slots[L->check_slot[r]];
+                if (!isfinite(v) || v < L->check_lo[r] || v > L->check_hi[r]) { L->k_end = done; return 3; }
+            }
+        }
+        if (L->n_stop > 0) {
+            int all = 1;
+            for (int r = 0; r < L->n_stop; ++r) {
+                if (L->slots[L->stop_slot[r]] == 0.0) { all = 0; break; }
+            }
+            if (all) { L->k_end = done; return 2; }
+        }
     }
     return 0;
 }
@@ -181,6 +244,23 @@ class _Loop(ctypes.Structure):
         ("rec", ctypes.POINTER(ctypes.c_double)),
         ("err", ctypes.c_int * 4),
         ("err_step", ctypes.c_long),
+        ("n_real", ctypes.c_int),
+        ("get_boolean", ctypes.POINTER(ctypes.c_void_p)),
+        ("get_integer", ctypes.POINTER(ctypes.c_void_p)),
+        ("bool_start", ctypes.POINTER(ctypes.c_int)),
+        ("bool_vr", ctypes.POINTER(ctypes.c_uint)),
+        ("int_start", ctypes.POINTER(ctypes.c_int)),
+        ("int_vr", ctypes.POINTER(ctypes.c_uint)),
+        ("ibuffer", ctypes.POINTER(ctypes.c_int)),
+        ("in_last", ctypes.POINTER(ctypes.c_double)),
+        ("n_stop", ctypes.c_int),
+        ("stop_slot", ctypes.POINTER(ctypes.c_int)),
+        ("n_check", ctypes.c_int),
+        ("check_every", ctypes.c_int),
+        ("check_slot", ctypes.POINTER(ctypes.c_int)),
+        ("check_lo", ctypes.POINTER(ctypes.c_double)),
+        ("check_hi", ctypes.POINTER(ctypes.c_double)),
+        ("k_end", ctypes.c_long),
     ]
 
 
@@ -253,15 +333,23 @@ class _Instance:
                 elif b.ours.causality == "output":
                     self.outputs[b.ours.name] = port
             self.discrete = {b.ours.name for b in obj._bindings if b.ours.type != "Real"}  # noqa: SLF001
+            self.discrete_outputs: dict[str, tuple[int, str]] = {
+                b.ours.name: (int(b.theirs.valueReference), b.ours.type)
+                for b in obj._bindings  # noqa: SLF001
+                if b.ours.causality == "output" and b.ours.type in ("Boolean", "Integer")}
         elif isinstance(obj, FMU2Slave):
             self.slave = obj
             md = read_model_description(obj.unzipDirectory, validate=False)
             self.inputs, self.outputs, self.discrete = {}, {}, set()
+            self.discrete_outputs = {}
             for v in md.modelVariables:
                 if v.causality not in ("input", "output"):
                     continue
                 if v.type != "Real":
                     self.discrete.add(v.name)
+                    if v.causality == "output" and v.type in ("Boolean", "Integer", "Enumeration"):
+                        kind = "Boolean" if v.type == "Boolean" else "Integer"
+                        self.discrete_outputs[v.name] = (int(v.valueReference), kind)
                     continue
                 (self.inputs if v.causality == "input" else self.outputs)[v.name] = _Port(int(v.valueReference), 1.0)
         else:
@@ -270,13 +358,13 @@ class _Instance:
         if not self.slave.component:
             raise FMUError(f"FastFMULoop: {name!r} is not instantiated (fmi2Instantiate first)", component=name)
 
-    def pointers(self) -> tuple[int, int, int, int]:
-        """(component, fmi2SetReal, fmi2GetReal, fmi2DoStep) as addresses."""
+    def pointers(self) -> tuple[int, ...]:
+        """(component, fmi2SetReal, fmi2GetReal, fmi2DoStep, fmi2GetBoolean, fmi2GetInteger) as addresses."""
         dll = self.slave.dll
         comp = self.slave.component
         comp = comp.value if isinstance(comp, ctypes.c_void_p) else int(comp)
         return (comp, *(ctypes.cast(getattr(dll, f), ctypes.c_void_p).value
-                        for f in ("fmi2SetReal", "fmi2GetReal", "fmi2DoStep")))
+                        for f in ("fmi2SetReal", "fmi2GetReal", "fmi2DoStep", "fmi2GetBoolean", "fmi2GetInteger")))
 
     def port(self, variable: str, causality: str) -> _Port:
         ports = self.inputs if causality == "input" else self.outputs
@@ -301,11 +389,17 @@ class FastLoopResult:
         Recorded outputs (our units), row ``k`` at ``t[k]``.
     names : list of str
         ``"component.variable"`` of each column.
+    event : {"end", "stop", "check", "error"}
+        Why the run returned: all steps done, the stop signals were all true
+        (after the last row), a checked output was not finite or outside its
+        bounds at a check step (the last row), or an FMI call failed (the rows
+        of the steps completed before it; see :attr:`FastFMULoop.partial`).
     """
 
     t: np.ndarray
     values: np.ndarray
     names: list[str]
+    event: str = "end"
 
     def __getitem__(self, name: str) -> np.ndarray:
         """Column of ``"component.variable"``."""
@@ -345,11 +439,26 @@ class FastFMULoop:
         Steps per communication step (default 1 each).
     method : {"gauss-seidel", "jacobi"}
         Coupling scheme.
+    stop : sequence of str, optional
+        ``"component.output"`` (Real, Boolean or Integer): :meth:`run` returns
+        early, with ``event = "stop"``, after the first step at which all of
+        them are non-zero.
+    checks : Mapping[str, (float, float)], optional
+        ``{"component.output": (low, high)}`` (Real): after every
+        ``check_every``-th step (counted from the first run), :meth:`run`
+        returns early, with ``event = "check"``, when one of them is not
+        finite or outside its bounds (``(-inf, inf)``: finite only).
+    check_every : int
+        Period of those checks, communication steps (>= 1 when ``checks``).
+
+    Record and stop references may name Boolean or Integer outputs too (read
+    with ``fmi2GetBoolean`` / ``fmi2GetInteger`` after every step of their
+    component, recorded as 0.0/1.0 or the integer as a float).
 
     Raises
     ------
     FMUError
-        Unknown names, non-Real variables, an input connected twice, no C compiler.
+        Unknown names, non-Real connected variables, an input connected twice, no C compiler.
 
     Examples
     --------
@@ -365,6 +474,9 @@ class FastFMULoop:
         order: Sequence[str] | None = None,
         rates: Mapping[str, int] | None = None,
         method: str = "gauss-seidel",
+        stop: Sequence[str] = (),
+        checks: Mapping[str, tuple[float, float]] | None = None,
+        check_every: int = 0,
     ) -> None:
         if not instances:
             raise FMUError("FastFMULoop: no instances given")
@@ -395,20 +507,47 @@ class FastFMULoop:
             self._unit(target).port(_split(target)[1], "input")
             self.connections.append((source, target, factor))
         self.record = list(record)
-        for ref in self.record:
-            self._unit(ref).port(_split(ref)[1], "output")
+        self.stop = list(stop)
+        self.checks = {ref: (float(lo), float(hi)) for ref, (lo, hi) in (checks or {}).items()}
+        if self.checks and (int(check_every) != check_every or check_every < 1):
+            raise FMUError(f"FastFMULoop: check_every must be a positive integer with checks, got {check_every!r}")
+        self.check_every = int(check_every)
+        self._discrete: list[tuple[int, str, int, str]] = []  # (unit index, variable, vr, Boolean | Integer)
+        for ref in self.record + self.stop:
+            self._output(ref, discrete_ok=True)
+        for ref in self.checks:
+            self._output(ref, discrete_ok=False)
         self._library = _library()
         self._k = 0
+        #: Result of the steps completed before an FMI call failed in the last :meth:`run` (else None).
+        self.partial: FastLoopResult | None = None
 
     @classmethod
-    def from_system(cls, system: System, record: Sequence[str] = (), method: str = "gauss-seidel") -> FastFMULoop:
+    def from_system(cls, system: System, record: Sequence[str] = (), method: str = "gauss-seidel",
+                    stop: Sequence[str] = (), checks: Mapping[str, tuple[float, float]] | None = None,
+                    check_every: int = 0) -> FastFMULoop:
         """The loop of a :class:`~orchestrator.system.System` whose components are all FMUComponents.
 
-        Execution order, rates and connections (with their unit factors) are the system's.
+        Execution order, rates and connections (with their unit factors) are the system's;
+        the other arguments are those of the constructor.
         """
         instances: Mapping = system.components
         return cls(instances, system.connections, record, order=system.execution_order(), rates=system.rates,
-                   method=method)
+                   method=method, stop=stop, checks=checks, check_every=check_every)
+
+    def _output(self, reference: str, discrete_ok: bool) -> None:
+        """Check that ``reference`` is a Real (or, with ``discrete_ok``, Boolean/Integer) output; note discrete ones."""
+        u = self._unit(reference)
+        var = _split(reference)[1]
+        if var in u.outputs:
+            return
+        if discrete_ok and var in u.discrete_outputs:
+            vr, kind = u.discrete_outputs[var]
+            entry = (self._index[u.name], var, vr, kind)
+            if entry not in self._discrete:
+                self._discrete.append(entry)
+            return
+        u.port(var, "output")  # raises, naming what there is
 
     def _unit(self, reference: str) -> _Instance:
         comp, _ = _split(reference)
@@ -461,6 +600,18 @@ class FastFMULoop:
                 out_vr.append(port.vr)
                 out_from.append(1.0 / port.to_fmu)
             out_start.append(len(out_vr))
+        n_real = len(out_vr)
+        bool_start, bool_vr, int_start, int_vr = [0], [], [0], []
+        bool_names, int_names = [], []
+        for i, u in enumerate(self.units):
+            for c, var, vr, kind in self._discrete:
+                if c == i:
+                    (bool_vr if kind == "Boolean" else int_vr).append(vr)
+                    (bool_names if kind == "Boolean" else int_names).append(f"{u.name}.{var}")
+            bool_start.append(len(bool_vr))
+            int_start.append(len(int_vr))
+        for i, ref in enumerate(bool_names + int_names):
+            slot_of[ref] = n_real + i
         source_of = {target: (source, factor) for source, target, factor in self.connections}
         in_start, in_vr, in_src, in_factor, in_to, in_const = [0], [], [], [], [], []
         for u in self.units:
@@ -489,9 +640,16 @@ class FastFMULoop:
         ptrs = [u.pointers() for u in self.units]
         counts = [b - a for a, b in zip(out_start, out_start[1:])] + [b - a for a, b in zip(in_start, in_start[1:])]
         width = max([1] + counts)
-        self._slots = np.zeros(max(1, len(out_vr)))
+        discrete_counts = ([b - a for a, b in zip(bool_start, bool_start[1:])]
+                           + [b - a for a, b in zip(int_start, int_start[1:])])
+        self._slots = np.zeros(max(1, n_real + len(bool_vr) + len(int_vr)))
         self._rec = np.zeros((n_steps + 1, len(self.record)))
-        keep += [self._slots, self._rec]
+        self._in_refs = [(u, name) for u in self.units for name in u.inputs]
+        self._in_last = np.array([float(u.owner.values[name][0]) if u.owner is not None else c
+                                  for (u, name), c in zip(self._in_refs, in_const)] or [0.0])
+        self._in_connected = [src >= 0 for src in in_src]
+        keep += [self._slots, self._rec, self._in_last]
+        checks = list(self.checks.items())
         dptr = ctypes.POINTER(ctypes.c_double)
         loop = _Loop(
             n_comp=len(self.units),
@@ -514,6 +672,21 @@ class FastFMULoop:
             n_rec=len(self.record),
             rec_slot=arr([slot_of[r] for r in self.record], ctypes.c_int),
             rec=self._rec.ctypes.data_as(dptr),
+            n_real=n_real,
+            get_boolean=arr([p[4] for p in ptrs], ctypes.c_void_p),
+            get_integer=arr([p[5] for p in ptrs], ctypes.c_void_p),
+            bool_start=arr(bool_start, ctypes.c_int), bool_vr=arr(bool_vr, ctypes.c_uint),
+            int_start=arr(int_start, ctypes.c_int), int_vr=arr(int_vr, ctypes.c_uint),
+            ibuffer=arr([0] * max([1] + discrete_counts), ctypes.c_int),
+            in_last=self._in_last.ctypes.data_as(dptr),
+            n_stop=len(self.stop),
+            stop_slot=arr([slot_of[r] for r in self.stop], ctypes.c_int),
+            n_check=len(checks),
+            check_every=max(1, self.check_every),
+            check_slot=arr([slot_of[r] for r, _ in checks], ctypes.c_int),
+            check_lo=arr([lo for _, (lo, _) in checks], ctypes.c_double),
+            check_hi=arr([hi for _, (_, hi) in checks], ctypes.c_double),
+            k_end=0,
         )
         self._slot_of = slot_of
         return loop, keep
@@ -545,18 +718,21 @@ class FastFMULoop:
         Returns
         -------
         FastLoopResult
-            Recorded outputs at ``t0 + k h`` for the steps of this run (row 0: before the first).
+            Recorded outputs at ``t0 + k h`` for the steps of this run (row 0: before the first);
+            fewer than ``n_steps`` when a stop signal or a check ended the run (``event``).
 
         Raises
         ------
         FMUError
-            A status worse than ``fmi2Warning``, naming component, function and time.
+            A status worse than ``fmi2Warning``, naming component, function and time;
+            :attr:`partial` then holds the rows of the steps completed before it.
         """
         if int(n_steps) != n_steps or n_steps < 0:
             raise FMUError(f"FastFMULoop: n_steps must be a non-negative integer, got {n_steps!r}")
         if not (h > 0.0 and math.isfinite(h)):
             raise FMUError(f"FastFMULoop: step must be positive and finite, got {h!r}")
         n_steps = int(n_steps)
+        self.partial = None
         if self._k == 0:
             self._initialize(t0)
         loop, keep = self._build(h, n_steps)
@@ -565,21 +741,36 @@ class FastFMULoop:
         self._rec[0] = [self._slots[self._slot_of[r]] for r in self.record]
         k0 = self._k
         status = self._library.cnct_run(ctypes.byref(loop), k0, n_steps, float(t0), float(h))
-        if status != 0:
-            raise self._error(loop, t0, h)
-        self._k = k0 + n_steps
+        event = {0: "end", 1: "error", 2: "stop", 3: "check"}[status]
+        k_end = {"end": k0 + n_steps, "error": int(loop.err_step)}.get(event, int(loop.k_end))
+        t = t0 + np.arange(k0, k_end + 1) * h
+        if event == "error":
+            error = self._error(loop, t0, h)
+            self.partial = FastLoopResult(t, self._rec[: k_end - k0 + 1], list(self.record), event)
+            self._write_back(error.time if error.time is not None else t0 + k_end * h)
+            del keep
+            raise error
+        self._k = k_end
         self._write_back(t0 + self._k * h)
         del keep
-        t = t0 + np.arange(k0, k0 + n_steps + 1) * h
-        return FastLoopResult(t, self._rec, list(self.record))
+        return FastLoopResult(t, self._rec[: k_end - k0 + 1], list(self.record), event)
 
     def _write_back(self, t_end: float) -> None:
-        """Hand the final outputs to the FMUComponents (Real from the loop, discrete read once)."""
+        """Hand the current values to the FMUComponents still initialised.
+
+        Real outputs from the loop, each connected input the value it received
+        at its component's last step, discrete outputs read once.
+        """
+        for (u, name), connected, value in zip(self._in_refs, self._in_connected, self._in_last):
+            if connected and u.owner is not None:
+                u.owner.values[name][0] = value
         for u in self.units:
             if u.owner is None:
                 continue
-            for name in u.outputs:
+            for name in u.outputs:  # a failed instance keeps the outputs of its last good step
                 u.owner.values[name][0] = self._slots[self._slot_of[f"{u.name}.{name}"]]
+            if u.owner.state != "initialized":
+                continue
             u.owner.time = t_end
             if u.discrete:
                 u.owner._get_discrete_outputs()  # noqa: SLF001 - same package; status-checked there
@@ -590,6 +781,8 @@ class FastFMULoop:
         function = FUNCTIONS[fn]
         n_fine = math.lcm(*self.rates.values())
         t = t0 + (int(loop.err_step) * n_fine + max(j, 0)) * (h / n_fine)
+        if fn >= 2 and j >= 0:  # reading outputs after fmi2DoStep: FMUComponent's time is the step's end
+            t = t + h / self.rates[u.name]
         if u.owner is not None:
             u.owner.time = t
             return u.owner._failure(function, status)  # noqa: SLF001 - same message and clean-up as FMUComponent
