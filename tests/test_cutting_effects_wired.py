@@ -407,11 +407,21 @@ def test_path_mode_agrees_with_zmap_mode_for_each_effect(effect):
     pos = along(verts, C / TOOTH_PERIOD * H)
     z = zmap_run(p, pos, OMEGA)
     q, _ = path_run(p, verts, pos, OMEGA)
-    # With a helix each band has its own arc at the block's corners: where one band's arc is narrower
-    # than a substep (first and last contact) the Z-map mode misses it while other bands still cut, so
-    # those steps (2 of about 1060 here) are not caught as "missed": 1 % of the steps may exceed TOL, none 5 %.
-    # (With angle_steps_per_tooth = 144 the two modes agree to 1e-4 of the peak on every step.)
-    assert_modes_agree(z, q, worst=0.05 if "helix_angle" in effect else 5e-3)
+    if "helix_angle" not in effect:
+        assert_modes_agree(z, q, worst=5e-3)
+        return
+    # With a helix the path mode integrates the instantaneous force exactly over the axial depth
+    # (checked against fine axial slices in test_diagnose_cutting_helix_chatter.py) while the Z-map
+    # mode sums helix bands (5 deg of lag each here), so only the step means, which average a band's
+    # lag spread over the substep, are compared: both modes use bands there. Where one band's arc at a
+    # block corner is narrower than a substep (first and last contact) the Z-map mode misses it while
+    # other bands still cut: 1 % of the steps may exceed 0.5 % of the peak, none 5 %.
+    peak = z["fc_peak"].max()
+    assert peak > 10.0
+    for n, scale in (("fx_mean", peak), ("fy_mean", peak), ("spindle_torque", peak * R), ("mrr", z["mrr"].max())):
+        err = np.abs(z[n] - q[n])
+        assert err.max() <= 0.05 * scale, n
+        assert np.mean(err > 5e-3 * scale) <= 0.01, n
 
 
 # ------------------------------------------------------------------------------------------ errors

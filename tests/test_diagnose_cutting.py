@@ -54,10 +54,9 @@ def test_each_cutting_effect_alone_is_found_with_its_parameters(effect, tmp_path
         diff = d.alignment["spindle_angle_deg"] + found["parameters"]["phase_deg"] - true_dir
         assert abs((diff + 180.0) % 360.0 - 180.0) < 5.0
         assert found["where"]["frequency_Hz"] == pytest.approx(100.0, rel=0.01)  # 6000 rpm
-    if effect != "helix_angle":  # the twin's helix bands leave ~1.5 N in the 3 mm side pass (README)
-        for ch in ("fx_N", "fy_N"):
-            assert d.rms_after[ch] <= 1.1 * d.noise[ch]
-        assert d.unexplained == []
+    for ch in ("fx_N", "fy_N"):
+        assert d.rms_after[ch] <= 1.1 * d.noise[ch]
+    assert d.unexplained == []
     channel = "spindle_rpm" if effect == "spindle_droop" else "fy_N"
     assert d.rms_before[channel] > d.rms_after[channel]
 
@@ -113,6 +112,27 @@ def test_chatter_is_a_growing_peak_off_the_spindle_harmonics(tmp_path):
     assert d.effects[0]["where"]["frequency_Hz"] == f
     assert len(d.effects[0]["where"]["time_s"]) == 1      # only the deep slot chatters
     assert d.unexplained == []
+    # the tool mode is refitted from the envelope (growth within the cut, limit cycle) and the stability
+    # relation; the spec's parameters stay frequency_Hz only, the mode goes to machine.toml and the evidence
+    assert set(d.effects[0]["parameters"]) == {"frequency_Hz"}
+    fit = d.cutting.chatter_fit
+    # the product k zeta sets the stability limit. Measured on this case: the twin with the truth's own
+    # mode starts chattering about 20 ms later than the truth and its limit cycle is 22 % lower (60 against
+    # 77 N; the twin keeps 4 surfaces, the truth one revolution: with 3 the twin reaches 69 N); a refit
+    # absorbs that with ~15 % lower k zeta: 35 % allowed
+    assert fit.stiffness_N_per_um * fit.damping_ratio == pytest.approx(30.0 * 0.03, rel=0.35)
+    assert 0.5 < fit.damping_ratio / 0.03 < 2.0 and 0.5 < fit.stiffness_N_per_um / 30.0 < 2.0
+    assert fit.natural_frequency_Hz == pytest.approx(1150.0, rel=0.02)
+    # band power around the chatter frequency: without the mode only the noise is there (60 Hz of the
+    # 1250 Hz band at 1 N against a ~77 N vibration: ~1e-5); with it, the twin's limit cycle is within
+    # the two models' 22 % amplitude difference at the same mode plus the grid step (13 %): power x 2
+    assert fit.band_power_before < 1e-3
+    assert 0.5 < fit.band_power_ratio < 2.0
+    assert fit.growth_twin_per_s == pytest.approx(fit.growth_per_s, rel=0.3)
+    machine = tomllib.loads(d.write(tmp_path / "out", plots=False)["machine"].read_text())["cutting"]["effects"]
+    assert machine["chatter_damping_ratio"]["value"] == pytest.approx(fit.damping_ratio, rel=1e-5)
+    assert machine["chatter_stiffness_N_per_um"]["value"] == pytest.approx(fit.stiffness_N_per_um, rel=1e-5)
+    assert f"damping ratio {fit.damping_ratio:.4f}" in d.effects[0]["evidence"]
 
 
 def test_a_vibration_outside_the_table_is_unexplained_with_its_frequency(tmp_path):

@@ -7,9 +7,15 @@ projection, substeps and engagement intervals are those of
 and tool mode those of :mod:`.kernel_effects` (shared scalar kernels in
 :mod:`.chip`), so both modes model the same physics:
 
-* each tooth is cut into helix bands (:func:`.effect_model.helix_bands`),
+* the instantaneous force of a helical flute (the ``fx``, ``fy`` outputs,
+  the peak at entry/exit instants) is integrated exactly over the axial depth
+  (:func:`_force_helix_exact`: ``phi(z) = phi_j - z tan(helix) / R`` turns the
+  axial integral into an angle integral of the chip's closed forms);
+* the substep means (mean force, torque, removal rate, the tool mode's load)
+  cut each tooth into helix bands (:func:`.effect_model.helix_bands`),
   band ``b`` at ``phi_j - lag_b`` cutting the material between ``z_lo_b`` and
-  ``z_hi_b`` above the tool tip (from the interval's top of material);
+  ``z_hi_b`` above the tool tip (from the interval's top of material): a
+  band's lag spread is averaged out by the mean over the substep;
 * in each substep, every band's sweep ``[phi_a, phi_b]`` is intersected with
   the engagement intervals and each piece integrated exactly with the
   generalised chip (:func:`.chip.add_piece`); the tooth's engaged depth for
@@ -40,6 +46,8 @@ from .path_kernel import (
 TWO_PI = 2.0 * math.pi
 #: Spindle turn per substep below which the point value replaces the exact integral, rad.
 SHORT_SPAN = 1e-9
+#: Most angle pieces of one helical flute at one instant (engagement intervals x turns of the flute).
+HELIX_PIECES = 64
 
 
 @njit
@@ -70,16 +78,126 @@ def _wrap(p: float) -> float:
 
 
 @njit
+def _helix_pieces(phi_j: float, tanh: float, radius: float, ia: np.ndarray, ib: np.ndarray, it: np.ndarray,
+                  cnt: int, bottom: float, ztip: float, lo_out: np.ndarray, hi_out: np.ndarray) -> int:
+    """Angle pieces swept by a helical flute over the material at one instant; returns how many.
+
+    The flute point at height ``z`` above the tool tip sits at ``phi_j - z tan(helix) / R``. For
+    each engagement interval ``q`` the flute is in material for ``z`` in ``[max(bottom - ztip, 0),
+    top_q - ztip]``, i.e. over an angle range of the same length times ``tan(helix) / R``; its
+    intersections with ``[alpha_q, beta_q] + 2 pi k`` are written to ``lo_out``, ``hi_out`` (rad,
+    unwrapped near ``phi_j``). The intervals of a station are disjoint, so the pieces are too.
+    """
+    n = 0
+    z1 = max(bottom - ztip, 0.0)
+    for q in range(cnt):
+        z2 = it[q] - ztip
+        if not z2 > z1:
+            continue
+        if tanh > 0.0:
+            plo = phi_j - z2 * tanh / radius
+            phi_hi = phi_j - z1 * tanh / radius
+        else:
+            plo = phi_j - z1 * tanh / radius
+            phi_hi = phi_j - z2 * tanh / radius
+        k0 = int(math.floor((plo - ib[q]) / TWO_PI))
+        k1 = int(math.ceil((phi_hi - ia[q]) / TWO_PI))
+        for k in range(k0, k1 + 1):
+            lo = max(plo, ia[q] + k * TWO_PI)
+            hi = min(phi_hi, ib[q] + k * TWO_PI)
+            if hi > lo and n < lo_out.shape[0]:
+                lo_out[n] = lo
+                hi_out[n] = hi
+                n += 1
+    return n
+
+
+@njit
+def _max_chip(forms: np.ndarray, nf: int, alpha: float, beta: float, lo: float, hi: float) -> float:
+    """Largest chip ``alpha min_i form_i - beta`` on ``[lo, hi]``: at the ends, the middle and each form's crest."""
+    best = max(chip_now(forms, nf, alpha, beta, lo), chip_now(forms, nf, alpha, beta, hi),
+               chip_now(forms, nf, alpha, beta, 0.5 * (lo + hi)))
+    for i in range(nf):
+        crest = math.atan2(forms[i, 0], forms[i, 1])  # a sin + b cos is largest there
+        crest += TWO_PI * math.ceil((lo - crest) / TWO_PI)
+        if crest <= hi:
+            best = max(best, chip_now(forms, nf, alpha, beta, crest))
+    return best
+
+
+@njit
+def _force_helix_exact(
+    phi0: float, flutes: int, pitch: float, tanh: float, radius: float, ia: np.ndarray, ib: np.ndarray,
+    it: np.ndarray, cnt: int, bottom: float, ztip: float, fxt: float, fyt: float, dq: np.ndarray, nf: int,
+    toff: np.ndarray, kt: float, ke: float, kte: float, kre: float, stiff: float, forms: np.ndarray,
+) -> tuple[float, float, float, float, int]:
+    """:func:`force_at_effects` of helical flutes, integrated exactly over the axial depth.
+
+    With ``phi(z) = phi_j - z tan(helix) / R`` (Altintas, *Manufacturing Automation*, ch. 2) the
+    force of flute ``j`` is ``int dF(phi(z)) dz = R / |tan(helix)| int dF(phi) dphi`` over the
+    pieces of :func:`_helix_pieces`, with ``dF`` the force per unit depth of the generalised chip
+    (runout, regeneration, static deflection, edge terms); the angle integrals are the closed forms
+    of :func:`.chip.add_piece` (zero crossings and envelope of the chip forms located exactly). The
+    engaged depth of a flute (static deflection) is ``R / |tan(helix)|`` times the angle measure of
+    its pieces with a positive geometric chip.
+    """
+    if cnt == 0:
+        return 0.0, 0.0, 0.0, 0.0, 0
+    scale = radius / abs(tanh)
+    lo = np.empty(HELIX_PIECES)
+    hi = np.empty(HELIX_PIECES)
+    acc = np.zeros(4)
+    tmp = np.zeros(6)
+    cuts = np.zeros(MAX_PASSES * (MAX_PASSES - 1) + 2)
+    fx = 0.0
+    fy = 0.0
+    hmax = 0.0
+    dmax = 0.0
+    n_in = 0
+    for j in range(flutes):
+        np_ = _helix_pieces(_wrap(phi0 + j * pitch), tanh, radius, ia, ib, it, cnt, bottom, ztip, lo, hi)
+        if np_ == 0:
+            continue
+        build_forms(forms, nf, fxt, fyt, dq, toff[j])
+        depth = 0.0
+        for i in range(np_):
+            tmp[:] = 0.0
+            chip.envelope_integrals(forms, nf, 1.0, 0.0, lo[i], hi[i], tmp, cuts)
+            depth += scale * tmp[5]
+        if not depth > 0.0:
+            continue
+        alpha, beta = deflection_factors(kt, ke, kre, depth, stiff)
+        acc[:] = 0.0
+        engaged = 0.0
+        for i in range(np_):
+            add_piece(kt, ke, kte, kre, 1.0, forms, nf, alpha, beta, fxt, fyt, lo[i], hi[i], radius, 1.0, scale,
+                      acc, tmp, cuts)
+            tmp[:] = 0.0
+            chip.envelope_integrals(forms, nf, alpha, beta, lo[i], hi[i], tmp, cuts)
+            if tmp[5] > 0.0:
+                engaged += scale * tmp[5]
+                hmax = max(hmax, _max_chip(forms, nf, alpha, beta, lo[i], hi[i]))
+        fx += acc[0]
+        fy += acc[1]
+        if engaged > 0.0:
+            n_in += 1
+            dmax = max(dmax, engaged)
+    return fx, fy, dmax, hmax, n_in
+
+
+@njit
 def force_at_effects(
     phi0: float, flutes: int, pitch: float, nb: int, lag: np.ndarray, z_lo: np.ndarray, z_hi: np.ndarray,
     ia: np.ndarray, ib: np.ndarray, it: np.ndarray, cnt: int, bottom: float, ztip: float, fxt: float, fyt: float,
     dq: np.ndarray, nf: int, toff: np.ndarray, kt: float, ke: float, kte: float, kre: float, stiff: float,
-    dsum: np.ndarray, forms: np.ndarray,
+    dsum: np.ndarray, forms: np.ndarray, tanh: float, radius: float,
 ) -> tuple[float, float, float, float, int]:
     """Force on the tool at one instant (tooth 0 at ``phi0``) with the effect terms.
 
     ``dq`` holds the regenerative displacements at that instant, ``toff`` the
-    runout offsets (nmax, passes) of the member, ``forms`` is work space.
+    runout offsets (nmax, passes) of the member, ``forms`` is work space. A
+    helical flute (``tanh != 0``) is integrated exactly over the axial depth
+    (:func:`_force_helix_exact`), not in bands; a straight one is one band.
 
     Returns
     -------
@@ -92,6 +210,9 @@ def force_at_effects(
     """
     if cnt == 0:
         return 0.0, 0.0, 0.0, 0.0, 0
+    if tanh != 0.0:
+        return _force_helix_exact(phi0, flutes, pitch, tanh, radius, ia, ib, it, cnt, bottom, ztip, fxt, fyt, dq,
+                                  nf, toff, kt, ke, kte, kre, stiff, forms)
     for j in range(flutes):
         dsum[j] = 0.0
         build_forms(forms, nf, fxt, fyt, dq, toff[j])
@@ -300,7 +421,7 @@ max_substeps
                                     fx, fy, _, _, _ = force_at_effects(
                                         edge - j * pitch + lag[b], flutes, pitch, nb, lag, z_lo, z_hi, ia, ib, it,
                                         cm, bottom, ztip, fxt, fyt, dq, nf, toff[m], kt, ke, kte, kre, stiff, dsum,
-                                        cuts_forms)
+                                        cuts_forms, epar[E_TANH, m], radius)
                                     peak = max(peak, math.sqrt(fx * fx + fy * fy))
             for i in range(4):
                 acc[i] += sub[i]
@@ -318,7 +439,8 @@ max_substeps
                 zt1 = z0 + f1 * ddz
                 fx, fy, dm, hm, ne = force_at_effects(
                     theta0 + om * h * f1, flutes, pitch, nb, lag, z_lo, z_hi, ja, jb, jt, cj, max(zt1, z_floor),
-                    zt1, fxt, fyt, dq, nf, toff[m], kt, ke, kte, kre, stiff, dsum, cuts_forms)
+                    zt1, fxt, fyt, dq, nf, toff[m], kt, ke, kte, kre, stiff, dsum, cuts_forms, epar[E_TANH, m],
+                    radius)
             else:
                 fx, fy, dm, hm, ne = 0.0, 0.0, 0.0, 0.0, 0
             peak = max(peak, math.sqrt(fx * fx + fy * fy))

@@ -14,14 +14,18 @@ from typing import Any, Callable
 
 import numpy as np
 
+from fmus_src.cutting.component import CuttingError
+
 from ..case import Case
 from ..recording import Recording
 from .cutting import (CuttingColumns, CuttingData, CuttingModel, cutting_columns, prepare_cutting, select_cutting,
                       start_model)
+from .cutting_chatter import ChatterFit, refit_chatter
 from .cutting_library import CUTTING_CHANNELS, CUTTING_EFFECT_PARAMETERS, CUTTING_EVENTS, machine_keys
 from .cutting_locate import ChatterPeak, chatter_peaks, force_unexplained, harmonic_ratio, windows_where
 from .cutting_refit import projector, refit_cutting, refit_droop
 from .cutting_replay import ForceReplay
+from .errors import DiagnosisError
 from .select import MIN_GAIN, Selection
 
 #: Model entries that are not effects.
@@ -59,6 +63,8 @@ class CuttingResult:
     log : list of str
     data, cols, sim : for the plots (``sim`` members: 0 baseline, 1 final).
     chatter : list of ChatterPeak
+    chatter_fit : ChatterFit or None
+        The refitted tool mode of the strongest chatter cut (:mod:`.cutting_chatter`).
     """
 
     effects: list[dict[str, Any]]
@@ -75,6 +81,7 @@ class CuttingResult:
     sim: ForceReplay | None = field(default=None, repr=False)
     chatter: list[ChatterPeak] = field(default_factory=list)
     droop_rows: tuple[np.ndarray, np.ndarray, np.ndarray] | None = field(default=None, repr=False)
+    chatter_fit: ChatterFit | None = field(default=None, repr=False)
 
 
 def _without(model: CuttingModel, effect: str) -> CuttingModel:
@@ -239,6 +246,7 @@ def diagnose_cutting(case: Case, recording: Recording, spindle_command: Callable
                          f"BIC {-droop_choice.delta_bic:.0f}"),
             "_score": droop_choice.delta_bic,
         })
+    chatter_fit = None
     if chatter:
         freq = float(np.median([p.frequency for p in chatter]))
         res = max(p.resolution for p in chatter)
@@ -247,6 +255,17 @@ def diagnose_cutting(case: Case, recording: Recording, spindle_command: Callable
         best = max(chatter, key=lambda p: p.snr)
         harmonic = freq / best.spindle_hz
         final["chatter"] = {"frequency_Hz": freq}
+        mode_text = ""
+        try:
+            mode = refit_chatter(data, final, best)
+        except (DiagnosisError, CuttingError, FloatingPointError, np.linalg.LinAlgError) as exc:
+            log.append(f"cutting: chatter mode not refitted ({exc}); only its frequency is reported")
+        else:
+            final["chatter"].update(natural_frequency_Hz=mode.natural_frequency_Hz,
+                                    damping_ratio=mode.damping_ratio, stiffness_N_per_um=mode.stiffness_N_per_um)
+            mode_text = "; " + mode.evidence()
+            log.append(f"cutting: chatter mode of cut {best.cut + 1}: {mode.evidence()}")
+            chatter_fit = mode
         effects.append({
             "effect": "chatter", "channels": list(CUTTING_CHANNELS["chatter"]),
             "where": {"time_s": windows, "lines": lines_of(windows), "event": CUTTING_EVENTS["chatter"],
@@ -256,7 +275,7 @@ def diagnose_cutting(case: Case, recording: Recording, spindle_command: Callable
             "evidence": (f"spectral peak at {freq:.1f} Hz in {len(chatter)} cut(s), {harmonic:.2f} x the spindle "
                          f"frequency (not a harmonic), {best.amplitude:.1f} N, {best.snr:.0f} x the spectral floor, "
                          f"growing x{best.growth:.2f} within the cut, absent in the air; not replayed sample by "
-                         "sample (regenerative): those cuts are left out of the force fit"),
+                         f"sample (regenerative): those cuts are left out of the force fit{mode_text}"),
             "_score": 1e9,
         })
     effects.sort(key=lambda d: -d["_score"])
@@ -275,7 +294,7 @@ def diagnose_cutting(case: Case, recording: Recording, spindle_command: Callable
         alignment["channels"]["spindle_rpm"] = {"scale": 1.0, "offset": _r(sp_offset, 4)}
     machine_values = _machine_values(case, data, final)
     return CuttingResult(effects, unexplained, rms_before, rms_after, noise, alignment, final, machine_values, log,
-                         data, cols, sim, chatter, droop_rows)
+                         data, cols, sim, chatter, droop_rows, chatter_fit)
 
 
 def _windows(t: np.ndarray, mask: np.ndarray) -> list[list[float]]:

@@ -147,6 +147,9 @@ def machine_keys(effect: str, params: Mapping[str, float]) -> dict[str, float]:
         "tool_deflection": {"tool_stiffness_N_per_um": p.get("stiffness_N_per_um", 0.0)},
         "tool_wear": {"wear_rate_percent_per_min": p.get("rate_percent_per_min", 0.0)},
         "spindle_droop": {"spindle_droop_rpm_per_Nm": p.get("rpm_per_Nm", 0.0)},
-        "chatter": {"chatter_frequency_Hz": p.get("frequency_Hz", 0.0)},
+        # the twin's tool mode: its natural frequency when refitted (else the chatter frequency), damping, stiffness
+        "chatter": {"chatter_frequency_Hz": p.get("natural_frequency_Hz", p.get("frequency_Hz", 0.0)),
+                    **({"chatter_damping_ratio": p["damping_ratio"]} if "damping_ratio" in p else {}),
+                    **({"chatter_stiffness_N_per_um": p["stiffness_N_per_um"]} if "stiffness_N_per_um" in p else {})},
     }
     return table[effect]

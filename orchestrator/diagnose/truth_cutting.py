@@ -10,7 +10,9 @@ the forces are summed here from the equations, on a fine time grid
 * **tooth by tooth, in axial slices** of :data:`SLICE_M`: a slice at height
   ``z`` above the tool tip sits at ``phi = theta + j p - z tan(helix) / R``
   (helix lag), is in the cut when ``phi`` lies in an engagement interval
-  whose material top is above the slice (partial slices by their overlap);
+  whose material top is above the slice (partial slices by their overlap;
+  a helical slice spans ``SLICE_M tan(helix) / R`` of angle and cuts with
+  the fraction of it inside the interval, :func:`_slice_overlap`);
 * **chip thickness from the path**: ``h = (c(t) - c(t - T)) . n`` with the
   tool-centre positions ``c`` one tooth period ``T`` apart (not the twin's
   velocity x period), ``n = (sin phi, cos phi)``;
@@ -36,8 +38,9 @@ the forces are summed here from the equations, on a fine time grid
 * **chatter**: an isotropic tool mode in x and y (frequency, damping ratio,
   stiffness) driven by the force on the tool, integrated in
   :data:`MODE_SUBSTEPS` substeps per fine step, with the regenerative chip
-  ``(u(t - T) - u(t)) . n``; beyond the stability lobe the vibration grows
-  until teeth leave the cut.
+  ``(u(t) - u(t - T)) . n`` (the tool displacement ``u`` now against when
+  the surface was left; Altintas ch. 3); beyond the stability lobe the
+  vibration grows until teeth leave the cut.
 
 The tool-centre path comes from the independent truth servo
 (:func:`.truth.simulate_truth`) run on the twin's NC commands, once without
@@ -118,6 +121,39 @@ def _interp_row(arr: np.ndarray, x: float) -> float:
 
 
 @njit
+def _slice_overlap(phi: float, span: float, ia: np.ndarray, ib: np.ndarray, it: np.ndarray, cm: int,
+                   bottom: float, z_lo: float, slice_m: float) -> tuple[float, float]:
+    """Cutting width of a helical slice and the angle of its part in material.
+
+    The slice ``[z_lo, z_lo + slice_m)`` of a helical flute covers the angles
+    ``[phi - span / 2, phi + span / 2]``; the fraction of them inside interval
+    ``c`` cuts with that interval's material height. Returns ``(w, phi_c)``:
+    the axial width [m] times the fraction in material, summed over the
+    (disjoint) intervals, and the weighted middle of those parts [rad].
+    Without this a slice enters the cut all at once, a jump of one slice's
+    force (2.6 N for 50 um at a 1 mm radial entry, 0.05 mm/tooth, A6061).
+    """
+    lo = phi - 0.5 * span
+    hi = phi + 0.5 * span
+    w = 0.0
+    moment = 0.0
+    for c in range(cm):
+        wc = min(max(it[c] - bottom - z_lo, 0.0), slice_m)
+        if wc <= 0.0:
+            continue
+        for shift in (-TWO_PI, 0.0, TWO_PI):
+            a = max(lo, ia[c] + shift)
+            b = min(hi, ib[c] + shift)
+            if b > a:
+                part = wc * (b - a) / span
+                w += part
+                moment += part * 0.5 * (a + b)
+    if w <= 0.0:
+        return 0.0, phi
+    return w, moment / w
+
+
+@njit
 def _cut_kernel(pos: np.ndarray, omega_cmd: np.ndarray, dt: float, q: np.ndarray, verts: np.ndarray,
                 vs: np.ndarray, ds: float, count: np.ndarray, alpha: np.ndarray, beta: np.ndarray,
                 top: np.ndarray, z_floor: float, slice_m: float, out: np.ndarray) -> None:
@@ -141,6 +177,7 @@ def _cut_kernel(pos: np.ndarray, omega_cmd: np.ndarray, dt: float, q: np.ndarray
     fn, zeta, kc, theta = q[12], q[13], q[14], q[15]
     pitch = TWO_PI / flutes
     tan_b = math.tan(helix)
+    span = slice_m * abs(tan_b) / radius  # spindle angle swept by one helical slice
     kmax = alpha.shape[1]
     ia = np.empty(kmax)
     ib = np.empty(kmax)
@@ -185,8 +222,10 @@ def _cut_kernel(pos: np.ndarray, omega_cmd: np.ndarray, dt: float, q: np.ndarray
         back = TWO_PI / (flutes * om) / dt if om > 1e-6 else 0.0
         for i in range(1, flutes + 1):
             kb = k - i * back
-            fpx[i] = cx - _interp_row(pos[:, 0], kb) + _interp_row(ux, kb) - u_now_x
-            fpy[i] = cy - _interp_row(pos[:, 1], kb) + _interp_row(uy, kb) - u_now_y
+            # the tool is now at c + u, the surface was left at c(t - iT) + u(t - iT): a tool pushed off
+            # the material (u . n < 0, the radial force's direction) takes a thinner chip
+            fpx[i] = cx - _interp_row(pos[:, 0], kb) + u_now_x - _interp_row(ux, kb)
+            fpy[i] = cy - _interp_row(pos[:, 1], kb) + u_now_y - _interp_row(uy, kb)
         wf = 1.0 + wear * t_cut
         depth_max = 0.0
         for c in range(cm):
@@ -206,12 +245,17 @@ def _cut_kernel(pos: np.ndarray, omega_cmd: np.ndarray, dt: float, q: np.ndarray
                     zc = z_lo + 0.5 * slice_m
                     phi = theta + j * pitch - zc * tan_b / radius
                     phi = phi - math.floor(phi / TWO_PI) * TWO_PI
-                    d = 0.0
-                    for c in range(cm):
-                        if (ia[c] <= phi <= ib[c]) or (phi + TWO_PI <= ib[c]):
-                            if it[c] - bottom > d:
-                                d = it[c] - bottom
-                    w = min(max(d - z_lo, 0.0), slice_m)
+                    if span > 0.0:
+                        # a helical slice sweeps [phi - span/2, phi + span/2]: the part of it inside each
+                        # interval cuts (a slice across an entry is partly in the cut), at that part's middle
+                        w, phi = _slice_overlap(phi, span, ia, ib, it, cm, bottom, z_lo, slice_m)
+                    else:
+                        d = 0.0
+                        for c in range(cm):
+                            if (ia[c] <= phi <= ib[c]) or (phi + TWO_PI <= ib[c]):
+                                if it[c] - bottom > d:
+                                    d = it[c] - bottom
+                        w = min(max(d - z_lo, 0.0), slice_m)
                     if w <= 0.0:
                         continue
                     sp = math.sin(phi)
