@@ -43,6 +43,7 @@ from .locate import Locator, residual_windows
 from .model import Model, Simulated, simulate
 from .prepare import Prepared, prepare, recorded_forces
 from .refit import Parameter, RefitResult, artefact_values, projectors, refit, residuals
+from .rest import add_stuck_artefacts
 from .select import MIN_GAIN, Choice, Selection, select
 
 #: Residual RMS (noise floors) above which a channel's remaining residual is looked at for `unexplained`.
@@ -236,7 +237,11 @@ def _name_and_refit(prep: Prepared, base: Model, lead: dict[str, float], vertica
                     ) -> tuple[dict[str, AxisColumns], dict[str, Selection], dict[str, list[Choice]], RefitResult]:
     """Library columns, selection per axis and the joint refit (steps 2-4 of the pipeline)."""
     say("building the effect library (batched replay)")
-    cols, _ = build(prep, base, lead, vertical)
+    cols, base_sim = build(prep, base, lead, vertical)
+    stuck = add_stuck_artefacts(prep.t, cols, base_sim, prep.disturbance)
+    if stuck:
+        log.append("held current of stuck, loaded axes fitted as artefacts: "
+                   + ", ".join(f"{a}: {n} stretches" for a, n in stuck.items()))
     selections: dict[str, Selection] = {}
     for a, c in cols.items():
         selections[a] = select(c.y, c.artefacts, c.variants, c.columns)
@@ -312,7 +317,8 @@ def _timing_check(prep: Prepared, cols: dict[str, AxisColumns], final: Model, fi
 def _evaluate_case(name: str, prep: Prepared, base: Model, final: Model, lead: dict[str, float],
                    cols: dict[str, AxisColumns] | None = None) -> CaseResult:
     if cols is None:
-        cols, _ = build(prep, base, lead)
+        cols, base_sim = build(prep, base, lead)
+        add_stuck_artefacts(prep.t, cols, base_sim, prep.disturbance)
     sim = simulate(prep.machine, prep.t, prep.commands, [base, final], prep.t_start, disturbance=prep.disturbance)
     return CaseResult(name, prep, cols, sim, _rms(prep, cols, sim, 0), _rms(prep, cols, sim, 1))
 

@@ -9,7 +9,7 @@ power above the noise floor that the diagnosed model removes
 (``(rms_before^2 - rms_after^2) / (rms_before^2 - noise^2)``, channels with
 ``rms_before > 1.2 noise``), into ``OUT_DIR/scorecard.json`` and
 ``OUT_DIR/scorecard.md``. With ``--cutting``: the cutting-process scorecard
-(:mod:`.scorecard_cutting`).
+(:mod:`.scorecard_cutting`), with ``--cutting --drives`` diagnosing the feed drives too.
 """
 from __future__ import annotations
 
@@ -186,13 +186,15 @@ def main() -> None:  # pragma: no cover - a study, run by hand
     parser.add_argument("--clean-seeds", type=int, default=10)
     parser.add_argument("--cutting", action="store_true",
                         help="the cutting-process scorecard (scorecard_cutting.json/.md) instead of the drives'")
+    parser.add_argument("--drives", action="store_true",
+                        help="with --cutting: diagnose the feed drives too (drive effects found count as false)")
     args = parser.parse_args()
     from ..cli import emit  # the command line's one output point
 
     if args.cutting:
         from .scorecard_cutting import score_cutting
 
-        rows = score_cutting(Path(args.out), args.seeds, args.clean_seeds)
+        rows = score_cutting(Path(args.out), args.seeds, args.clean_seeds, drives=args.drives)
     else:
         rows = score(Path(args.out), args.seeds, args.clean_seeds)
     emit(json.dumps(rows, indent=2))

@@ -3,10 +3,11 @@
 ``python -m orchestrator.diagnose.scorecard OUT_DIR --cutting [--seeds N] [--clean-seeds M]`` writes a
 case per scenario and seed with :func:`.cutting_case.write_cutting_case` (the short program: two slots at
 1 and 2 mm and a 1 mm side pass 3 mm deep, 6 mm 3-flute end mill, about 2.4 s of cutting), diagnoses its
-cutting process (``drives=False``) and tabulates per scenario: detection rate (every hidden effect
-found), false effects per run, median relative parameter error, and the share of the residual power
-above the noise floor that the diagnosed model removes on ``fx_N``, ``fy_N`` (and ``spindle_rpm``), into
-``OUT_DIR/scorecard_cutting.json`` and ``.md``.
+cutting process (``drives=False``; with ``--drives`` the feed drives too, as ``diagnose`` does by
+default, and any drive effect found counts as false: the recordings hide none) and tabulates per
+scenario: detection rate (every hidden effect found), false effects per run, median relative parameter
+error, and the share of the residual power above the noise floor that the diagnosed model removes on
+``fx_N``, ``fy_N`` (and ``spindle_rpm``), into ``OUT_DIR/scorecard_cutting.json`` and ``.md``.
 
 Parameter errors: runout by its eccentricity and by the direction of the eccentricity in the spindle
 frame (``spindle_angle_deg + phase_deg`` against the truth's, which does not depend on which tooth is
@@ -63,8 +64,18 @@ def parameter_errors(found: dict, truth_effects: dict, spindle_deg: float, truth
     return errors
 
 
-def score_cutting(out: Path, seeds: int = 3, clean_seeds: int = 10) -> dict:
-    """Run the cutting scorecard; returns the table as a dict (also written to ``out``)."""
+def score_cutting(out: Path, seeds: int = 3, clean_seeds: int = 10, drives: bool = False) -> dict:
+    """Run the cutting scorecard; returns the table as a dict (also written to ``out``).
+
+    Parameters
+    ----------
+    out : Path
+        Folder of the cases and the tables.
+    seeds, clean_seeds : int
+        Runs per effect scenario and of the clean scenario.
+    drives : bool
+        Diagnose the feed drives as well (the recordings hide no drive effect: any found is false).
+    """
     rows = {}
     scenarios = {"clean": {}, **CUTTING_SCENARIOS, "50 Hz hum (outside the table)": {}}
     for name, effects in scenarios.items():
@@ -74,7 +85,7 @@ def score_cutting(out: Path, seeds: int = 3, clean_seeds: int = 10) -> dict:
             hum = 5.0 if "hum" in name else 0.0
             folder = write_cutting_case(out / f"{_slug(name)}_{seed}", effects, seed + 100, program=SHORT_PROGRAM,
                                         dynamometer=Dynamometer(hum_N=hum))
-            d = diagnose(folder, drives=False)
+            d = diagnose(folder, drives=drives)
             truth = json.loads((folder / "truth.json").read_text())
             names = {e["effect"] for e in d.effects}
             if set(effects) <= names and (effects or not names):

@@ -9,8 +9,8 @@ equations (:func:`_axis_kernel`):
 * controller: P position loop every ``Tp``, PI velocity loop every ``Tv``,
   velocity feed-forward, integrator frozen while saturated, extra command
   delay by a sample history (not the twin's delay line);
-* drive: explicit (semi-implicit Euler) integration at ``Tv / 50`` with a
-  Karnopp stick/slip friction model (not the twin's event-located RK4),
+* drive: explicit Euler velocity and trapezoidal position updates at
+  ``Tv / 50`` with a Karnopp stick/slip friction model (not the twin's event-located RK4),
   gravity, spring, ripple and reversal friction evaluated at every substep;
 * table: lead error, screw deflection, backlash play and thermal drift
   applied to the motor position (the same physics, coded again).
@@ -126,7 +126,9 @@ def _axis_kernel(ref: np.ndarray, p: np.ndarray, tv: float, ratio: int, out: np.
             v_new = v + dt * (f - fr) / mass
             if v_new * d < 0.0:  # friction cannot reverse the motion within a substep
                 v_new = 0.0
-            dx = dt * v_new
+            # trapezoidal position update: x += dt v_new (semi-implicit Euler) would lead the continuous
+            # motion by dt (v_new - v_start) / 2 over a move, 0.75 µm at 0.3 m/s, seen as following error
+            dx = dt * 0.5 * (v + v_new)
             x += dx
             if v_new != 0.0:
                 s = 1.0 if v_new > 0.0 else -1.0
