@@ -224,28 +224,21 @@ def _add_integral(
     """
     h_a = dx * s_a + dy * c_a
     h_b = dx * s_b + dy * c_b
-    if h_a < 0.0 and h_b < 0.0:
-        return
+    if (h_a < 0.0 and h_b < 0.0) or (h_b < 0.0 and not h_a > 0.0):
+        return  # no chip, or a chip at the single instant pa
     s_lo, c_lo, s_hi, c_hi = s_a, c_a, s_b, c_b
     lo = pa
     hi = pb
-    if not (h_a >= 0.0 or h_b < 0.0):
+    if h_a < 0.0 or h_b < 0.0:  # the chip changes sign inside [pa, pb]: integrate its positive side
         zero = pa + ((-psi - pa) % math.pi)
         if zero < pb:
-            lo = zero
-            s_lo, c_lo = math.sin(zero), math.cos(zero)
-        else:
-            lo = pb
-            s_lo, c_lo = s_b, c_b
-    if h_b < 0.0:
-        if h_a > 0.0:
-            zero = pa + ((-psi - pa) % math.pi)
-            if zero < pb:
-                hi = zero
-                s_hi, c_hi = math.sin(zero), math.cos(zero)
-        else:
-            hi = pa
-            s_hi, c_hi = s_a, c_a
+            s_z, c_z = math.sin(zero), math.cos(zero)
+            if h_a < 0.0:
+                lo, s_lo, c_lo = zero, s_z, c_z
+            else:
+                hi, s_hi, c_hi = zero, s_z, c_z
+        elif h_a < 0.0:
+            return  # it turns positive only at pb
     if hi <= lo:
         return
     s2_lo, s2_hi = 2.0 * s_lo * c_lo, 2.0 * s_hi * c_hi
