@@ -13,7 +13,15 @@ Time discretisation of one communication step ``[t, t + h]``
   it (``theta += omega h``, wrapped to ``[0, 2 pi)``).
 * The step is cut into ``n`` substeps so that the spindle turns at most
   ``pitch / angle_steps_per_tooth`` and the tool moves at most ``R / 20`` per
-  substep. Forces are evaluated at the ``n + 1`` substep instants.
+  substep (with chatter on, also at least 32 substeps per period of the tool
+  mode). Forces are evaluated at the ``n + 1`` substep instants. ``n`` is
+  **per member**: the kernels take one count per member (a member with
+  fewer substeps than the largest leaves the extra instants out), so a
+  member's figures are those of its solo run, bit for bit, whatever batch
+  it is in, and the whole batch is still one kernel call. A member needing
+  more than :data:`MAX_SUBSTEPS` fails alone
+  (:meth:`~fmus_src.component.Component.fail_members`, the message names
+  it); a single run raises :class:`CuttingError`.
 * Step means (``fx_mean``, ``fy_mean``, torque, power, MRR) integrate each
   tooth exactly over each substep (closed-form integrals of the chip-thickness
   trigonometry, :func:`.force.interval_mean_quantities`, with the mean of the
@@ -29,8 +37,9 @@ Effect terms (diagnosis, issue 8)
 Runout, helix, edge force, static tool deflection, tool wear, spindle droop
 and regenerative chatter are parameters, all 0 (off, the paper's model) by
 default (:mod:`.effect_model`, physics in :mod:`.effects` and :mod:`.chip`).
-With runout, helix, edge force, deflection or chatter on, the step runs in
-:func:`.kernel_effects.cut_step_effects`; wear (``Kt x (1 + rate t_cut)``)
+With runout, helix, edge force, deflection or chatter on for a member, its
+step runs in :func:`.kernel_effects.cut_step_effects` (members without them
+stay on :func:`.kernel.cut_step`, as alone); wear (``Kt x (1 + rate t_cut)``)
 and droop (spindle speed minus ``droop x`` the previous step's torque) only
 change the inputs of :func:`.kernel.cut_step`, so with every term off the
 outputs are those of the baseline bit for bit.
@@ -44,8 +53,8 @@ import numpy as np
 from ..component import Component, Variable
 from ..errors import CncTwinError
 from .effect_model import CHATTER_SUBSTEPS_PER_PERIOD, EffectParameters, EffectState
-from .engagement import SweptPath
-from .kernel import cut_step
+from .engagement import NearField, SweptPath
+from .kernel import StepResult, cut_step
 from .kernel_effects import cut_step_effects
 from .stock import ZMapStock
 
@@ -211,21 +220,36 @@ class CuttingLoad(Component):
         return pos
 
     # ------------------------------------------------------------------ step
-    def _substeps(self, omega: np.ndarray, move: np.ndarray, h: float) -> int:
+    def _substeps(self, omega: np.ndarray, move: np.ndarray, h: float) -> np.ndarray:
+        """Substeps each member needs for a step, shape (B,) int (capped at ``MAX_SUBSTEPS + 1``).
+
+        Parameters
+        ----------
+        omega : ndarray, shape (B,)
+            Spindle speed over the step, rad/s (>= 0).
+        move : ndarray, shape (B,)
+            XY tool move over the step, m.
+        h : float
+            Step length, s.
+        """
         steps = np.asarray(self.values["angle_steps_per_tooth"], dtype=np.float64)
         pitch = 2.0 * math.pi / self._flutes
         # at most pitch/steps and at most pi/2 per substep (interval_mean_quantities needs < pi)
-        n_angle = np.ceil(omega * h / np.minimum(pitch / steps, 0.5 * math.pi) - 1e-9).max()
-        n_move = np.ceil(move / (0.05 * self._radius) - 1e-9).max()
+        n_angle = np.ceil(omega * h / np.minimum(pitch / steps, 0.5 * math.pi) - 1e-9)
+        n_move = np.ceil(move / (0.05 * self._radius) - 1e-9)
         # the tool mode (chatter) is stepped exactly per substep under the substep-mean force
-        n_mode = np.ceil(h * self._eff.chatter_wn / (2.0 * math.pi) * CHATTER_SUBSTEPS_PER_PERIOD - 1e-9).max()
-        n = int(max(1.0, n_angle, n_move, n_mode))
-        if n > MAX_SUBSTEPS:
-            raise CuttingError(
-                f"{self.name}: step of {h} s needs {n} substeps (spindle speed up to {omega.max():.4g} rad/s, "
-                f"tool move up to {move.max():.4g} m); expected at most {MAX_SUBSTEPS}"
-            )
-        return n
+        n_mode = np.ceil(h * self._eff.chatter_wn / (2.0 * math.pi) * CHATTER_SUBSTEPS_PER_PERIOD - 1e-9)
+        n = np.maximum(np.maximum(np.maximum(n_angle, n_move), n_mode), 1.0)
+        return np.minimum(n, MAX_SUBSTEPS + 1.0).astype(np.int64)
+
+    def _fail_substeps(self, bad: np.ndarray, omega: np.ndarray, move: np.ndarray, h: float) -> None:
+        """Fail the members ``bad`` (shape (B,) bool) needing over ``MAX_SUBSTEPS`` (raises when none is left)."""
+        m = int(np.flatnonzero(bad)[0])
+        more = "" if bad.sum() == 1 else f" (and {int(bad.sum()) - 1} more)"
+        reason = (f"{self.name}: step of {h} s of member {m}{more} needs more than {MAX_SUBSTEPS} substeps "
+                  f"(spindle speed {omega[m]:.4g} rad/s, tool move {move[m]:.4g} m); expected a spindle speed "
+                  "and a tool move per step within that (one is far too large)")
+        self.fail_members(bad, reason, CuttingError)
 
     def _step_inputs(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Tool position (B, 3) m, actual spindle speed (B,) rad/s and the members with non-finite inputs.
@@ -249,25 +273,32 @@ class CuttingLoad(Component):
             if var.causality == "output" and var.name != "spindle_angle":
                 self.values[var.name][lost] = 0 if var.type == "Integer" else np.nan
 
+    def _geometric_members(self) -> np.ndarray:
+        """Members with a term that changes the chip or the force law (runout, helix, edge, deflection, chatter)."""
+        e = self._eff
+        return ((e.eccentricity != 0) | (e.tan_helix != 0) | (e.kte != 0) | (e.kre != 0) | (e.stiffness != 0)
+                | (e.chatter_wn != 0))
+
     def _do_step(self, t: float, h: float) -> None:
         v = self.values
-        p_new, actual, lost = self._step_inputs()
+        p_new, actual, held = self._step_inputs()
+        failed = self.failed_members & ~held
+        if failed.any():  # failed here earlier: held still like a lost member, outputs NaN
+            p_new[failed] = self._p_prev[failed]
+            actual = np.where(failed, 0.0, actual)
+            held = held | failed
         omega = np.maximum(actual, 0.0)
         dp = p_new - self._p_prev
-        n = self._substeps(omega, np.hypot(dp[:, 0], dp[:, 1]), h)
-        wear = self._wear()
-        kt = np.asarray(v["kt"], dtype=np.float64) * wear
-        ke = np.asarray(v["ke"], dtype=np.float64)
-        if self._eff.geometric:
-            coefficients = np.stack([kt, ke, self._eff.kte * wear, self._eff.kre * wear])
-            r = cut_step_effects(
-                self.stock, self.path.near_field(), self._p_prev, p_new, self._theta, omega, h, n, self._radius,
-                self._flutes, np.asarray(v["angle_steps_per_tooth"], dtype=np.float64), coefficients, self._eff,
-                self._effect_state, np.asarray(v["stock_z_max"], dtype=np.float64),
-            )
-        else:
-            r = cut_step(self.stock, self.path.near_field(), self._p_prev, p_new, self._theta, omega, h, n,
-                         self._radius, self._flutes, kt, ke)
+        move = np.hypot(dp[:, 0], dp[:, 1])
+        n = self._substeps(omega, move, h)
+        too_many = (n > MAX_SUBSTEPS) & ~held
+        if too_many.any():
+            self._fail_substeps(too_many, omega, move, h)
+            p_new[too_many] = self._p_prev[too_many]
+            actual = np.where(too_many, 0.0, actual)
+            omega = np.where(too_many, 0.0, omega)
+            held = held | too_many
+        r = self._cut(p_new, omega, h, n, held)
         v["fx"][...] = -r.force[:, 0]
         v["fy"][...] = -r.force[:, 1]
         v["fc"][...] = np.hypot(r.force[:, 0], r.force[:, 1])
@@ -285,8 +316,70 @@ class CuttingLoad(Component):
         self._finish_effects(h, omega, actual)
         self._p_prev = p_new
         self._commit(p_new)
-        if lost.any():
-            self._blank(lost)
+        if held.any():
+            self._blank(held)
+
+    def _cut(self, p_new: np.ndarray, omega: np.ndarray, h: float, n: np.ndarray, held: np.ndarray) -> StepResult:
+        """Kernel results of one step for every member.
+
+        Parameters
+        ----------
+        p_new : ndarray, shape (B, 3)
+            Tool-tip position at ``t + h``, m.
+        omega : ndarray, shape (B,)
+            Spindle speed over the step, rad/s (>= 0).
+        h : float
+            Step length, s.
+        n : ndarray of int, shape (B,)
+            Substeps per member (:meth:`_substeps`).
+        held : ndarray of bool, shape (B,)
+            Members not computed (lost or failed): zero results.
+
+        Returns
+        -------
+        StepResult
+            Shapes (B, ...). One kernel call per kernel in use: members with an
+            effect term that changes the chip or the force law run in
+            :func:`.kernel_effects.cut_step_effects`, the others in
+            :func:`.kernel.cut_step`, as each would alone.
+        """
+        geometric = self._geometric_members()
+        near = self.path.near_field()
+        live = ~held
+        if live.all() and (geometric.all() or not geometric.any()):
+            return self._cut_rows(None, near, p_new, omega, h, n, bool(geometric[0]))
+        B = self.batch
+        force, mean = np.zeros((B, 2)), np.zeros((B, 4))
+        peak, axial, chip = np.zeros(B), np.zeros(B), np.zeros(B)
+        engaged = np.zeros(B, dtype=np.int64)
+        for kind in (False, True):
+            rows = np.flatnonzero(live & (geometric == kind))
+            if rows.size == 0:
+                continue
+            r = self._cut_rows(rows, near, p_new, omega, h, n, kind)
+            force[rows], mean[rows], peak[rows] = r.force, r.mean, r.fc_peak
+            axial[rows], chip[rows], engaged[rows] = r.axial_depth, r.chip_thickness, r.engaged_teeth
+        return StepResult(force=force, fc_peak=peak, mean=mean, axial_depth=axial, chip_thickness=chip,
+                          engaged_teeth=engaged)
+
+    def _cut_rows(self, rows: np.ndarray | None, near: NearField, p_new: np.ndarray, omega: np.ndarray, h: float,
+                  n: np.ndarray, geometric: bool) -> StepResult:
+        """One kernel call for the members ``rows`` (``None``: all); ``n`` of shape (B,) as :meth:`_cut`."""
+        v = self.values
+        sel = slice(None) if rows is None else rows
+        wear = self._wear()[sel]
+        kt = np.asarray(v["kt"], dtype=np.float64)[sel] * wear
+        ke = np.asarray(v["ke"], dtype=np.float64)[sel]
+        if geometric:
+            coefficients = np.stack([kt, ke, self._eff.kte[sel] * wear, self._eff.kre[sel] * wear])
+            return cut_step_effects(
+                self.stock, near, self._p_prev[sel], p_new[sel], self._theta[sel], omega[sel], h, n[sel],
+                self._radius[sel], self._flutes[sel],
+                np.asarray(v["angle_steps_per_tooth"], dtype=np.float64)[sel], coefficients, self._eff,
+                self._effect_state, np.asarray(v["stock_z_max"], dtype=np.float64)[sel], rows,
+            )
+        return cut_step(self.stock, near, self._p_prev[sel], p_new[sel], self._theta[sel], omega[sel], h, n[sel],
+                        self._radius[sel], self._flutes[sel], kt, ke, rows)
 
     def _commit(self, position: np.ndarray) -> None:
         """Store the new tool position and move old path segments into the Z-map."""

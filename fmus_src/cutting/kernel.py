@@ -11,6 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import CncTwinError
 from .engagement import NearField, tooth_depth
 from .force import chip_thickness, interval_mean_quantities, tooth_quantities
 from .stock import ZMapStock
@@ -49,11 +50,23 @@ class StepResult:
     engaged_teeth: np.ndarray
 
 
+def substep_counts(n: int | np.ndarray, batch: int) -> np.ndarray:
+    """Substeps per member, shape (batch,) int64, from one count or one per member (each >= 1)."""
+    ns = np.array(np.broadcast_to(np.asarray(n, dtype=np.int64), (batch,)))
+    if ns.size and ns.min() < 1:
+        raise CncTwinError(f"cutting kernel: substep counts must be integers >= 1, got {ns.min()}")
+    return ns
+
+
 def step_kinematics(
-    p_old: np.ndarray, p_new: np.ndarray, theta0: np.ndarray, omega: np.ndarray, h: float, n: int,
+    p_old: np.ndarray, p_new: np.ndarray, theta0: np.ndarray, omega: np.ndarray, h: float, n: np.ndarray,
     flutes: np.ndarray,
 ) -> tuple[np.ndarray, int, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Tool motion over a step of ``n`` substeps (linear move, constant spindle speed); arguments as :func:`cut_step`.
+
+    ``n`` is per member, shape (B,) (:func:`substep_counts`); with ``K = max(n)``
+    the instants ``k > n[b]`` of member ``b`` repeat its end of step (``k / n = 1``),
+    the others are ``t + k h / n[b]`` exactly as for a batch of that member alone.
 
     Returns
     -------
@@ -63,9 +76,9 @@ def step_kinematics(
         Most teeth of a member.
     pitch : ndarray, shape (B,)
         Tooth pitch, rad.
-    centre : ndarray, shape (B, n + 1, 3)
+    centre : ndarray, shape (B, K + 1, 3)
         Tool tip at the instants ``t + k h / n``, m.
-    theta : ndarray, shape (B, n + 1)
+    theta : ndarray, shape (B, K + 1)
         Spindle angle (tooth 0) at those instants, rad.
     feed : ndarray, shape (B, 2)
         Feed per tooth vector from the tool-centre velocity over the step, m.
@@ -73,9 +86,10 @@ def step_kinematics(
     dp = p_new - p_old
     nmax = int(flutes.max())
     pitch = 2.0 * math.pi / flutes
-    frac = np.arange(n + 1) / n  # (n+1,)
-    centre = p_old[:, None, :] + frac[None, :, None] * dp[:, None, :]  # (B, n+1, 3)
-    theta = theta0[:, None] + (omega * h)[:, None] * frac[None, :]  # (B, n+1)
+    k = np.arange(int(n.max()) + 1)
+    frac = np.minimum(k[None, :], n[:, None]) / n[:, None]  # (B, K+1)
+    centre = p_old[:, None, :] + frac[:, :, None] * dp[:, None, :]  # (B, K+1, 3)
+    theta = theta0[:, None] + (omega * h)[:, None] * frac  # (B, K+1)
     period = 2.0 * math.pi / (flutes * np.maximum(omega, OMEGA_FLOOR))
     feed = dp[:, :2] / h * period[:, None]  # (B, 2)
     return dp, nmax, pitch, centre, theta, feed
@@ -83,7 +97,8 @@ def step_kinematics(
 
 def cut_step(
     stock: ZMapStock, near: NearField, p_old: np.ndarray, p_new: np.ndarray, theta0: np.ndarray,
-    omega: np.ndarray, h: float, n: int, radius: np.ndarray, flutes: np.ndarray, kt: np.ndarray, ke: np.ndarray,
+    omega: np.ndarray, h: float, n: int | np.ndarray, radius: np.ndarray, flutes: np.ndarray, kt: np.ndarray,
+    ke: np.ndarray, rows: np.ndarray | None = None,
 ) -> StepResult:
     """Cutting forces while the tool moves linearly from ``p_old`` to ``p_new`` in ``h`` seconds.
 
@@ -101,24 +116,39 @@ def cut_step(
         Spindle speed, held over the step, rad/s (>= 0).
     h : float
         Step length, s.
-    n : int
-        Substeps (the ``n + 1`` instants ``t + k h / n`` are evaluated).
+    n : int or ndarray of int, shape (B,)
+        Substeps, one count or one per member (the ``n + 1`` instants
+        ``t + k h / n`` of each member are evaluated; a member's figures are
+        those of its run alone, whatever the counts of the others).
     radius : ndarray, shape (B,)
         Tool radius, m.
     flutes : ndarray of int, shape (B,)
         Teeth per member.
     kt, ke : ndarray, shape (B,)
         Cutting coefficients, N/m2 and 1.
+    rows : ndarray of int, shape (B,), optional
+        Batch index in ``stock`` and ``near`` of each member of the other
+        arguments, when they are a subset of the members ``stock`` and
+        ``near`` hold (e.g. the members without effect terms);
+        ``None``: all of them, in order. A member's figures do not depend on
+        the other members passed with it.
 
     Returns
     -------
     StepResult
+        Shapes (B, ...) with B = ``p_old.shape[0]``.
     """
     B = p_old.shape[0]
     R = radius
-    dp, nmax, pitch, centre, theta, feed = step_kinematics(p_old, p_new, theta0, omega, h, n, flutes)
+    rows = np.arange(B) if rows is None else np.asarray(rows, dtype=np.int64)
+    ns = substep_counts(n, B)
+    dp, nmax, pitch, centre, theta, feed = step_kinematics(p_old, p_new, theta0, omega, h, ns, flutes)
+    K = theta.shape[1] - 1
+    # instants and substeps of each member (beyond its own count: not evaluated, no contribution)
+    inst_ok = np.arange(K + 1)[None, :] <= ns[:, None]  # (B, K+1)
+    sub_ok = (np.arange(K)[None, :] < ns[:, None])[:, :, None]  # (B, K, 1)
     teeth = np.arange(nmax)
-    phi = theta[:, :, None] + teeth[None, None, :] * pitch[:, None, None]  # (B, n+1, N)
+    phi = theta[:, :, None] + teeth[None, None, :] * pitch[:, None, None]  # (B, K+1, N)
     tooth_ok = (teeth[None, :] < flutes[:, None])[:, None, :]
     hc = chip_thickness(feed[:, 0, None, None], feed[:, 1, None, None], phi)
 
@@ -126,25 +156,25 @@ def cut_step(
     shape = phi.shape
     member = np.broadcast_to(np.arange(B)[:, None, None], shape).ravel()
     c_flat = np.broadcast_to(centre[:, :, None, :], shape + (3,)).reshape(-1, 3)
-    active = (np.broadcast_to(tooth_ok, shape) & (hc > 0.0)).ravel()
-    depth = tooth_depth(stock, near, member, c_flat, phi.ravel(), R[member], active).reshape(shape)
+    active = (np.broadcast_to(tooth_ok, shape) & (hc > 0.0) & inst_ok[:, :, None]).ravel()
+    depth = tooth_depth(stock, near, rows[member], c_flat, phi.ravel(), R[member], active).reshape(shape)
 
     q = tooth_quantities(kt[:, None, None], ke[:, None, None], depth, hc, phi,
-                         R[:, None, None], omega[:, None, None])  # (B, n+1, N, 4)
-    f_tot = q[..., :2].sum(axis=2)  # (B, n+1, 2) on the tool
+                         R[:, None, None], omega[:, None, None])  # (B, K+1, N, 4)
+    f_tot = q[..., :2].sum(axis=2)  # (B, K+1, 2) on the tool
     fc_samples = np.hypot(f_tot[..., 0], f_tot[..., 1])
     peak = fc_samples[:, 1:].max(axis=1)
 
     engaged = depth > 0.0
-    both = engaged[:, :-1] & engaged[:, 1:]
+    both = engaged[:, :-1] & engaged[:, 1:] & sub_ok
     fx_t = feed[:, 0, None, None]
     fy_t = feed[:, 1, None, None]
     q_int = interval_mean_quantities(
         kt[:, None, None], ke[:, None, None], 0.5 * (depth[:, :-1] + depth[:, 1:]), fx_t, fy_t,
         phi[:, :-1], phi[:, 1:], R[:, None, None], omega[:, None, None],
-    )  # (B, n, N, 4)
+    )  # (B, K, N, 4)
     integral = np.where(both[..., None], q_int, 0.0).sum(axis=(1, 2))  # (B, 4), in substeps
-    change = engaged[:, :-1] ^ engaged[:, 1:]
+    change = (engaged[:, :-1] ^ engaged[:, 1:]) & sub_ok
     if np.any(change):
         bb, kk, jj = np.nonzero(change)
         e_lo = engaged[bb, kk, jj]
@@ -154,19 +184,19 @@ def cut_step(
         inner = np.arange(1, SECTIONS) / SECTIONS  # (S-1,)
         for _ in range(SECTION_ROUNDS):
             s_try = lo[:, None] + width * inner[None, :]  # (M, S-1)
-            f = (kk[:, None] + s_try) / n
+            f = (kk[:, None] + s_try) / ns[bb][:, None]
             c_try = p_old[bb][:, None, :] + f[..., None] * dp[bb][:, None, :]
             phi_try = theta0[bb][:, None] + (omega[bb] * h)[:, None] * f + (jj * pitch[bb])[:, None]
             m_try = np.broadcast_to(bb[:, None], f.shape)
             h_try = chip_thickness(feed[bb, 0][:, None], feed[bb, 1][:, None], phi_try)
-            e_try = tooth_depth(stock, near, m_try.ravel(), c_try.reshape(-1, 3), phi_try.ravel(),
+            e_try = tooth_depth(stock, near, rows[m_try.ravel()], c_try.reshape(-1, 3), phi_try.ravel(),
                                 R[m_try.ravel()], (h_try > 0.0).ravel()).reshape(f.shape) > 0.0
             flipped = e_try != e_lo[:, None]
             first = np.where(flipped.any(axis=1), flipped.argmax(axis=1), SECTIONS - 1)  # parts kept before it
             lo = lo + width * first / SECTIONS
             width /= SECTIONS
         s_star = lo + 0.5 * width
-        f = (kk + s_star) / n
+        f = (kk + s_star) / ns[bb]
         phi_star = theta0[bb] + omega[bb] * h * f + jj * pitch[bb]
         k_eng = np.where(e_lo, kk, kk + 1)
         depth_eng = depth[bb, k_eng, jj]
@@ -183,15 +213,15 @@ def cut_step(
         others1 = f_tot[bb, kk + 1] - q[bb, kk + 1, jj, :2]
         f_b = q_star[:, :2] + (1.0 - s_star)[:, None] * others0 + s_star[:, None] * others1
         np.maximum.at(peak, bb, np.hypot(f_b[:, 0], f_b[:, 1]))
-    mean = integral / n
+    mean = integral / ns[:, None]
 
-    last = n
-    in_cut = engaged[:, last]
+    b = np.arange(B)
+    in_cut = engaged[b, ns]  # (B, N) at each member's last instant
     return StepResult(
-        force=f_tot[:, last],
+        force=f_tot[b, ns],
         fc_peak=peak,
         mean=mean,
-        axial_depth=depth[:, last].max(axis=1),
-        chip_thickness=np.where(engaged[:, last], hc[:, last], 0.0).max(axis=1),
+        axial_depth=depth[b, ns].max(axis=1),
+        chip_thickness=np.where(in_cut, hc[b, ns], 0.0).max(axis=1),
         engaged_teeth=in_cut.sum(axis=1),
     )

@@ -32,6 +32,7 @@ The sequential part (per member, per substep) is compiled
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -43,7 +44,7 @@ from .chip import add_piece, add_piece_point, build_forms, chip_now, deflection_
     effect_workspace, history_push, mode_advance, regenerative_displacements
 from .effect_model import HISTORY_PER_PITCH, EffectParameters, EffectState, helix_bands
 from .engagement import NearField, tooth_depth
-from .kernel import SECTION_ROUNDS, SECTIONS, StepResult, step_kinematics
+from .kernel import SECTION_ROUNDS, SECTIONS, StepResult, step_kinematics, substep_counts
 from .stock import ZMapStock
 
 #: Spindle turn per substep below which the point value replaces the exact integral, rad.
@@ -97,40 +98,61 @@ def _band_depth(stock: ZMapStock, near: NearField, member: np.ndarray, centre: n
 
 def cut_step_effects(
     stock: ZMapStock, near: NearField, p_old: np.ndarray, p_new: np.ndarray, theta0: np.ndarray,
-    omega: np.ndarray, h: float, n: int, radius: np.ndarray, flutes: np.ndarray, steps: np.ndarray,
+    omega: np.ndarray, h: float, n: int | np.ndarray, radius: np.ndarray, flutes: np.ndarray, steps: np.ndarray,
     coefficients: np.ndarray, eff: EffectParameters, state: EffectState, stock_top: np.ndarray,
+    rows: np.ndarray | None = None,
 ) -> StepResult:
     """Cutting forces with the effect terms while the tool moves linearly from ``p_old`` to ``p_new``.
 
     Parameters
     ----------
     stock, near, p_old, p_new, theta0, omega, h, n, radius, flutes
-        As :func:`.kernel.cut_step` (``omega`` is the actual spindle speed).
+        As :func:`.kernel.cut_step` (``omega`` is the actual spindle speed;
+        ``n`` one count or one per member).
     steps : ndarray, shape (B,)
         Angle steps per tooth (helix band height).
     coefficients : ndarray, shape (4, B)
         ``Kt`` [N/m2], ``Ke`` [1], ``Kte``, ``Kre`` [N/m] (wear already applied).
     eff : EffectParameters
+        Of every member ``stock`` holds (see ``rows``).
     state : EffectState
-        Tool vibration and its history (advanced in place); ``state.angle`` is
-        the unwrapped spindle angle at the start of the step (not advanced here).
+        Tool vibration and its history of every member ``stock`` holds (the
+        members ``rows`` advanced in place); ``state.angle`` is the unwrapped
+        spindle angle at the start of the step (not advanced here).
     stock_top : ndarray, shape (B,)
         Stock block top [m] (highest material).
+    rows : ndarray of int, shape (B,), optional
+        Batch index in ``stock``, ``near``, ``eff`` and ``state`` of each
+        member of the per-member arguments, when these are a subset of the
+        batch (e.g. the members with an effect term on); ``None``:
+        all members, in order. A member's figures do not depend on the other
+        members passed with it.
 
     Returns
     -------
     StepResult
+        Shapes (B, ...) with B = ``p_old.shape[0]``.
     """
     B = p_old.shape[0]
     R = radius
-    dp, nmax, pitch, centre, theta, feed = step_kinematics(p_old, p_new, theta0, omega, h, n, flutes)
+    if rows is None:
+        rows = np.arange(B)
+    else:
+        rows = np.asarray(rows, dtype=np.int64)
+        eff = _members(eff, rows)
+    ns = substep_counts(n, B)
+    dp, nmax, pitch, centre, theta, feed = step_kinematics(p_old, p_new, theta0, omega, h, ns, flutes)
+    K = theta.shape[1] - 1
+    # instants and substeps of each member (beyond its own count: not evaluated, no contribution)
+    inst_ok = np.arange(K + 1)[None, :] <= ns[:, None]  # (B, K+1)
+    sub_ok = (np.arange(K)[None, :] < ns[:, None])[:, :, None]  # (B, K, 1)
     height = stock_top - np.minimum(p_old[:, 2], p_new[:, 2])
     z_lo, z_hi, lag, _ = band_layout(eff, R, pitch, steps, height)
     nb = z_lo.shape[1]
     et = np.repeat(np.arange(nmax), nb)  # tooth of each edge
     eb = np.tile(np.arange(nb), nmax)  # band of each edge
     offset = et[None, :] * pitch[:, None] - lag[:, eb]  # (B, E)
-    phi = theta[:, :, None] + offset[:, None, :]  # (B, n+1, E)
+    phi = theta[:, :, None] + offset[:, None, :]  # (B, K+1, E)
     ok = (et[None, :] < flutes[:, None]) & np.isfinite(z_lo[:, eb])  # (B, E)
     toff = eff.runout_offsets(flutes, nmax)  # (B, nmax, passes)
     off1 = np.maximum(toff[:, et, 0], 0.0)  # (B, E)
@@ -143,12 +165,12 @@ def cut_step_effects(
     c_flat = np.broadcast_to(centre[:, :, None, :], shape + (3,)).reshape(-1, 3)
     lo_f = np.broadcast_to(z_lo[:, eb][:, None, :], shape).ravel()
     hi_f = np.broadcast_to(z_hi[:, eb][:, None, :], shape).ravel()
-    active = (np.broadcast_to(ok[:, None, :], shape) & may_cut).ravel()
-    depth = _band_depth(stock, near, member, c_flat, phi.ravel(), R[member], lo_f, hi_f, active).reshape(shape)
+    active = (np.broadcast_to(ok[:, None, :], shape) & may_cut & inst_ok[:, :, None]).ravel()
+    depth = _band_depth(stock, near, rows[member], c_flat, phi.ravel(), R[member], lo_f, hi_f, active).reshape(shape)
 
     inside = depth > 0.0
-    change = inside[:, :-1] ^ inside[:, 1:]
-    sstar = np.full((B, n, nmax * nb), np.nan)
+    change = (inside[:, :-1] ^ inside[:, 1:]) & sub_ok
+    sstar = np.full((B, K, nmax * nb), np.nan)
     if np.any(change):
         bb, kk, ee = np.nonzero(change)
         e_lo = inside[bb, kk, ee]
@@ -157,13 +179,13 @@ def cut_step_effects(
         inner = np.arange(1, SECTIONS) / SECTIONS
         for _ in range(SECTION_ROUNDS):
             s_try = lo[:, None] + width * inner[None, :]  # (M, S-1)
-            f = (kk[:, None] + s_try) / n
+            f = (kk[:, None] + s_try) / ns[bb][:, None]
             c_try = p_old[bb][:, None, :] + f[..., None] * dp[bb][:, None, :]
             phi_try = theta0[bb][:, None] + (omega[bb] * h)[:, None] * f + offset[bb, ee][:, None]
             m_try = np.broadcast_to(bb[:, None], f.shape).ravel()
             g_try = feed[bb, 0][:, None] * np.sin(phi_try) + feed[bb, 1][:, None] * np.cos(phi_try)
             act = ((g_try + off1[bb, ee][:, None] > 0.0) | chatter[bb][:, None]).ravel()
-            e_try = _band_depth(stock, near, m_try, c_try.reshape(-1, 3), phi_try.ravel(), R[m_try],
+            e_try = _band_depth(stock, near, rows[m_try], c_try.reshape(-1, 3), phi_try.ravel(), R[m_try],
                                 np.broadcast_to(z_lo[bb, eb[ee]][:, None], f.shape).ravel(),
                                 np.broadcast_to(z_hi[bb, eb[ee]][:, None], f.shape).ravel(),
                                 act).reshape(f.shape) > 0.0
@@ -181,13 +203,18 @@ def cut_step_effects(
     engaged = np.zeros(B, dtype=np.int64)
     gap = pitch / HISTORY_PER_PITCH
     _integrate(
-        h, n, omega, state.angle, feed, R, pitch, coefficients, eff.stiffness, toff, eff.passes(flutes), et, nmax,
+        h, ns, omega, state.angle, feed, R, pitch, coefficients, eff.stiffness, toff, eff.passes(flutes), et, nmax,
         phi, depth, sstar,
-        eff.chatter_wn, eff.chatter_zeta, eff.chatter_k, state.mode, state.ht, state.hx, state.hy, state.meta, gap,
-        force, peak, mean, axial, chip, engaged,
+        eff.chatter_wn, eff.chatter_zeta, eff.chatter_k, rows, state.mode, state.ht, state.hx, state.hy, state.meta,
+        gap, force, peak, mean, axial, chip, engaged,
     )
     return StepResult(force=force, fc_peak=peak, mean=mean, axial_depth=axial, chip_thickness=chip,
                       engaged_teeth=engaged)
+
+
+def _members(eff: EffectParameters, rows: np.ndarray) -> EffectParameters:
+    """The effect parameters of the members ``rows`` (arrays of shape (len(rows),))."""
+    return EffectParameters(**{f.name: getattr(eff, f.name)[rows] for f in dataclasses.fields(eff)})
 
 
 @njit
@@ -281,22 +308,28 @@ def _instant(
 
 @njit
 def _integrate(
-    h: float, n: int, omega: np.ndarray, angle: np.ndarray, feed: np.ndarray, radius: np.ndarray,
+    h: float, ns: np.ndarray, omega: np.ndarray, angle: np.ndarray, feed: np.ndarray, radius: np.ndarray,
     pitch: np.ndarray, coef: np.ndarray, stiffness: np.ndarray, toff: np.ndarray, passes: np.ndarray,
     et: np.ndarray, nmax: int, phi: np.ndarray, depth: np.ndarray, sstar: np.ndarray, wn: np.ndarray,
-    zeta: np.ndarray, kc: np.ndarray, mode: np.ndarray, ht: np.ndarray, hx: np.ndarray, hy: np.ndarray,
-    meta: np.ndarray, gap: np.ndarray, out_force: np.ndarray, out_peak: np.ndarray, out_mean: np.ndarray,
-    out_depth: np.ndarray, out_chip: np.ndarray, out_eng: np.ndarray,
+    zeta: np.ndarray, kc: np.ndarray, rows: np.ndarray, mode: np.ndarray, ht: np.ndarray, hx: np.ndarray,
+    hy: np.ndarray, meta: np.ndarray, gap: np.ndarray, out_force: np.ndarray, out_peak: np.ndarray,
+    out_mean: np.ndarray, out_depth: np.ndarray, out_chip: np.ndarray, out_eng: np.ndarray,
 ) -> None:
-    """Sequential part of :func:`cut_step_effects` (means, instants, peak, tool mode), per member."""
+    """Sequential part of :func:`cut_step_effects` (means, instants, peak, tool mode), per member.
+
+    Member ``m`` has ``ns[m]`` substeps and is row ``rows[m]`` of the state
+    arrays (``angle``, ``mode``, ``ht``, ``hx``, ``hy``, ``meta``).
+    """
     B = phi.shape[0]
     ne = phi.shape[2]
     acc, sub, tmp, cuts, forms, dq, dtooth, dsum = effect_workspace(nmax)
     wd = np.zeros(ne)
     wh = np.zeros(ne)
-    dt = h / n
     for m in range(B):
+        g = rows[m]
         om = omega[m]
+        n = ns[m]
+        dt = h / n
         span = om * h / n
         kt, ke, kte, kre = coef[0, m], coef[1, m], coef[2, m], coef[3, m]
         stiff = stiffness[m]
@@ -305,13 +338,13 @@ def _integrate(
         R = radius[m]
         nf = passes[m]
         chat = wn[m] > 0.0
-        qx, qy, vx, vy = mode[m, 0], mode[m, 1], mode[m, 2], mode[m, 3]
+        qx, qy, vx, vy = mode[g, 0], mode[g, 1], mode[g, 2], mode[g, 3]
         dq[:] = 0.0
         acc[:] = 0.0
         peak = 0.0
         for k in range(n):
             if chat:
-                regenerative_displacements(dq, nf, ht, hx, hy, meta, m, angle[m] + span * (k + 0.5),
+                regenerative_displacements(dq, nf, ht, hx, hy, meta, g, angle[g] + span * (k + 0.5),
                                            qx + 0.5 * dt * vx, qy + 0.5 * dt * vy, pitch[m])
             # engaged depth of each tooth in this substep (static deflection)
             dtooth[:] = 0.0
@@ -348,9 +381,9 @@ def _integrate(
             if chat:
                 qx, vx = mode_advance(qx, vx, sub[0], wn[m], zeta[m], kc[m], dt)
                 qy, vy = mode_advance(qy, vy, sub[1], wn[m], zeta[m], kc[m], dt)
-                theta1 = angle[m] + span * (k + 1)
-                history_push(ht, hx, hy, meta, m, theta1, qx, qy, gap[m])
-                regenerative_displacements(dq, nf, ht, hx, hy, meta, m, theta1, qx, qy, pitch[m])
+                theta1 = angle[g] + span * (k + 1)
+                history_push(ht, hx, hy, meta, g, theta1, qx, qy, gap[m])
+                regenerative_displacements(dq, nf, ht, hx, hy, meta, g, theta1, qx, qy, pitch[m])
             fx, fy, dm, hm, ni = _instant(m, k, 1.0, forms, nf, phi, depth, sstar, fxt, fyt, dq, toff, et, kt, ke,
                                           kte, kre, stiff, dsum, wd, wh)
             peak = max(peak, math.sqrt(fx * fx + fy * fy))
@@ -363,7 +396,7 @@ def _integrate(
         for i in range(4):
             out_mean[m, i] = acc[i] / n
         out_peak[m] = peak
-        mode[m, 0], mode[m, 1], mode[m, 2], mode[m, 3] = qx, qy, vx, vy
+        mode[g, 0], mode[g, 1], mode[g, 2], mode[g, 3] = qx, qy, vx, vy
 
 
 # the cached step links the chip kernels' code: recompile it when their modules change

@@ -349,9 +349,9 @@ def check_front_zmap(ctx, front: list[dict[str, Any]], alone: dict[tuple, Evalua
     -----
     The points not in ``alone`` run in ONE batched twin call: the first one's written program
     (:meth:`~.context.ProblemContext.program_for`, the writer of ``optimized.nc``) with every member's F and S
-    as NC-kernel overrides, which act exactly as rewritten words. The cutting component takes one substep count
-    per batch, so a batched member's peak load can differ slightly from a run alone (0.004 N of 23 N on the
-    tests' slot).
+    as NC-kernel overrides, which act as rewritten words. Every member keeps its own substep counts, so a batched
+    member's figures equal its run alone with the same overrides bit for bit; against its written program run
+    alone they can differ in the last digits (an S override and a written S word round differently).
     """
     alone = dict(alone or {})
     keys = [_genes(ctx, p["X"]) for p in front]
