@@ -37,6 +37,7 @@ import numpy as np
 from fmus_src.cutting.table import EngagementTable
 
 from fmus_src.nck.blocks import Arc, Block, Linear, SpindleSpeed, SpindleStop, ToolChange
+from fmus_src.nck.interpreter import MM, RPM
 from fmus_src.nck.writer import rewrite_program
 
 from ..case import Case
@@ -178,11 +179,11 @@ class ProblemContext:
         feeds = np.atleast_2d(np.asarray(feeds, float))
         spindles = np.atleast_2d(np.asarray(spindles, float))
         batch = feeds.shape[0]
-        feed: dict[int, object] = {int(line): np.full(batch, f / MM_PER_MIN_PER_M_S)
-                                   for line, f in self.pinned_feeds.items()}
+        # the interpreter's own conversions (F * MM / 60, S * RPM), so an override equals the written word bit for bit
+        feed: dict[int, object] = {int(line): np.full(batch, f * MM / 60.0) for line, f in self.pinned_feeds.items()}
         for i, line in enumerate(self.lines.tolist()):
-            feed[int(line)] = feeds[:, i] / MM_PER_MIN_PER_M_S
-        spindle: dict[int, object] = {int(line): spindles[:, i] / RPM_PER_RAD_S
+            feed[int(line)] = feeds[:, i] * MM / 60.0
+        spindle: dict[int, object] = {int(line): spindles[:, i] * RPM
                                       for i, line in enumerate(self.spindle_lines.tolist())}
         return feed, spindle
 
@@ -247,7 +248,7 @@ def classify_lines(blocks: tuple[Block, ...], removed_mm3: dict[int, float], min
     feed_lines: dict[int, tuple[float, int]] = {}
     for b in blocks:
         if isinstance(b, (Linear, Arc)) and b.line not in feed_lines:
-            feed_lines[b.line] = (b.feed * MM_PER_MIN_PER_M_S, b.feed_line)
+            feed_lines[b.line] = (round(b.feed * MM_PER_MIN_PER_M_S, 6), b.feed_line)  # the written value
     cutting = sorted(line for line in feed_lines if removed_mm3.get(line, 0.0) >= min_removed_mm3)
     cut_set = set(cutting)
     pins = {line: f for line, (f, src) in feed_lines.items() if line not in cut_set and src in cut_set}
@@ -256,7 +257,7 @@ def classify_lines(blocks: tuple[Block, ...], removed_mm3: dict[int, float], min
     speed = 0.0
     for b in blocks:
         if isinstance(b, SpindleSpeed):
-            speed = b.speed * RPM_PER_RAD_S
+            speed = round(b.speed * RPM_PER_RAD_S, 6)  # the written value (the conversion leaves ~1e-12 rpm)
         elif isinstance(b, SpindleStop):
             speed = 0.0
         if b.line in cut_set and b.line not in speed_at:
