@@ -116,16 +116,20 @@ def test_chatter_is_a_growing_peak_off_the_spindle_harmonics(tmp_path):
     # relation; the spec's parameters stay frequency_Hz only, the mode goes to machine.toml and the evidence
     assert set(d.effects[0]["parameters"]) == {"frequency_Hz"}
     fit = d.cutting.chatter_fit
-    # the product k zeta sets the stability limit. Measured on this case: the twin with the truth's own
-    # mode starts chattering about 20 ms later than the truth and its limit cycle is 22 % lower (60 against
-    # 77 N; the twin keeps 4 surfaces, the truth one revolution: with 3 the twin reaches 69 N); a refit
-    # absorbs that with ~15 % lower k zeta: 35 % allowed
+    # the product k zeta sets the stability limit. Twin and truth remember the same 5 surfaces: with the
+    # truth's own mode the twin's limit cycle is 58.8 N against 58.0 N, it reaches half of it 10 ms later
+    # (405 against 395 ms) and grows at 51 against 45 1/s. The refit matches the rise of the envelope with
+    # a lower k zeta (0.65 against 0.90 N/um, 28 % low): 35 % allowed
     assert fit.stiffness_N_per_um * fit.damping_ratio == pytest.approx(30.0 * 0.03, rel=0.35)
-    assert 0.5 < fit.damping_ratio / 0.03 < 2.0 and 0.5 < fit.stiffness_N_per_um / 30.0 < 2.0
+    # zeta and k separately are NOT identified (README, Limits (cutting), chatter mode): along k zeta = 0.9
+    # the twin's limit cycle moves only as zeta^0.16 and its growth as zeta^0.55, so a 13 % growth error
+    # costs ~40 % in zeta; this case gives zeta 0.010 (the coarse grid's lowest), k 65 N/um: no bound on
+    # the split is asserted, only what the recording fixes (k zeta, frequency, limit cycle, growth, power)
     assert fit.natural_frequency_Hz == pytest.approx(1150.0, rel=0.02)
+    assert fit.amplitude_twin_N == pytest.approx(fit.amplitude_N, rel=0.3)   # 72 against 58 N
     # band power around the chatter frequency: without the mode only the noise is there (60 Hz of the
-    # 1250 Hz band at 1 N against a ~77 N vibration: ~1e-5); with it, the twin's limit cycle is within
-    # the two models' 22 % amplitude difference at the same mode plus the grid step (13 %): power x 2
+    # 1250 Hz band at 1 N against a ~58 N vibration: ~1e-5); with it, the refitted twin's limit cycle is
+    # 24 % high (power 1.54x): x 2 allowed
     assert fit.band_power_before < 1e-3
     assert 0.5 < fit.band_power_ratio < 2.0
     assert fit.growth_twin_per_s == pytest.approx(fit.growth_per_s, rel=0.3)

@@ -136,3 +136,51 @@ def test_truth_agrees_with_the_twins_cutting_component(slot, effects, component)
         assert np.abs(np.hypot(ex, ey)).max() < 5e-5 * peak
     else:
         assert np.abs(np.hypot(ex, ey)).max() < 1e-6
+
+
+# ------------------------------------------------------------------ chatter: how many surfaces to remember
+CHATTER = {"frequency_Hz": 1150.0, "damping_ratio": 0.03, "stiffness_N_per_um": 30.0}
+
+
+def _chatter_run(slot, passes=0, dt=DT):
+    from orchestrator.diagnose.truth_cutting import fine_grid
+
+    table, t, pos = slot
+    if dt != DT:
+        t = fine_grid(0.0, float(t[-1]), dt)
+        pos = np.column_stack([-0.01 + V * t, np.full_like(t, 0.01), np.full_like(t, -DEPTH)])
+    q = _packed(chatter=CHATTER)
+    q[_Q.index("passes")] = passes
+    run = simulate_cutting(table, t, pos, np.full(t.size, OMEGA), q)
+    from orchestrator.diagnose.cutting_chatter import envelope
+
+    step = max(int(round(1e-4 / dt)), 1)   # 10 kHz is plenty for a 1150 Hz vibration
+    tc, env = envelope(run.t[::step], run.fx[::step], run.fy[::step], 1145.0)
+    tail = run.t > run.t[-1] - 0.3           # the limit cycle: the last 0.3 s of the 2 mm slot
+    return float(np.median(env[tc > run.t[-1] - 0.3])), run.lookback[tail & run.cutting]
+
+
+def test_truth_chatter_remembers_as_many_surfaces_as_the_limit_cycle_needs(slot):
+    # beyond the stability limit (the 2 mm slot, 1150 Hz, 3 %, 30 N/um) teeth jump out of the cut and the next
+    # ones cut the lowest surface left by ANY earlier tooth (multiple regeneration, Altintas ch. 3)
+    from fmus_src.cutting.effect_model import MAX_PASSES
+    from orchestrator.diagnose.truth_cutting import CHATTER_PASSES
+
+    assert MAX_PASSES == CHATTER_PASSES   # one modelling choice in the twin and the truth
+    lc_default, _ = _chatter_run(slot)
+    lc_wide, back = _chatter_run(slot, passes=2 * CHATTER_PASSES)
+    lc_rev, _ = _chatter_run(slot, passes=N)
+    assert lc_wide > 20.0                                       # it does chatter
+    # with twice as many surfaces allowed, teeth look back CHATTER_PASSES periods in > 1 % of the cutting
+    # instants and further in < 0.5 %: the limit cycle is converged
+    assert np.mean(back == CHATTER_PASSES) > 0.01 and np.mean(back > CHATTER_PASSES) < 0.005
+    assert lc_default == pytest.approx(lc_wide, rel=0.01)
+    assert lc_rev > 1.1 * lc_wide                               # one revolution is not enough
+
+
+def test_truth_chatter_limit_cycle_is_converged_in_the_time_step(slot):
+    # the dynamic chip is taken at the middle of the step over which the force is held: a 4x finer step
+    # gives the same limit cycle (start-of-step u and end-of-step delayed u gave 77 against 70.6 N)
+    lc_20us, _ = _chatter_run(slot)
+    lc_5us, _ = _chatter_run(slot, dt=5e-6)
+    assert lc_20us == pytest.approx(lc_5us, rel=0.02)

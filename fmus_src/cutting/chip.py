@@ -8,7 +8,8 @@ mode), so both modes share one implementation of the physics of
   the generalised chip ``h = a sin phi + b cos phi + c`` where it is positive
   (runout offsets, regenerative and deflection terms make ``c != 0`` and move
   the zero crossings of the chip); :func:`envelope_integrals` the same for the
-  lowest of several such forms (the surfaces left by the last teeth);
+  lowest of several such forms (the surfaces left by the last teeth, at most
+  :data:`.effect_model.MAX_PASSES`);
 * :func:`add_piece` / :func:`add_piece_point` — mean force, torque and removal
   rate of one tooth (or helix band) over a piece of a substep, with edge forces;
 * :func:`edge_force_on_tool` — instantaneous force of one tooth (or band);

@@ -17,8 +17,13 @@ from ..errors import CncTwinError
 from ..jit import njit
 from .effects import runout_radius_offsets
 
-#: Most surfaces a tooth may cut (the ones left by the last MAX_PASSES teeth: multiple regeneration).
-MAX_PASSES = 4
+#: Most surfaces a tooth may cut (the ones left by the last MAX_PASSES teeth: multiple regeneration); with
+#: a tool mode every tooth considers this many. One revolution of a 3-flute tool plus the two teeth that jump
+#: out of the cut at a chatter limit cycle: in the truth's chatter case (1150 Hz, 3 %, 30 N/um, 2 mm slot,
+#: 3 flutes) the teeth cut surfaces left 1..5 periods back (5: 3 % of the cutting instants), never 6 or more,
+#: and the limit cycle is 57.6 N with 5, 6 or 9 surfaces (59.4 N with 4, 68.3 N with 3). The independent
+#: truth (``orchestrator.diagnose.truth_cutting.CHATTER_PASSES``) remembers the same number.
+MAX_PASSES = 5
 #: Finest history spacing: ``pitch / HISTORY_PER_PITCH`` of spindle angle.
 HISTORY_PER_PITCH = 1024
 #: Ring-buffer length of the regenerative history (entries per member): spans MAX_PASSES + 1 pitches.

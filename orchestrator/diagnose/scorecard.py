@@ -188,13 +188,16 @@ def main() -> None:  # pragma: no cover - a study, run by hand
                         help="the cutting-process scorecard (scorecard_cutting.json/.md) instead of the drives'")
     parser.add_argument("--drives", action="store_true",
                         help="with --cutting: diagnose the feed drives too (drive effects found count as false)")
+    parser.add_argument("--only", default=None,
+                        help="with --cutting: comma-separated scenarios to run (e.g. chatter,clean)")
     args = parser.parse_args()
     from ..cli import emit  # the command line's one output point
 
     if args.cutting:
         from .scorecard_cutting import score_cutting
 
-        rows = score_cutting(Path(args.out), args.seeds, args.clean_seeds, drives=args.drives)
+        only = [s.strip() for s in args.only.split(",") if s.strip()] if args.only else None
+        rows = score_cutting(Path(args.out), args.seeds, args.clean_seeds, drives=args.drives, only=only)
     else:
         rows = score(Path(args.out), args.seeds, args.clean_seeds)
     emit(json.dumps(rows, indent=2))

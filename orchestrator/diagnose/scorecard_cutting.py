@@ -18,12 +18,14 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
+from typing import Sequence
 
 import numpy as np
 
 from ..atomic import atomic_write_json, atomic_write_text
 from .core import diagnose
 from .cutting_case import SHORT_PROGRAM, write_cutting_case
+from .errors import DiagnosisError
 from .scorecard import rms_gap_closed
 from .truth_cutting import Dynamometer
 
@@ -64,7 +66,8 @@ def parameter_errors(found: dict, truth_effects: dict, spindle_deg: float, truth
     return errors
 
 
-def score_cutting(out: Path, seeds: int = 3, clean_seeds: int = 10, drives: bool = False) -> dict:
+def score_cutting(out: Path, seeds: int = 3, clean_seeds: int = 10, drives: bool = False,
+                  only: Sequence[str] | None = None) -> dict:
     """Run the cutting scorecard; returns the table as a dict (also written to ``out``).
 
     Parameters
@@ -75,12 +78,26 @@ def score_cutting(out: Path, seeds: int = 3, clean_seeds: int = 10, drives: bool
         Runs per effect scenario and of the clean scenario.
     drives : bool
         Diagnose the feed drives as well (the recordings hide no drive effect: any found is false).
+    only : sequence of str, optional
+        Run only these scenarios (names or their folder slugs, e.g. ``("chatter", "clean")``).
+
+    Raises
+    ------
+    DiagnosisError
+        An ``only`` entry that names no scenario.
     """
     rows = {}
     scenarios = {"clean": {}, **CUTTING_SCENARIOS, "50 Hz hum (outside the table)": {}}
+    if only:
+        wanted = set(only)
+        unknown = wanted - set(scenarios) - {_slug(n) for n in scenarios}
+        if unknown:
+            raise DiagnosisError(f"scorecard --only: unknown scenario(s) {sorted(unknown)}; expected names or slugs "
+                                 f"of {sorted(_slug(n) for n in scenarios)}")
+        scenarios = {n: e for n, e in scenarios.items() if n in wanted or _slug(n) in wanted}
     for name, effects in scenarios.items():
         n = clean_seeds if name == "clean" else seeds
-        found_all, false_pos, errors, closed, unexplained = 0, 0, [], [], 0
+        found_all, false_pos, errors, closed, unexplained, modes = 0, 0, [], [], 0, []
         for seed in range(n):
             hum = 5.0 if "hum" in name else 0.0
             folder = write_cutting_case(out / f"{_slug(name)}_{seed}", effects, seed + 100, program=SHORT_PROGRAM,
@@ -94,6 +111,12 @@ def score_cutting(out: Path, seeds: int = 3, clean_seeds: int = 10, drives: bool
             unexplained += bool(d.unexplained)
             errors += parameter_errors(d.effects, effects, d.alignment.get("spindle_angle_deg", 0.0),
                                        math.degrees(truth["spindle_angle_at_first_force_sample_rad"]))
+            fit = d.cutting.chatter_fit if d.cutting is not None else None
+            if fit is not None:
+                modes.append({"damping_ratio": fit.damping_ratio, "stiffness_N_per_um": fit.stiffness_N_per_um,
+                              "natural_frequency_Hz": fit.natural_frequency_Hz, "growth_per_s": fit.growth_per_s,
+                              "growth_twin_per_s": fit.growth_twin_per_s, "amplitude_N": fit.amplitude_N,
+                              "amplitude_twin_N": fit.amplitude_twin_N, "band_power_ratio": fit.band_power_ratio})
             gap = rms_gap_closed(d, ("fx_N", "fy_N", "spindle_rpm"))
             if gap is not None:
                 closed.append(gap)
@@ -101,6 +124,8 @@ def score_cutting(out: Path, seeds: int = 3, clean_seeds: int = 10, drives: bool
                       "false_effects_per_run": false_pos / n, "runs_with_unexplained": unexplained / n,
                       "median_relative_parameter_error": float(np.median(errors)) if errors else None,
                       "mean_rms_gap_closed": float(np.mean(closed)) if closed else None}
+        if modes:
+            rows[name]["chatter_modes"] = modes
     atomic_write_json(out / "scorecard_cutting.json", rows)
     lines = ["| scenario | runs | detection | false effects/run | median param. error | RMS gap closed "
              "| runs with unexplained |", "| --- | --- | --- | --- | --- | --- | --- |"]
