@@ -17,7 +17,11 @@ Per member and step ``[t, t + h]``:
    in time over the step.
 3. **Means** — in each substep the table is read at the substep mid-point
    (intervals linearly interpolated between stations when the two stations
-   have the same interval structure, else the nearest station); each tooth
+   have the same interval structure, extrapolated from one side where it
+   changes, else the nearest station; an interval or gap opening or closing
+   where the periphery is tangent to an edge of the material, e.g. a block's
+   entry or exit face, follows ``cos(half-width)`` linear in ``s``: see
+   :func:`_pair`); each tooth
    sweeps ``[phi_a, phi_b]``; its intersection with every engagement interval
    is integrated in closed form (chip thickness clipped at zero), so entry and
    exit angles are exact to the table, with no sampling of the jumps.
@@ -49,6 +53,15 @@ INCLUSIVE_TOL = 1e-9
 MAX_INTERP_JUMP = 0.5
 #: Tops closer than this are the same interval when interpolating, m.
 INTERP_TOP_TOL = 1e-7
+#: A feature (interval or gap) whose width changes by more than this between two stations, rad ...
+TANGENT_MIN_CHANGE = 1e-3
+#: ... while it is narrower than this many times that change at one of them (the first few stations
+#: after the tangency; beyond, a linear interpolation of the square-root opening is within 1/256 of
+#: the half-width one station after the tangency) ...
+TANGENT_NEAR = 8.0
+#: ... and its centre moves by less than this fraction of the width change, opens or closes at a
+#: tangency (:func:`_pair`).
+TANGENT_CENTRE = 0.25
 #: Distance margin below which two projection candidates tie (smallest s wins), m.
 TIE_TOL = 1e-9
 
@@ -64,16 +77,50 @@ ST_THETA, ST_X, ST_Y, ST_Z, ST_S, ST_SEG, ST_DIST = range(7)
 PAR_RADIUS, PAR_FLUTES, PAR_KT, PAR_KE, PAR_STEPS = range(5)
 
 
-@njit
-def _pair(
-    i: int, j: int, u: float, count: np.ndarray, alpha: np.ndarray, beta: np.ndarray, top: np.ndarray,
-    out_a: np.ndarray, out_b: np.ndarray, out_t: np.ndarray, write: bool,
-) -> int:
-    """Boundaries linear in ``u`` through stations ``i`` (u = 0) and ``j`` (u = 1), tops of station ``i``.
+@njit_inline
+def _bound(alpha: np.ndarray, beta: np.ndarray, i: int, c: int, f: int) -> float:
+    """Boundary ``f`` (``0 .. 2c``) of station ``i``: ``alpha[k]`` at ``2k``, ``beta[k]`` at ``2k + 1``, rad.
 
-    ``u`` outside ``[0, 1]`` extrapolates; intervals that close up are dropped. Returns -1 when the
-    two stations do not have the same interval structure (count, tops, boundaries within
-    :data:`MAX_INTERP_JUMP`).
+    ``f = 2c`` is ``alpha[0] + 2 pi``, so feature ``f`` (interval for even ``f``, the gap after it for odd
+    ``f``) spans boundaries ``f`` and ``f + 1``.
+    """
+    if f == 2 * c:
+        return alpha[i, 0] + TWO_PI
+    k = f // 2
+    return alpha[i, k] if f % 2 == 0 else beta[i, k]
+
+
+@njit_inline
+def _tangent_move(d_lo: float, d_hi: float) -> bool:
+    """A feature whose boundaries change by ``d_lo``, ``d_hi`` [rad] between two stations may open or
+    close at a tangency: its width changes by ``dw`` > :data:`TANGENT_MIN_CHANGE` and its centre by at
+    most :data:`TANGENT_CENTRE` ``dw`` (:func:`_tangent` adds the width test)."""
+    dw = abs(d_hi - d_lo)
+    return dw > TANGENT_MIN_CHANGE and abs(0.5 * (d_lo + d_hi)) <= TANGENT_CENTRE * dw
+
+
+@njit_inline
+def _tangent(d_lo: float, d_hi: float, w_i: float, w_j: float) -> bool:
+    """A feature whose boundaries change by ``d_lo``, ``d_hi`` [rad] between two stations, where it is
+    ``w_i``, ``w_j`` [rad] wide, opens or closes at a tangency (see :func:`_pair`):
+    :func:`_tangent_move`, and it is narrower than :data:`TANGENT_NEAR` times its width change at one of
+    the stations."""
+    return _tangent_move(d_lo, d_hi) and min(w_i, w_j) < TANGENT_NEAR * abs(d_hi - d_lo)
+
+
+@njit_inline
+def _pair_lean(
+    i: int, j: int, u: float, count: np.ndarray, alpha: np.ndarray, beta: np.ndarray, top: np.ndarray,
+    out_a: np.ndarray, out_b: np.ndarray, out_t: np.ndarray,
+) -> int:
+    """The hot part of :func:`_pair`: boundaries linear in ``u`` into ``out_*`` and a cheap test for tangencies.
+
+    Returns the number of intervals when that is all (``u`` in ``[0, 1]``, no feature whose two ends
+    move apart or together by more than :data:`TANGENT_MIN_CHANGE` while it is narrower than
+    :data:`TANGENT_NEAR` times that change: a superset of :func:`_tangent`); -1 when the stations do not
+    have the same structure; -2 (extrapolated) or -3 (a tangency candidate) when :func:`_pair` must
+    complete ``out_*``. Kept small and free of calls: it is inlined into :func:`table_at`, which runs
+    twice per substep and member (the rare part behind a call costs nothing until it is needed).
     """
     c = count[i]
     if count[j] != c:
@@ -82,25 +129,161 @@ def _pair(
         if (abs(top[i, k] - top[j, k]) > INTERP_TOP_TOL or abs(alpha[i, k] - alpha[j, k]) > MAX_INTERP_JUMP
                 or abs(beta[i, k] - beta[j, k]) > MAX_INTERP_JUMP):
             return -1
-    n = 0
-    prev_b = -math.inf
-    first_a = math.inf
+    uc = min(max(u, 0.0), 1.0)
+    # candidates for a tangency (:func:`_tangent`): a feature whose two ends move apart or together, the
+    # interval k and the gap before it (before the first: the gap across 2 pi); branch-free
+    tangent = False
     for k in range(c):
-        a = alpha[i, k] + u * (alpha[j, k] - alpha[i, k])
-        b = beta[i, k] + u * (beta[j, k] - beta[i, k])
+        da = alpha[j, k] - alpha[i, k]
+        db = beta[j, k] - beta[i, k]
+        out_a[k] = alpha[i, k] + u * da
+        out_b[k] = beta[i, k] + u * db
+        out_t[k] = top[i, k] + uc * (top[j, k] - top[i, k])
+        # the gap before interval k (before the first: the gap across 2 pi)
+        kp = k - 1 if k > 0 else c - 1
+        shift = 0.0 if k > 0 else TWO_PI
+        db_prev = beta[j, kp] - beta[i, kp]
+        gap_i = alpha[i, k] + shift - beta[i, kp]
+        w_i = beta[i, k] - alpha[i, k]
+        tangent |= ((da * db < 0.0) & (abs(db - da) > TANGENT_MIN_CHANGE)
+                    & (min(w_i, w_i + db - da) < TANGENT_NEAR * abs(db - da))) \
+            | ((db_prev * da < 0.0) & (abs(da - db_prev) > TANGENT_MIN_CHANGE)
+               & (min(gap_i, gap_i + da - db_prev) < TANGENT_NEAR * abs(da - db_prev)))
+    extrapolated = u < 0.0 or u > 1.0  # extrapolated boundaries may cross; interpolated ones cannot
+    if not (extrapolated or tangent):
+        return c
+    return -3 if tangent else -2
+
+
+@njit
+def _pair(
+    i: int, j: int, u: float, count: np.ndarray, alpha: np.ndarray, beta: np.ndarray, top: np.ndarray,
+    out_a: np.ndarray, out_b: np.ndarray, out_t: np.ndarray,
+) -> int:
+    """Intervals at ``u`` from stations ``i`` (u = 0) and ``j`` (u = 1) into ``out_*``; returns their number.
+
+    Boundaries are linear in ``u`` (``u`` outside ``[0, 1]`` extrapolates), except for a feature (an
+    interval, or the gap between two neighbours, the last one across 2 pi) that opens or closes at a
+    *tangency* (:func:`_tangent`): its width changes by more than :data:`TANGENT_MIN_CHANGE`
+    between the stations, it is narrower than :data:`TANGENT_NEAR` times that change at one of them,
+    and its centre moves by at most :data:`TANGENT_CENTRE` of that change. There the periphery meets an
+    edge of the material tangentially and the half-width ``w`` follows ``cos w = d / R`` with ``d``, the
+    edge's distance from the tool centre, linear along the path (exact for a straight path through a
+    straight face; ``w`` grows like the square root of the distance travelled: from a tangency at a
+    station, a linear interpolation is up to a quarter of the width ``W`` at the next station off, and
+    a linear extrapolation from the next two stations still has 0.59 ``W`` open at the tangency). So
+    ``cos w`` is linear in ``u``, and the centre too. A feature closing linearly (at a corner) that is
+    taken for a tangency closes early, by less than its width at the nearer station.
+
+    Intervals that close up are dropped; neighbours whose gap closes are merged (equal tops within
+    :data:`INTERP_TOP_TOL`) or clipped to meet. Tops: station ``i``'s moved linearly towards station
+    ``j``'s, clamped to the two. ``out_*`` serve as work space also when -1 is returned.
+    Returns -1 when the two stations do not have the same interval structure (count, tops, boundaries
+    within :data:`MAX_INTERP_JUMP`).
+    """
+    n = _pair_lean(i, j, u, count, alpha, beta, top, out_a, out_b, out_t)
+    if n >= -1:
+        return n
+    return _tangents_and_merge(i, j, u, count[i], n == -3, u < 0.0 or u > 1.0, alpha, beta, out_a, out_b,
+                               out_t)
+
+
+@njit
+def _tangents_and_merge(
+    i: int, j: int, u: float, c: int, tangents: bool, extrapolated: bool, alpha: np.ndarray, beta: np.ndarray,
+    out_a: np.ndarray, out_b: np.ndarray, out_t: np.ndarray,
+) -> int:
+    """The rare part of :func:`_pair`: tangent features (if ``tangents``) and, when a boundary was moved
+    or extrapolated, dropping, merging and clipping; ``out_*`` hold the ``c`` linear intervals."""
+    # features opening or closing at a tangency: cos(half-width) and centre linear in u
+    adjusted = extrapolated
+    prev_set = False
+    first_set = False
+    for f in range(2 * c if tangents else 0):
+        lo_i, hi_i = _bound(alpha, beta, i, c, f), _bound(alpha, beta, i, c, f + 1)
+        lo_j, hi_j = _bound(alpha, beta, j, c, f), _bound(alpha, beta, j, c, f + 1)
+        w_i = hi_i - lo_i
+        w_j = hi_j - lo_j
+        if prev_set or (f == 2 * c - 1 and first_set) or not _tangent(lo_j - lo_i, hi_j - hi_i, w_i, w_j):
+            prev_set = False
+            continue
+        cos_i = math.cos(0.5 * w_i)
+        cos_u = cos_i + u * (math.cos(0.5 * w_j) - cos_i)
+        half = 0.0 if cos_u >= 1.0 else (math.pi if cos_u <= -1.0 else math.acos(cos_u))
+        mid = 0.5 * (lo_i + hi_i) + u * 0.5 * (lo_j + hi_j - lo_i - hi_i)
+        k = f // 2
+        if f % 2 == 0:  # interval k
+            out_a[k] = mid - half
+            out_b[k] = mid + half
+        else:  # gap after interval k, before interval k + 1 (interval 0 shifted by 2 pi after the last)
+            out_b[k] = mid - half
+            if k + 1 < c:
+                out_a[k + 1] = mid + half
+            else:
+                out_a[0] = mid + half - TWO_PI
+        prev_set = True
+        adjusted = True
+        if f == 0:
+            first_set = True
+    if not adjusted:
+        return c
+    # drop closed intervals; merge or clip neighbours whose gap closed (in place: n <= k)
+    n = 0
+    for k in range(c):
+        a, b, t = out_a[k], out_b[k], out_t[k]
+        if n > 0 and a <= out_b[n - 1]:
+            if abs(t - out_t[n - 1]) <= INTERP_TOP_TOL:
+                out_b[n - 1] = max(out_b[n - 1], b)
+                continue
+            a = out_b[n - 1]
         if b > a:
-            if a < prev_b:  # extrapolated intervals overlap: not usable
-                return -1
-            prev_b = b
-            first_a = min(first_a, a)
-            if write:
-                out_a[n] = a
-                out_b[n] = b
-                out_t[n] = top[i, k] + min(max(u, 0.0), 1.0) * (top[j, k] - top[i, k])
+            out_a[n], out_b[n], out_t[n] = a, b, t
             n += 1
-    if n > 1 and prev_b > first_a + TWO_PI:
-        return -1
+    # across 2 pi: the last interval reaching into the first
+    while n > 1 and out_b[n - 1] >= out_a[0] + TWO_PI:
+        if abs(out_t[n - 1] - out_t[0]) <= INTERP_TOP_TOL:  # merge the first into the last
+            out_b[n - 1] = max(out_b[n - 1], out_b[0] + TWO_PI)
+            for q in range(n - 1):
+                out_a[q], out_b[q], out_t[q] = out_a[q + 1], out_b[q + 1], out_t[q + 1]
+            n -= 1
+        else:  # clip the last
+            out_b[n - 1] = out_a[0] + TWO_PI
+            if not out_b[n - 1] > out_a[n - 1]:
+                n -= 1
+            break
+    if n == 1 and out_b[0] > out_a[0] + TWO_PI:
+        out_b[0] = out_a[0] + TWO_PI
     return n
+
+
+@njit
+def _table_between(
+    i: int, u: float, count: np.ndarray, alpha: np.ndarray, beta: np.ndarray, top: np.ndarray,
+    out_a: np.ndarray, out_b: np.ndarray, out_t: np.ndarray,
+) -> int:
+    """:func:`table_at` at ``u`` in ``(0, 1)`` between stations ``i`` and ``i + 1`` where the lean
+    interpolation does not apply (a tangency, or a structure change: see :func:`table_at`)."""
+    last = count.shape[0] - 1
+    n = _pair(i, i + 1, u, count, alpha, beta, top, out_a, out_b, out_t)
+    if n >= 0:
+        return n
+    # structure changes between the stations: extrapolate the side that keeps more intervals open
+    n_lo = _pair(i, i - 1, -u, count, alpha, beta, top, out_a, out_b, out_t) if i >= 1 else -1
+    n_hi = _pair(i + 1, i + 2, u - 1.0, count, alpha, beta, top, out_a, out_b, out_t) \
+        if i + 2 <= last else -1
+    use_lo = n_lo > n_hi or (n_lo == n_hi and u < 0.5)
+    if use_lo and n_lo >= 0:
+        return _pair(i, i - 1, -u, count, alpha, beta, top, out_a, out_b, out_t)
+    if not use_lo and n_hi >= 0:
+        return _pair(i + 1, i + 2, u - 1.0, count, alpha, beta, top, out_a, out_b, out_t)
+    if u >= 0.5:
+        i = i + 1
+    c = count[i]
+    for k in range(c):
+        out_a[k] = alpha[i, k]
+        out_b[k] = beta[i, k]
+        out_t[k] = top[i, k]
+    return c
 
 
 @njit
@@ -111,13 +294,14 @@ def table_at(
     """Engagement intervals at arc length ``s`` into ``out_*``; returns their number.
 
     Between stations ``i`` and ``i + 1`` with the same interval structure the
-    boundaries are interpolated linearly. Where the structure changes between
-    them (an interval appears, vanishes or splits) one side is extrapolated
-    linearly from its outer neighbour: the side that keeps more intervals open
-    at ``s`` (so an interval that opens or closes between two stations does so
-    at the extrapolated place), the nearer one on a tie; the nearest station is
-    used when neither side is consistent (different structure, or
-    extrapolated intervals that would overlap).
+    boundaries are interpolated (:func:`_pair`: linearly, except for an
+    interval or gap opening or closing at a tangency). Where the structure
+    changes between them (an interval appears, vanishes or splits) one side is
+    extrapolated from its outer neighbour the same way: the side that keeps
+    more intervals open at ``s`` (so an interval that opens or closes between
+    two stations does so at the extrapolated place), the nearer one on a tie;
+    the nearest station is used when neither side has the same structure on
+    its two stations.
     """
     last = count.shape[0] - 1
     x = s / ds
@@ -131,20 +315,10 @@ def table_at(
     else:
         u = x - i
     if u > 0.0:
-        n = _pair(i, i + 1, u, count, alpha, beta, top, out_a, out_b, out_t, True)
+        n = _pair_lean(i, i + 1, u, count, alpha, beta, top, out_a, out_b, out_t)
         if n >= 0:
             return n
-        # structure changes between the stations: extrapolate the side that keeps more intervals open
-        n_lo = _pair(i, i - 1, -u, count, alpha, beta, top, out_a, out_b, out_t, False) if i >= 1 else -1
-        n_hi = _pair(i + 1, i + 2, u - 1.0, count, alpha, beta, top, out_a, out_b, out_t, False) \
-            if i + 2 <= last else -1
-        use_lo = n_lo > n_hi or (n_lo == n_hi and u < 0.5)
-        if use_lo and n_lo >= 0:
-            return _pair(i, i - 1, -u, count, alpha, beta, top, out_a, out_b, out_t, True)
-        if not use_lo and n_hi >= 0:
-            return _pair(i + 1, i + 2, u - 1.0, count, alpha, beta, top, out_a, out_b, out_t, True)
-        if u >= 0.5:
-            i = i + 1
+        return _table_between(i, u, count, alpha, beta, top, out_a, out_b, out_t)
     c = count[i]
     for k in range(c):
         out_a[k] = alpha[i, k]
