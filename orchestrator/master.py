@@ -250,6 +250,28 @@ class Master:
             self._connections_by_target[c.target_component].append(c)
 
     # ------------------------------------------------------------------ internals
+    def _start(self) -> None:
+        """Fresh failure bookkeeping, then every component set up; shared by the Python and the compiled loops.
+
+        Components are set up along the signal flow: each gets its inputs from the
+        components already set up (start values inside feedback loops). A failure
+        here (bad program, bad parameters) is raised: there is nothing to keep yet.
+        """
+        comps = self.system.components
+        self._failed = np.zeros(self.system.batch, dtype=bool)
+        self._failures: list[str | None] = [None] * self.system.batch
+        self._resolve_wires()
+        try:
+            for name in self.order:
+                self._transfer(self._wires[name])
+                comps[name].setup(self.settings.t0)
+        except BaseException:
+            self._terminate_all()
+            raise
+        self._resolve_wires()
+        # components with the per-member failure channel (native ones; an FMU raises instead)
+        self._reporting = [comps[name] for name in self.order if callable(getattr(comps[name], "take_failures", None))]
+
     def _resolve_wires(self) -> None:
         """Bind connections to the components' value dictionaries once."""
         comps = self.system.components
@@ -396,22 +418,7 @@ class Master:
         k = 0
         success, message = True, ""
         stopped_at = np.full(batch, np.nan)
-        self._failed = np.zeros(batch, dtype=bool)
-        self._failures: list[str | None] = [None] * batch
-        # initialise along the signal flow: each component gets its inputs from the
-        # components already initialised (start values inside feedback loops). A failure
-        # here (bad program, bad parameters) is raised: there is nothing to keep yet.
-        self._resolve_wires()
-        try:
-            for name in self.order:
-                self._transfer(self._wires[name])
-                comps[name].setup(s.t0)
-        except BaseException:
-            self._terminate_all()
-            raise
-        self._resolve_wires()
-        # components with the per-member failure channel (native ones; an FMU raises instead)
-        self._reporting = [comps[name] for name in self.order if callable(getattr(comps[name], "take_failures", None))]
+        self._start()
         recorder = _Recorder(
             [(ch, comps[comp].values, var, f, u) for ch, _, var, f, u, comp in probes], batch, max(capacity, 2)
         )

@@ -49,20 +49,25 @@ def along(vertices, step_length):
     return out
 
 
-def drive(comp, pos, omega):
+def step_through(comp, pos, k0, names=NAMES):
+    """Step a set-up component through pos[k0:] (shape (K, B, 3)); returns {name: (K - k0, B)}."""
+    out = {n: [] for n in names}
+    for k in range(k0, pos.shape[0]):
+        for a, name in enumerate(("x_position", "y_position", "z_position")):
+            comp.set(name, pos[k, :, a])
+        comp.do_step((k - 1) * H, H)
+        for n in names:
+            out[n].append(comp.get(n))
+    return {n: np.array(v) for n, v in out.items()}
+
+
+def drive(comp, pos, omega, names=NAMES):
     """Set up at pos[0] and step through pos[1:] (shape (K, B, 3)); returns dict of (K-1, B) arrays."""
     for a, name in enumerate(("x_position", "y_position", "z_position")):
         comp.set(name, pos[0, :, a])
     comp.set("spindle_speed", omega)
     comp.setup(0.0)
-    out = {n: [] for n in NAMES}
-    for k in range(1, pos.shape[0]):
-        for a, name in enumerate(("x_position", "y_position", "z_position")):
-            comp.set(name, pos[k, :, a])
-        comp.do_step((k - 1) * H, H)
-        for n in NAMES:
-            out[n].append(comp.get(n))
-    return {n: np.array(v) for n, v in out.items()}
+    return step_through(comp, pos, 1, names)
 
 
 def path_run(p, vertices, pos, omega, **kw):

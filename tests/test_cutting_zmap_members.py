@@ -19,6 +19,7 @@ import pytest
 
 from fmus_src.cutting import CuttingError, CuttingLoad
 from fmus_src.cutting.component import MAX_SUBSTEPS
+from tests.test_cutting_path import drive, step_through
 
 R = 3e-3
 N_TEETH = 2
@@ -53,19 +54,7 @@ def positions(feed_per_tooth, omega):
 
 def run(pos, omega, **params):
     """Step a CuttingLoad of batch pos.shape[1] along pos; returns {name: (K-1, B)}."""
-    comp = CuttingLoad("cut", batch=pos.shape[1], **{**BLOCK, **params})
-    for a, name in enumerate(("x_position", "y_position", "z_position")):
-        comp.set(name, pos[0, :, a])
-    comp.set("spindle_speed", omega)
-    comp.setup(0.0)
-    out = {n: [] for n in NAMES}
-    for k in range(1, pos.shape[0]):
-        for a, name in enumerate(("x_position", "y_position", "z_position")):
-            comp.set(name, pos[k, :, a])
-        comp.do_step((k - 1) * H, H)
-        for n in NAMES:
-            out[n].append(comp.get(n))
-    return {n: np.array(v) for n, v in out.items()}
+    return drive(CuttingLoad("cut", batch=pos.shape[1], **{**BLOCK, **params}), pos, omega, NAMES)
 
 
 def member_params(params, m):
@@ -128,15 +117,11 @@ def test_a_member_needing_too_many_substeps_fails_alone():
     assert np.isnan(comp.get("fc")[1]) and comp.get("engaged_teeth")[1] == 0
     # member 0 goes on as alone
     solo = run(pos[:, :1], SPEEDS[:1])
-    out = {n: [comp.get(n)] for n in NAMES}
-    for k in range(2, pos.shape[0]):
-        for a, name in enumerate(("x_position", "y_position", "z_position")):
-            comp.set(name, pos[k, :, a])
-        comp.do_step((k - 1) * H, H)
-        for n in NAMES:
-            out[n].append(comp.get(n))
+    first = {n: comp.get(n) for n in NAMES}
+    rest = step_through(comp, pos, 2, NAMES)
     for n in NAMES:
-        np.testing.assert_array_equal(np.array(out[n])[:, 0], solo[n][:, 0], err_msg=n)
+        got = np.concatenate([first[n][None, :], rest[n]])
+        np.testing.assert_array_equal(got[:, 0], solo[n][:, 0], err_msg=n)
     # alone, the same member raises (nothing left to compute)
     single = CuttingLoad("cut", batch=1, **BLOCK)
     single.set("spindle_speed", fast)

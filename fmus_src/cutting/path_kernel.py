@@ -256,6 +256,20 @@ def _tangents_and_merge(
     return n
 
 
+@njit_inline
+def _station(
+    i: int, count: np.ndarray, alpha: np.ndarray, beta: np.ndarray, top: np.ndarray, out_a: np.ndarray,
+    out_b: np.ndarray, out_t: np.ndarray,
+) -> int:
+    """The intervals of station ``i`` into ``out_*``; returns their number."""
+    c = count[i]
+    for k in range(c):
+        out_a[k] = alpha[i, k]
+        out_b[k] = beta[i, k]
+        out_t[k] = top[i, k]
+    return c
+
+
 @njit
 def _table_between(
     i: int, u: float, count: np.ndarray, alpha: np.ndarray, beta: np.ndarray, top: np.ndarray,
@@ -278,12 +292,7 @@ def _table_between(
         return _pair(i + 1, i + 2, u - 1.0, count, alpha, beta, top, out_a, out_b, out_t)
     if u >= 0.5:
         i = i + 1
-    c = count[i]
-    for k in range(c):
-        out_a[k] = alpha[i, k]
-        out_b[k] = beta[i, k]
-        out_t[k] = top[i, k]
-    return c
+    return _station(i, count, alpha, beta, top, out_a, out_b, out_t)
 
 
 @njit
@@ -319,12 +328,7 @@ def table_at(
         if n >= 0:
             return n
         return _table_between(i, u, count, alpha, beta, top, out_a, out_b, out_t)
-    c = count[i]
-    for k in range(c):
-        out_a[k] = alpha[i, k]
-        out_b[k] = beta[i, k]
-        out_t[k] = top[i, k]
-    return c
+    return _station(i, count, alpha, beta, top, out_a, out_b, out_t)
 
 
 @njit

@@ -107,7 +107,6 @@ def run_compiled(master: "Master") -> "RunResult | None":
         return None
     s = master.settings
     system = master.system
-    comps = system.components
     h = s.step
     max_steps = int(math.floor(s.time_limit / h + 1e-9))
     expected = master.expected_duration or s.time_limit
@@ -117,19 +116,7 @@ def run_compiled(master: "Master") -> "RunResult | None":
     k = 0
     success, message = True, ""
     stopped_at = np.full(batch, np.nan)
-    master._failed = np.zeros(batch, dtype=bool)  # noqa: SLF001
-    master._failures = [None] * batch  # noqa: SLF001
-    master._resolve_wires()  # noqa: SLF001
-    try:
-        for name in master.order:
-            master._transfer(master._wires[name])  # noqa: SLF001
-            comps[name].setup(s.t0)
-    except BaseException:
-        master._terminate_all()  # noqa: SLF001
-        raise
-    master._resolve_wires()  # noqa: SLF001
-    master._reporting = [comps[name] for name in master.order  # noqa: SLF001
-                         if callable(getattr(comps[name], "take_failures", None))]
+    master._start()  # noqa: SLF001 - failure bookkeeping and component set-up, as Master.run
     layout.bind()
     V = layout.pack()
     n_probe = layout.probe_rows.shape[0]

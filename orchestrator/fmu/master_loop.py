@@ -140,18 +140,7 @@ def run_fast_fmu(master: "Master") -> "RunResult | None":
     k = 0
     success, message = True, ""
     stopped_at = np.full(1, np.nan)
-    master._failed = np.zeros(1, dtype=bool)  # noqa: SLF001
-    master._failures = [None]  # noqa: SLF001
-    master._resolve_wires()  # noqa: SLF001
-    try:
-        for name in master.order:
-            master._transfer(master._wires[name])  # noqa: SLF001
-            comps[name].setup(s.t0)
-    except BaseException:
-        master._terminate_all()  # noqa: SLF001
-        raise
-    master._resolve_wires()  # noqa: SLF001
-    master._reporting = []  # noqa: SLF001 - FMUComponents raise instead of failing members
+    master._start()  # noqa: SLF001 - failure bookkeeping and component set-up, as Master.run
     steps: list[np.ndarray] = [np.zeros(1, dtype=np.int64)]
     rows: list[np.ndarray] = [np.array([[float(_value(comps, ref)) for ref in record]]).reshape(1, len(record))]
 
