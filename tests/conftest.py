@@ -4,7 +4,9 @@ PythonFMU 0.7 can corrupt the heap while the interpreter shuts down after its
 FMUs have been loaded in the process ("corrupted double-linked list", SIGABRT,
 exit status 134; NTNU-IHB/PythonFMU#228). It happens after every test has
 run and been reported, about one run in four of ``tests/test_fmu_import.py``,
-and it would turn a green suite red. So once pytest is completely done
+and it would turn a green suite red. ``FMUComponent`` no longer frees PythonFMU
+instances (``NO_FREE_TOOLS``), but ``fmpy.simulate_fmu`` and fmpy's validation,
+which the FMU tests call, still do. So once pytest is completely done
 (results reported, every other plugin unconfigured), the process leaves with
 pytest's own exit status without running the interpreter's teardown.
 """

@@ -191,17 +191,25 @@ class _Channel:
             arr[0] = self.view[i]
 
 
-def _free_instance(slave: FMU2Slave, alive: list[bool]) -> None:
-    """Free an FMU instance once (used by close() and the finaliser).
+#: ``generationTool`` prefixes of FMUs whose ``fmi2FreeInstance`` corrupts the host process's heap: PythonFMU 0.7
+#: (NTNU-IHB/PythonFMU#228; "corrupted double-linked list", an abort at interpreter exit in about half of the
+#: processes that freed one). Their instances are left allocated until the process ends.
+NO_FREE_TOOLS = ("PythonFMU 0.7",)
+
+
+def _free_instance(slave: FMU2Slave, alive: list[bool], free: bool = True) -> None:
+    """Free an FMU instance once (used by close() and the finaliser); ``free=False`` only marks it closed.
 
     The shared library is deliberately *not* unloaded: an FMU that embeds
     Python (pythonfmu) leaves objects in the interpreter that may refer to
     its code, and several instances share one loaded copy anyway. A loaded
-    library costs a few hundred kB for the life of the process.
+    library costs a few hundred kB for the life of the process; an instance
+    of an FMU from :data:`NO_FREE_TOOLS` is not freed either (a few kB).
     """
     if alive[0]:
         alive[0] = False
-        slave.fmi2FreeInstance(slave.component)
+        if free:
+            slave.fmi2FreeInstance(slave.component)
 
 
 class FMUComponent:
@@ -484,7 +492,9 @@ class FMUComponent:
         self._slave.component = component
         self._slave.callbacks = callbacks
         self._alive = [True]
-        self._finalizer = weakref.finalize(self, _free_instance, self._slave, self._alive)
+        tool = md.generationTool or ""
+        frees = not tool.startswith(NO_FREE_TOOLS)
+        self._finalizer = weakref.finalize(self, _free_instance, self._slave, self._alive, frees)
 
     def _close(self) -> None:
         """Free the FMU instance and its library (idempotent)."""
