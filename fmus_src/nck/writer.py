@@ -25,6 +25,47 @@ from .errors import GCodeError
 from .lexer import LexError, LexedLine, Word, lex_line, split_lines
 
 
+#: Decimals of a written F word: mm/min under G21, in/min under G20.
+FEED_DECIMALS_MM = 3
+FEED_DECIMALS_INCH = 4
+MM_PER_INCH = 25.4
+
+
+def feed_word_value(feed_mm_per_min: float, inch: bool) -> float:
+    """The number an F word written by :func:`rewrite_program` carries, as the lexer reads it back.
+
+    Parameters
+    ----------
+    feed_mm_per_min : float
+        Feed, mm/min.
+    inch : bool
+        G20 in effect on the line (the word is then in in/min).
+
+    Returns
+    -------
+    float
+        In/min under G20, else mm/min (``float`` of the written digits, so ``value * INCH / 60`` or
+        ``value * MM / 60`` is the interpreter's feed bit for bit).
+    """
+    value = float(feed_mm_per_min) / MM_PER_INCH if inch else float(feed_mm_per_min)
+    return float(_format(value, FEED_DECIMALS_INCH if inch else FEED_DECIMALS_MM, True))
+
+
+def inch_lines(text: str, lines: list[int] | tuple[int, ...], file: str = "<text>") -> set[int]:
+    """The given 1-based lines on which G20 (inch) is in effect (a G20/G21 on the line itself counts).
+
+    Raises
+    ------
+    GCodeError
+        A line up to the last one asked for is malformed.
+    """
+    targets = sorted(set(int(n) for n in lines))
+    if not targets:
+        return set()
+    state = _inch_mode(split_lines(text, keepends=True), targets, file)
+    return {n for n, inch in state.items() if inch}
+
+
 def _format(value: float, decimals: int, point: bool) -> str:
     text = f"{value:.{decimals}f}".rstrip("0")
     if text.endswith("."):
@@ -77,7 +118,8 @@ def rewrite_program(text: str, feed_by_line: Mapping[int, float] | None = None,
             value = float(feed_by_line[number])
             _check(value, number, "F", file, body)
             inch = inch_at.get(number, False)
-            edits.append(("F", value / 25.4 if inch else value, 4 if inch else 3, True))
+            edits.append(("F", value / MM_PER_INCH if inch else value,
+                          FEED_DECIMALS_INCH if inch else FEED_DECIMALS_MM, True))
         if number in spindle_by_line:
             value = float(spindle_by_line[number])
             _check(value, number, "S", file, body, allow_zero=True)

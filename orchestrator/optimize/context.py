@@ -11,7 +11,10 @@ Rules (documented for machinists)
 * **Genes**: one feed (mm/min) and one spindle speed (rpm) per cutting line,
   keys ``L0042.feed`` and ``L0042.spindle`` (``0042`` = 1-based line of the
   program file), on a grid of ``feed_step`` (10 mm/min) and ``spindle_step``
-  (50 rpm) within the ranges.
+  (50 rpm) within the ranges. When a cutting line runs under G20 (inch), the
+  feed grid is ``feed_step_in_per_min`` (0.1 in/min = 2.54 mm/min) instead,
+  so the written in/min F words are round numbers and read back exactly as
+  the genes (mm/min) say.
 * **Non-cutting feed lines keep their feed**: a non-cutting feed line that
   would inherit a changed F modally from a cutting line gets its original F
   written explicitly (a "pin").
@@ -37,8 +40,8 @@ import numpy as np
 from fmus_src.cutting.table import EngagementTable
 
 from fmus_src.nck.blocks import Arc, Block, Linear, SpindleSpeed, SpindleStop, ToolChange
-from fmus_src.nck.interpreter import MM, RPM
-from fmus_src.nck.writer import rewrite_program
+from fmus_src.nck.interpreter import INCH, MM, RPM
+from fmus_src.nck.writer import MM_PER_INCH, feed_word_value, rewrite_program
 
 from ..case import Case
 from .errors import OptimizeError
@@ -61,14 +64,19 @@ class Ranges:
         Feed grid, mm/min.
     spindle_step : float
         Spindle grid, rpm.
+    feed_step_in_per_min : float
+        Feed grid of programs whose cutting lines run under G20, in/min.
     """
 
     feed_mm_per_min: tuple[float, float] = (100.0, 500.0)
     spindle_rpm: tuple[float, float] = (1000.0, 8000.0)
     feed_step: float = 10.0
     spindle_step: float = 50.0
+    feed_step_in_per_min: float = 0.1
 
     def __post_init__(self) -> None:
+        if not (math.isfinite(self.feed_step_in_per_min) and self.feed_step_in_per_min > 0):
+            raise OptimizeError(f"the inch feed grid step must be positive, got {self.feed_step_in_per_min} in/min")
         for name, (lo, hi), step in (("feed range", self.feed_mm_per_min, self.feed_step),
                                      ("spindle range", self.spindle_rpm, self.spindle_step)):
             if not (math.isfinite(lo) and math.isfinite(hi) and 0 < lo <= hi and step > 0):
@@ -111,6 +119,9 @@ class ProblemContext:
         Cutter–workpiece engagement along the program's path, computed once
         (F and S change the timing, not the path); every evaluation then runs
         the twin's path-mode cutting load. None: Z-map cutting per member.
+    inch_lines : frozenset of int
+        Cutting and pinned feed lines under G20: their F words are written, and their overrides converted, in
+        in/min (:func:`fmus_src.nck.writer.feed_word_value`).
     """
 
     case: Case
@@ -127,6 +138,22 @@ class ProblemContext:
     time_limit_s: float = 3600.0
     original_load_N: np.ndarray = field(default_factory=lambda: np.zeros(0))
     engagement: EngagementTable | None = field(default=None, repr=False, compare=False)
+    inch_lines: frozenset[int] = frozenset()
+
+    @property
+    def inch(self) -> bool:
+        """A cutting line runs under G20: the feed grid is ``ranges.feed_step_in_per_min``."""
+        return any(int(line) in self.inch_lines for line in self.lines.tolist())
+
+    @property
+    def feed_step(self) -> float:
+        """Feed grid of the genes, mm/min (10, or 0.1 in/min = 2.54 mm/min for an inch program)."""
+        r = self.ranges
+        return r.feed_step_in_per_min * MM_PER_INCH if self.inch else r.feed_step
+
+    def feed_word(self, line: int, feed_mm_per_min: float) -> float:
+        """The F word written on ``line`` for a feed in mm/min (in/min under G20), as read back."""
+        return feed_word_value(feed_mm_per_min, int(line) in self.inch_lines)
 
     @property
     def n_lines(self) -> int:
@@ -146,16 +173,17 @@ class ProblemContext:
         """Hash of program, genes and ranges (a checkpoint only resumes the same problem)."""
         h = hashlib.sha256(self.program_text.encode("utf-8"))
         h.update(repr((self.lines.tolist(), self.spindle_lines.tolist(), sorted(self.pinned_feeds.items()),
-                       self.ranges, self.load_limit_N, self.step)).encode("utf-8"))
+                       self.ranges, self.load_limit_N, self.step, sorted(self.inch_lines))).encode("utf-8"))
         return h.hexdigest()[:16]
 
     # ------------------------------------------------------------------ genes <-> values
     def snap(self, feeds: np.ndarray, spindles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Round half up to the grid and clip into the ranges (shape kept)."""
         r = self.ranges
-        f = np.clip(np.floor(np.asarray(feeds, float) / r.feed_step + 0.5) * r.feed_step,
-                    math.ceil(r.feed_mm_per_min[0] / r.feed_step - 1e-9) * r.feed_step,
-                    math.floor(r.feed_mm_per_min[1] / r.feed_step + 1e-9) * r.feed_step)
+        step = self.feed_step
+        f = np.clip(np.floor(np.asarray(feeds, float) / step + 0.5) * step,
+                    math.ceil(r.feed_mm_per_min[0] / step - 1e-9) * step,
+                    math.floor(r.feed_mm_per_min[1] / step + 1e-9) * step)
         s = np.clip(np.floor(np.asarray(spindles, float) / r.spindle_step + 0.5) * r.spindle_step,
                     math.ceil(r.spindle_rpm[0] / r.spindle_step - 1e-9) * r.spindle_step,
                     math.floor(r.spindle_rpm[1] / r.spindle_step + 1e-9) * r.spindle_step)
@@ -179,13 +207,19 @@ class ProblemContext:
         feeds = np.atleast_2d(np.asarray(feeds, float))
         spindles = np.atleast_2d(np.asarray(spindles, float))
         batch = feeds.shape[0]
-        # the interpreter's own conversions (F * MM / 60, S * RPM), so an override equals the written word bit for bit
-        feed: dict[int, object] = {int(line): np.full(batch, f * MM / 60.0) for line, f in self.pinned_feeds.items()}
+        # the interpreter's own conversions of the written words (F * MM / 60 or F * INCH / 60, S * RPM), so an
+        # override equals the written word bit for bit (also in inch, where the word is mm/min / 25.4, rounded)
+        feed: dict[int, object] = {int(line): np.full(batch, self._si_feed(line, f))
+                                   for line, f in self.pinned_feeds.items()}
         for i, line in enumerate(self.lines.tolist()):
-            feed[int(line)] = feeds[:, i] * MM / 60.0
+            feed[int(line)] = np.array([self._si_feed(line, f) for f in feeds[:, i].tolist()])
         spindle: dict[int, object] = {int(line): spindles[:, i] * RPM
                                       for i, line in enumerate(self.spindle_lines.tolist())}
         return feed, spindle
+
+    def _si_feed(self, line: int, feed_mm_per_min: float) -> float:
+        """Feed of ``line``'s written F word in m/s, converted as the interpreter converts it."""
+        return self.feed_word(line, feed_mm_per_min) * (INCH if int(line) in self.inch_lines else MM) / 60.0
 
     def program_for(self, feeds: np.ndarray, spindles: np.ndarray) -> str:
         """The rewritten program of one individual (only F and S words change).
@@ -293,6 +327,11 @@ def check_context(ctx: ProblemContext) -> None:
             f"{ctx.case.program}: no cutting line found (a feed move removing material in the reference run); "
             "check the case's [stock] and the program's work offsets"
         )
+    lo, hi = ctx.ranges.feed_mm_per_min
+    if ctx.inch and math.ceil(lo / ctx.feed_step - 1e-9) * ctx.feed_step > hi + 1e-9:
+        raise OptimizeError(f"{ctx.case.program}: inch program (G20): feed range {lo:g}..{hi:g} mm/min "
+                            f"({lo / MM_PER_INCH:.4g}..{hi / MM_PER_INCH:.4g} in/min) holds no multiple of "
+                            f"{ctx.ranges.feed_step_in_per_min:g} in/min")
     stopped = ctx.lines[ctx.original_spindle <= 0.0]
     if stopped.size:
         raise OptimizeError(f"{ctx.case.program}:{int(stopped[0])}: cutting line with the spindle stopped; "

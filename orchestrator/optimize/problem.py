@@ -3,7 +3,7 @@
 Decision vector ``x`` (length ``2 L``): ``[feed_0, spindle_0, feed_1, spindle_1, ...]``
 in mm/min and rpm, one pair per cutting line, named ``L0042.feed``,
 ``L0042.spindle`` (:attr:`.context.ProblemContext.keys`), always on the
-machinist's grid (10 mm/min, 50 rpm) after :class:`GridRepair`.
+machinist's grid (10 mm/min, or 0.1 in/min for a G20 program; 50 rpm) after :class:`GridRepair`.
 
 Objectives and constraint (``method="default"``)
     ``time``: F = Tp (s); ``cost``: F = Cp (KRW); ``pareto``: F = (Tp, Cp).
@@ -116,7 +116,7 @@ class LineProblem(Problem):
 
 
 class GridRepair(Repair):
-    """Round feeds to 10 mm/min and speeds to 50 rpm (the grid of the ranges) and clip."""
+    """Round feeds to 10 mm/min (0.1 in/min under G20) and speeds to 50 rpm (the grid of the ranges) and clip."""
 
     def _do(self, problem: LineProblem, X: np.ndarray, **kwargs: object) -> np.ndarray:
         return join(*problem.ctx.snap(*split(np.asarray(X, float))))
@@ -149,7 +149,7 @@ class SeededSampling(Sampling):
             elif i <= n_scaled and scalable:
                 s = hi_s - (i - 1) * (hi_s - lo_s) / n_scaled  # stratified: the top of the range first
                 fraction = random_state.uniform(0.8, 0.97)
-                step_f = ctx.ranges.feed_step  # round the feeds down: the load estimate is linear, not exact
+                step_f = ctx.feed_step  # round the feeds down: the load estimate is linear, not exact
                 feeds = np.floor(ctx.chip_load_feeds(np.full(L, s), fraction) / step_f) * step_f
                 X[i] = join(feeds, np.full(L, s))[0]
             elif i <= n_scaled + n_uniform:
@@ -217,7 +217,7 @@ class LinewiseMutation(Mutation):
                 op = random_state.integers(7)
                 if op == 5 and problem.ctx.original_load_N.size == L:  # to the load limit at this line's S
                     fraction = random_state.uniform(*self.boundary)
-                    step_f = problem.ctx.ranges.feed_step  # rounded down: the load estimate is linear, not exact
+                    step_f = problem.ctx.feed_step  # rounded down: the load estimate is linear, not exact
                     X[i, 2 * j] = np.floor(problem.ctx.chip_load_feeds(X[i, 1::2], fraction)[j] / step_f) * step_f
                     continue
                 if op == 6 and L > 1:  # this line's S everywhere, same feed per tooth on every line

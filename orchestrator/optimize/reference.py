@@ -5,6 +5,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fmus_src.nck.writer import inch_lines
+
 from ..case import Case
 from ..twin import TwinOptions, build_twin, engagement_table
 from .context import ProblemContext, Ranges, check_context, classify_lines
@@ -105,9 +107,10 @@ def build_reference(case: Case, program_text: str | None = None, ranges: Ranges 
     blocks = twin.nck.blocks_
     removed = removed_volume_by_line(run.recording)
     lines, s_lines, pins, f0, s0 = classify_lines(blocks, removed, min_removed_mm3)
+    inch = frozenset(inch_lines(text, list(lines) + list(pins), file=str(case.program)))  # F words in in/min
     ctx = ProblemContext(case, text, np.asarray(lines, int), np.asarray(s_lines, int), pins, np.asarray(f0, float),
                          np.asarray(s0, float), ranges, float(load_limit_N), removed, step, time_limit_s,
-                         engagement=engagement)
+                         engagement=engagement, inch_lines=inch)
     check_context(ctx)
     evaluation = figures(ctx, run, 1)
     if not max_cycle_factor > 1.0:

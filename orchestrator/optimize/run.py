@@ -76,6 +76,8 @@ class OptimizeSettings:
         [--spindle-range] rpm (paper: 1000–8000).
     feed_step, spindle_step : float
         Grid a machinist writes: 10 mm/min, 50 rpm.
+    feed_step_in_per_min : float
+        Feed grid of a program whose cutting lines run under G20 (inch): 0.1 in/min (2.54 mm/min).
     pop, gens : int
         [--pop, --gens] population size and number of generations.
     seed : int
@@ -115,6 +117,7 @@ class OptimizeSettings:
     spindle_range: tuple[float, float] = (1000.0, 8000.0)
     feed_step: float = 10.0
     spindle_step: float = 50.0
+    feed_step_in_per_min: float = 0.1
     pop: int = 20
     gens: int = 10
     seed: int = 1
@@ -150,12 +153,13 @@ class OptimizeSettings:
     def ranges(self) -> Ranges:
         """The search ranges and grid."""
         return Ranges(tuple(map(float, self.feed_range)), tuple(map(float, self.spindle_range)),  # type: ignore[arg-type]
-                      float(self.feed_step), float(self.spindle_step))
+                      float(self.feed_step), float(self.spindle_step), float(self.feed_step_in_per_min))
 
     def identity(self) -> dict[str, Any]:
         """Settings that must match for ``resume`` (everything but gens, workers, progress, plot)."""
         keep = ("objective", "method", "load_limit_N", "feed_range", "spindle_range", "feed_step", "spindle_step",
-                "pop", "seed", "penalty_weight", "fitness_limit", "min_removed_mm3", "max_cycle_factor", "step")
+                "feed_step_in_per_min", "pop", "seed", "penalty_weight", "fitness_limit", "min_removed_mm3",
+                "max_cycle_factor", "step")
         d = asdict(self)
         return {k: (list(d[k]) if isinstance(d[k], tuple) else d[k]) for k in keep}
 
@@ -174,7 +178,8 @@ class OptimizeResult:
         ``cycle_time_s``, ``cost_KRW``, ``max_cutting_load_N``, ``tool_life_used`` of the original and the
         optimised program (each re-simulated alone).
     lines : list of dict
-        Per cutting line: feed and spindle before/after, time and largest load before/after.
+        Per cutting line: feed and spindle before/after, time and largest load before/after; on a G20 line also
+        ``feed_before_in_per_min`` and ``feed_after_in_per_min`` (the F words as written).
     history : list of dict
         Per generation: evaluations so far, best objective, feasible count.
     front : list of dict
@@ -513,6 +518,9 @@ def optimize(program: str | Path | None = None, case: str | Path | Case | None =
             "max_load_before_N": float(before.line_max_load_N[0, i]),
             "max_load_after_N": float(ev_after.line_max_load_N[0, i]),
         })
+        if int(line) in ctx.inch_lines:  # G20: the F words as written, in/min
+            lines[-1]["feed_before_in_per_min"] = ctx.feed_word(line, ctx.original_feed[i])
+            lines[-1]["feed_after_in_per_min"] = ctx.feed_word(line, f[i])
     result = OptimizeResult(
         X=ctx.as_dict(f, s), program_text=text, before=before.member(0), after=ev_after.member(0), lines=lines,
         history=history, front=front, evaluations=evaluator.evaluations,
