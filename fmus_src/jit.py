@@ -25,18 +25,23 @@ F = TypeVar("F", bound=Callable)
 NUMBA_AVAILABLE: bool = numba is not None
 
 
+def _compile(fn: F, **options: object) -> F:
+    """``numba.njit(cache=True, **options)(fn)``; uncached when no cache directory is usable; ``fn`` without numba."""
+    if numba is None:  # pragma: no cover
+        return fn
+    try:
+        return numba.njit(cache=True, **options)(fn)
+    except RuntimeError:  # "cannot cache function ...: no locator available" (read-only install)
+        return numba.njit(**options)(fn)
+
+
 def njit(fn: F) -> F:
     """``numba.njit(cache=True)`` without fastmath (IEEE results equal to numpy's, operation by operation).
 
     Falls back to an uncached compilation when no cache directory is usable,
     and to the Python function itself when numba is missing.
     """
-    if numba is None:  # pragma: no cover
-        return fn
-    try:
-        return numba.njit(cache=True)(fn)
-    except RuntimeError:  # "cannot cache function ...: no locator available" (read-only install)
-        return numba.njit(fn)
+    return _compile(fn)
 
 
 def njit_inline(fn: F) -> F:
@@ -45,9 +50,14 @@ def njit_inline(fn: F) -> F:
     For small helpers shared by several hot loops, where a call across compiled
     functions would cost more than the work (the floating-point operations are unchanged).
     """
-    if numba is None:  # pragma: no cover
-        return fn
-    try:
-        return numba.njit(cache=True, inline="always")(fn)
-    except RuntimeError:  # no cache locator, as in njit
-        return numba.njit(inline="always")(fn)
+    return _compile(fn, inline="always")
+
+
+def njit_nogil(fn: F) -> F:
+    """:func:`njit` with ``nogil=True``: the compiled function releases the GIL while it runs.
+
+    For loops that Python threads run side by side on separate data (the
+    compiled master loop over blocks of batch members); the compiled
+    functions it calls run without the GIL too.
+    """
+    return _compile(fn, nogil=True)

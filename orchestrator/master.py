@@ -93,6 +93,11 @@ class MasterSettings:
         FMUs' function pointers (:mod:`orchestrator.fmu.master_loop`) when
         every component is an FMUComponent; same results bit for bit.
         False: always the Python loop.
+    threads : int or None
+        Threads of the compiled loop for a batch: the members are split into
+        that many blocks, stepped side by side (:mod:`orchestrator.compiled.blocks`);
+        same results bit for bit. None: one per core this process may use,
+        with at least 4 members each. 1: one thread.
     """
 
     step: float = 1e-3
@@ -104,6 +109,7 @@ class MasterSettings:
     check_every: int = 50
     limits: dict[str, tuple[float, float]] = field(default_factory=dict)
     compiled: bool = True
+    threads: int | None = None
 
     def __post_init__(self) -> None:
         if not (self.step > 0 and math.isfinite(self.step)):
@@ -114,6 +120,9 @@ class MasterSettings:
             raise SystemDescriptionError(f"method must be 'gauss-seidel' or 'jacobi', got {self.method!r}")
         if int(self.decimation) != self.decimation or self.decimation < 1:
             raise SystemDescriptionError(f"decimation must be a positive integer, got {self.decimation!r}")
+        if self.threads is not None and (isinstance(self.threads, bool) or int(self.threads) != self.threads
+                                         or self.threads < 1):
+            raise SystemDescriptionError(f"threads must be None or a positive integer, got {self.threads!r}")
 
     def stop_signals(self) -> tuple[str, ...]:
         """The stop signals as a tuple (empty when the run goes to the time limit)."""

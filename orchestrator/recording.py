@@ -50,6 +50,11 @@ def unit_of_column(name: str) -> str:
     return split_unit_suffix(name)[1]
 
 
+def _unit_map(names: Iterable[str], units: Mapping[str, str] | None) -> dict[str, str]:
+    """Every channel's unit: from ``units``, else from the channel name."""
+    return {name: (units or {}).get(name) or unit_of_column(name) for name in names}
+
+
 @dataclass
 class Recording:
     """Time series of named channels with units.
@@ -109,8 +114,40 @@ class Recording:
         data = np.empty(n, dtype=fields)
         for name, arr in arrays.items():
             data[name] = arr
-        unit_map = {name: (units or {}).get(name) or unit_of_column(name) for name in channels}
-        return cls(data, unit_map, success, message, source)
+        return cls(data, _unit_map(channels, units), success, message, source)
+
+    @classmethod
+    def from_rows(
+        cls,
+        rows: np.ndarray,
+        names: Iterable[str],
+        batch: int,
+        units: Mapping[str, str] | None = None,
+        success: bool = True,
+        message: str = "",
+        source: str = "<memory>",
+    ) -> "Recording":
+        """A recording that *is* ``rows`` (no copy): one sample per row, ``t_s`` first.
+
+        Parameters
+        ----------
+        rows : ndarray of float64, shape (n, 1 + n_channels * batch), C-contiguous
+            Row ``i``: ``t_s``, then every channel's ``batch`` member values in ``names`` order.
+        names : iterable of str
+            Channel names after ``t_s``.
+        batch : int
+            Members B (fields of shape (B,); scalar fields when B is 1).
+        """
+        names = ["t_s", *names]
+        rows = np.asarray(rows)
+        if rows.dtype != np.float64 or rows.ndim != 2 or not rows.flags.c_contiguous \
+                or rows.shape[1] != 1 + (len(names) - 1) * batch:
+            raise RecordingError(f"{source}: rows of {rows.dtype} {rows.shape} are not 1 + "
+                                 f"{len(names) - 1} x {batch} contiguous float64 columns")
+        member = () if batch == 1 else (batch,)
+        dtype = np.dtype([("t_s", np.float64)] + [(name, np.float64, member) for name in names[1:]])
+        data = rows.view(dtype)[:, 0]
+        return cls(data, _unit_map(names, units), success, message, source)
 
     # ------------------------------------------------------------------ access
     @property

@@ -34,9 +34,14 @@ def test_keys(result):
     assert {"machine", "settings", "native_twin", "fused", "c_fmu", "native_ring", "pythonfmu", "scaling",
             "master_us_per_step", "ratios", "targets", "bench_wall_s"} <= set(result)
     assert result["machine"]["nproc"] >= 1 and result["machine"]["cpu"]
-    assert set(result["native_twin"]) == {"single", "single_air", "single_rk4", "single_python_master",
-                                          "single_zmap", "batch_10", "batch_100"}
     twin = result["native_twin"]
+    threaded = twin["batch_100"]["threads"] > 1  # members in blocks on several cores: also timed in one thread
+    assert set(twin) == {"single", "single_air", "single_rk4", "single_python_master", "single_zmap", "batch_10",
+                         "batch_100"} | ({"batch_100_one_thread"} if threaded else set())
+    if threaded:
+        assert twin["batch_100_one_thread"]["threads"] == 1 and twin["batch_100_one_thread"]["batch"] == 100
+        assert "native_twin_batch_100_one_thread_over_threads" in result["ratios"]
+    assert twin["single"]["threads"] == 1
     assert twin["single"]["compiled_loop"] and twin["batch_100"]["compiled_loop"]
     assert not twin["single_python_master"]["compiled_loop"] and not twin["single_zmap"]["compiled_loop"]
     assert twin["single_rk4"]["integrator"] == "rk4" and twin["single_zmap"]["cutting_mode"] == "zmap"

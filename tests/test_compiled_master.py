@@ -37,12 +37,13 @@ def cut_case():
     return case, engagement_table(case, TwinOptions())
 
 
-def _runs(make, **settings):
-    """(compiled, python) results of two identical masters made by ``make(compiled)``."""
+def _runs(make, threads=1, **settings):
+    """(compiled, python) results of two identical masters made by ``make()``; ``threads`` of the compiled one."""
     results = []
     for compiled in (True, False):
         twin, master_settings = make(**settings)
         master_settings.compiled = compiled
+        master_settings.threads = threads
         master = Master(twin.system, master_settings, twin.probes)
         if compiled:
             assert compiled_support(master) is None, compiled_support(master)
@@ -93,14 +94,18 @@ def test_single_cutting_run_is_bit_identical(cut_case, integrator):
     assert np.nanmax(a.recording["fc_N"]) > 10.0  # the window includes cutting (from about 1.5 s)
 
 
-def test_batch_with_feed_and_speed_overrides_and_a_diverging_member(cut_case):
-    """Three members: two F/S variants and one unstable (positive velocity feedback) caught by the limits."""
+@pytest.mark.parametrize("threads", [1, 2, 3])
+def test_batch_with_feed_and_speed_overrides_and_a_diverging_member(cut_case, threads):
+    """Three members: two F/S variants and one unstable (positive velocity feedback) caught by the limits.
+
+    With 2 and 3 threads the members run in blocks side by side (the diverging one alone in its block with 3).
+    """
     case, table = cut_case
     # source lines of bench_part.nc: 7 = S6000 M3, 10 = first slot (F300), 14 = second slot (F400)
     feeds = {10: np.array([300.0, 450.0, 300.0]) * MM_PER_MIN, 14: np.array([400.0, 330.0, 400.0]) * MM_PER_MIN}
     spindles = {7: np.array([6000.0, 7000.0, 6000.0]) * RPM}
     a, b = _runs(lambda: _cut_twin(case, table, batch=3, feeds=feeds, spindles=spindles, alarms=False,
-                                   members={2: {("mcu", "x_velocity_p_scale"): -1.0}}))
+                                   members={2: {("mcu", "x_velocity_p_scale"): -1.0}}), threads=threads)
     _assert_same(a, b)
     assert a.failures[2].startswith("diverged")
     assert all(f.startswith("did not reach") for f in a.failures[:2])  # 2.5 s of a 36 s program
@@ -121,19 +126,20 @@ def _air_twin(batch=1, seconds=0.6, members=None, integrator="exponential"):
                                 limits=twin.limits or {}, check_every=10)
 
 
-def test_batch_member_failed_by_a_component_alarm():
+@pytest.mark.parametrize("threads", [1, 2])
+def test_batch_member_failed_by_a_component_alarm(threads):
     """The MCU's excess-error alarm fails a member inside the loop (a component failure, not the limits)."""
-    a, b = _runs(lambda: _air_twin(batch=2, members={1: {("mcu", "x_velocity_p_scale"): -1.0}}))
+    a, b = _runs(lambda: _air_twin(batch=2, members={1: {("mcu", "x_velocity_p_scale"): -1.0}}), threads=threads)
     _assert_same(a, b)
     assert a.success and a.failed.tolist() == [False, True]
     assert "SV0411" in a.failures[1]
 
 
-@pytest.mark.parametrize("integrator", ["exponential", "rk4"])
-def test_batch_member_failed_by_its_drive(integrator):
+@pytest.mark.parametrize("integrator, threads", [("exponential", 1), ("rk4", 1), ("rk4", 2)])
+def test_batch_member_failed_by_its_drive(integrator, threads):
     """Coulomb friction far above the static friction: the break-away of one member runs backwards."""
     a, b = _runs(lambda: _air_twin(batch=2, integrator=integrator,
-                                   members={1: {("x_drive", "coulomb_positive"): 1e9}}))
+                                   members={1: {("x_drive", "coulomb_positive"): 1e9}}), threads=threads)
     _assert_same(a, b)
     assert a.success and a.failed.tolist() == [False, True]
     assert "x_drive: stick/slip integrator" in a.failures[1]
@@ -148,10 +154,11 @@ def test_single_run_ended_by_a_component_error_and_the_time_limit():
     assert not a.success and "time limit" in a.message
 
 
-def test_decimation_progress_and_no_stop_signal():
+@pytest.mark.parametrize("threads", [1, 2])
+def test_decimation_progress_and_no_stop_signal(threads):
     def make():
         twin = build_twin(AIR_CASE, batch=2, program_text=AIR_PROGRAM)
-        return twin, MasterSettings(step=1e-3, time_limit=0.35, decimation=7, check_every=3)
+        return twin, MasterSettings(step=1e-3, time_limit=0.35, decimation=7, check_every=3, threads=threads)
     calls = []
     for compiled in (True, False):
         twin, settings = make()
@@ -172,3 +179,39 @@ def test_unsupported_systems_are_named_and_left_to_the_python_master():
     twin = build_twin(AIR_CASE, batch=1, program_text=AIR_PROGRAM)
     master = Master(twin.system, MasterSettings(time_limit=0.01, method="jacobi"), twin.probes)
     assert "jacobi" in compiled_support(master)
+
+
+@pytest.mark.parametrize("threads", [2, 4])
+def test_members_ending_at_different_steps_in_blocks(threads):
+    """Four members at 1200, 300, 900 and 600 mm/min end the air move at different steps.
+
+    The run stops when all members are done and in position: with the members split into blocks that
+    run side by side, the blocks that finish first keep stepping until the last member is done, exactly
+    as in one thread. Expected: the Python master's recording, stop times (the 5.385 mm move takes
+    0.27-1.08 s plus acc/dec) and end step.
+    """
+    feeds = {1: np.array([1200.0, 300.0, 900.0, 600.0]) * MM_PER_MIN}
+
+    def make():
+        twin = build_twin(AIR_CASE, batch=4, program_text=AIR_PROGRAM)
+        twin.nck.set_overrides(feed=feeds)
+        return twin, MasterSettings(step=1e-3, time_limit=3.0, stop_when=twin.stop_when, limits=twin.limits or {},
+                                    check_every=10)
+    a, b = _runs(make, threads=threads)
+    _assert_same(a, b)
+    assert a.success and np.all(np.isfinite(a.stopped_at))
+    length = math.hypot(5.0, 2.0)  # mm, then the rapid back
+    move = length / np.array([1200.0, 300.0, 900.0, 600.0]) * 60.0
+    assert np.all(np.diff(a.stopped_at[[0, 2, 3, 1]]) > 0)  # slower feed, later end
+    assert np.all(a.stopped_at > move)
+    assert a.t_end == pytest.approx(np.max(a.stopped_at))
+
+
+def test_thread_count_of_a_batch():
+    from orchestrator.compiled.blocks import MIN_MEMBERS_PER_BLOCK, block_count
+    assert block_count(1, None) == 1 and block_count(3, 8) == 3 and block_count(100, 1) == 1
+    assert 1 <= block_count(100, None) <= 100 // MIN_MEMBERS_PER_BLOCK
+    assert block_count(MIN_MEMBERS_PER_BLOCK - 1, None) == 1
+    for bad in (0, -1, 1.5, True):
+        with pytest.raises(Exception, match="threads"):
+            MasterSettings(threads=bad)

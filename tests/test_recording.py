@@ -96,3 +96,21 @@ def test_to_pandas_has_time_index():
     assert isinstance(frame, pd.DataFrame)
     assert frame.index.name == "t_s"
     assert frame.attrs["units"]["x_mm"] == "mm"
+
+
+@pytest.mark.parametrize("batch", [1, 3])
+def test_recording_from_rows_is_a_view_of_the_rows(batch):
+    """Row i = (t, every channel's members): the fields are those columns, and no data is copied."""
+    n, names = 5, ["x_mm", "fc_N"]
+    rows = np.arange(n * (1 + 2 * batch), dtype=float).reshape(n, 1 + 2 * batch)
+    rec = Recording.from_rows(rows, names, batch, {"x_mm": "mm"})
+    assert rec.channels == ["t_s", *names] and len(rec) == n and rec.batch == batch
+    np.testing.assert_array_equal(rec.t, rows[:, 0])
+    for i, name in enumerate(names):
+        expected = rows[:, 1 + i * batch:1 + (i + 1) * batch]
+        np.testing.assert_array_equal(rec[name], expected[:, 0] if batch == 1 else expected)
+    assert rec.units == {"t_s": "s", "x_mm": "mm", "fc_N": "N"}
+    rows[2, 0] = -1.0
+    assert rec.t[2] == -1.0  # the same memory
+    with pytest.raises(RecordingError, match="contiguous float64"):
+        Recording.from_rows(rows[:, :-1], names, batch)

@@ -236,6 +236,10 @@ def run_bench(settings: BenchSettings | None = None, quick: bool = False,
     for b in s.batches:
         say(f"native twin: batch {b}, {s.batch_seconds:g} s")
         twin[f"batch_{b}"] = time_twin(case, b, s.batch_seconds, engagement=table)
+    big = max(s.batches) if s.batches else 1
+    if s.batches and twin[f"batch_{big}"]["threads"] > 1:
+        say(f"native twin: batch {big} in one thread, {s.batch_seconds:g} s")
+        twin[f"batch_{big}_one_thread"] = time_twin(case, big, s.batch_seconds, engagement=table, threads=1)
     out["native_twin"] = twin
 
     # --- fused reference (same case, same lengths, batch sizes)
@@ -331,9 +335,11 @@ def run_bench(settings: BenchSettings | None = None, quick: bool = False,
         ratios[f"native_twin_over_fused_batch_{b}"] = ratio(us[f"native_twin_batch_{b}"], us[f"fused_batch_{b}"])
         ratios[f"native_twin_batch_{b}_per_member_over_single"] = ratio(
             twin[f"batch_{b}"]["us_per_member_step"], twin["single"]["us_per_member_step"])
+    if f"batch_{big}_one_thread" in twin:
+        ratios[f"native_twin_batch_{big}_one_thread_over_threads"] = ratio(
+            twin[f"batch_{big}_one_thread"]["us_per_step"], us[f"native_twin_batch_{big}"])
     out["ratios"] = ratios
 
-    big = max(s.batches) if s.batches else 1
     targets = {
         "native_single_rt_factor": (twin["single"]["rt_factor"], TARGETS["native_single_rt_factor_min"], ">="),
         f"native_population_{big}_rt_factor": (twin.get(f"batch_{big}", twin["single"])["rt_factor"],
@@ -360,11 +366,11 @@ def format_table(result: dict) -> str:
              f"load average {m.get('load_average', math.nan):.2f} at start, "
              f"{result.get('load_average_end', math.nan):.2f} at end; engagement table built once in "
              f"{result.get('engagement_table_s', math.nan):.2f} s", ""]
-    lines.append(f"{'run':<34}{'B':>5}{'sim s':>8}{'wall s':>9}{'x real time':>13}{'us/step':>11}")
+    lines.append(f"{'run':<40}{'B':>5}{'thr':>4}{'sim s':>8}{'wall s':>9}{'x real time':>13}{'us/step':>11}")
     for label, group in (("native twin", result["native_twin"]), ("fused reference", result["fused"])):
         for key, r in group.items():
-            lines.append(f"{label + ' ' + key:<34}{r['batch']:>5}{r['sim_s']:>8.2f}{r['wall_s']:>9.3f}"
-                         f"{r['rt_factor']:>13.1f}{r['us_per_step']:>11.1f}")
+            lines.append(f"{label + ' ' + key:<40}{r['batch']:>5}{r.get('threads', 1):>4}{r['sim_s']:>8.2f}"
+                         f"{r['wall_s']:>9.3f}{r['rt_factor']:>13.1f}{r['us_per_step']:>11.1f}")
     lines += ["", f"{'communication step of':<44}{'us/step':>10}"]
     for key, value in result["master_us_per_step"].items():
         lines.append(f"{key:<44}{value:>10.2f}")

@@ -11,6 +11,7 @@ from fmus_src.cutting.table import EngagementTable
 
 from ..case import Case
 from ..compiled import compiled_support
+from ..compiled.blocks import block_count
 from ..master import Master, MasterSettings
 from ..simulate import resolve_case
 from ..twin import TwinOptions, build_twin, engagement_table
@@ -28,7 +29,7 @@ def bench_case() -> Case:
 
 def time_twin(case: Case, batch: int, seconds: float, cutting: bool = True, step: float = 1e-3,
               cutting_mode: str = "path", engagement: EngagementTable | None = None, compiled: bool = True,
-              integrator: str = "exponential") -> dict:
+              integrator: str = "exponential", threads: int | None = None) -> dict:
     """Run the native twin for ``seconds`` of simulated time and time it.
 
     Parameters
@@ -51,6 +52,8 @@ def time_twin(case: Case, batch: int, seconds: float, cutting: bool = True, step
         ``MasterSettings.compiled``: the compiled loop where it covers the system.
     integrator : {"exponential", "rk4"}
         ``TwinOptions.drive_integrator``.
+    threads : int, optional
+        ``MasterSettings.threads`` (None: one per core, at least 4 members each).
 
     Returns
     -------
@@ -58,7 +61,8 @@ def time_twin(case: Case, batch: int, seconds: float, cutting: bool = True, step
         ``batch``, ``sim_s`` (simulated time per member), ``steps``, ``build_s`` (assembly),
         ``wall_s`` (run incl. set-up), ``rt_factor`` (``B · sim_s / wall_s``, aggregate),
         ``us_per_step`` (wall per communication step of the batch), ``us_per_member_step``,
-        ``compiled_loop`` (whether the compiled loop ran), ``cutting_mode``, ``integrator``.
+        ``compiled_loop`` (whether the compiled loop ran), ``threads`` (member blocks stepped side by side),
+        ``cutting_mode``, ``integrator``.
     """
     if cutting and cutting_mode == "path" and engagement is None and case.stock is not None:
         engagement = engagement_table(case, TwinOptions(step=step))
@@ -68,7 +72,7 @@ def time_twin(case: Case, batch: int, seconds: float, cutting: bool = True, step
     twin = build_twin(case, batch=batch, options=options)
     build = time.perf_counter() - t_build
     settings = MasterSettings(step=step, time_limit=seconds, stop_when=twin.stop_when, limits=twin.limits or {},
-                              compiled=compiled)
+                              compiled=compiled, threads=threads)
     master = Master(twin.system, settings, twin.probes)
     compiled_loop = compiled and compiled_support(master) is None
     quiet = logging.getLogger("orchestrator")  # a timing run that ends at its time limit is not news
@@ -86,6 +90,7 @@ def time_twin(case: Case, batch: int, seconds: float, cutting: bool = True, step
         "build_s": build, "wall_s": wall, "rt_factor": batch * sim / wall,
         "us_per_step": wall / max(run.steps, 1) * 1e6, "us_per_member_step": wall / max(run.steps, 1) / batch * 1e6,
         "success": run.success, "message": run.message, "compiled_loop": compiled_loop,
+        "threads": block_count(batch, threads) if compiled_loop else 1,
         "cutting_mode": cutting_mode if twin.cutting is not None else "none", "integrator": integrator,
     }
 

@@ -29,7 +29,7 @@ import numpy as np
 
 from fmus_src.cutting import kernel as cutting_kernel
 from fmus_src.cutting import path_kernel
-from fmus_src.jit import njit
+from fmus_src.jit import njit, njit_nogil
 from fmus_src.jit_cache import guard_cache
 from fmus_src.nck import sampling
 from fmus_src.nck.sampling import sample_position
@@ -46,6 +46,8 @@ INTEGRATOR_RK4, INTEGRATOR_EXPONENTIAL = 0, 1
 #: Events returned by :func:`run_chunk`: chunk end, stop condition, time limit, divergence check needed,
 #: component error (the whole batch), member failures reported by a kernel (after its call).
 EV_CHUNK, EV_STOP, EV_TIME, EV_CHECK, EV_FAIL = 0, 1, 2, 3, 5
+#: :func:`run_chunk`'s ``all_done_at`` when it returns at the stop condition itself (not written).
+NO_STOP_FLAGS = np.zeros(1, dtype=np.bool_)
 
 # rows of each kind's block in V (offsets from the component's base row)
 NCK_ROWS = ("x_ref", "y_ref", "z_ref", "feed_ref", "spindle_ref", "spindle_speed", "line", "tool", "done")
@@ -119,7 +121,7 @@ def _blank(V: np.ndarray, c: int, rows_ptr: np.ndarray, rows: np.ndarray, comp_f
                 V[r, b] = math.nan
 
 
-@njit
+@njit_nogil
 def run_chunk(
     k: int, k_limit: int, max_steps: int, t0: float, h: float, n_fine: int, check_every: int, decimation: int,
     V: np.ndarray,
@@ -130,7 +132,7 @@ def run_chunk(
     stop_rows: np.ndarray, stopped_at: np.ndarray, failed: np.ndarray,
     probe_rows: np.ndarray, probe_factor: np.ndarray, rec_t: np.ndarray, rec: np.ndarray, n_rec: int,
     real_ptr: np.ndarray, real_rows: np.ndarray, comp_failed: np.ndarray, comp_has_failed: np.ndarray,
-    nck: tuple, mcu: tuple, drives: tuple, cut: tuple,
+    nck: tuple, mcu: tuple, drives: tuple, cut: tuple, stop_record: bool, all_done_at: np.ndarray,
 ) -> tuple[int, int, int, int, int, int, int]:
     """Advance from step ``k`` until an event (see module docstring).
 
@@ -168,6 +170,12 @@ def run_chunk(
         Members each component has failed (their real outputs are NaN after every step of it).
     nck, mcu, drives, cut : tuple
         Kernel data of each kind (see :mod:`.layout`).
+    stop_record : bool
+        False: return ``EV_STOP`` at the first step where every member meets the stop condition.
+        True (a block of members run on its own, :mod:`.blocks`): never return ``EV_STOP``; write whether
+        every member of the block meets it at the top of step ``k`` to ``all_done_at[k - k_start]``.
+    all_done_at : ndarray of bool, shape (>= k_limit - k + 1,) when ``stop_record``
+        Written only when ``stop_record``.
 
     Returns
     -------
@@ -187,6 +195,7 @@ def run_chunk(
     n_stop = stop_rows.shape[0]
     n_probe = probe_rows.shape[0]
     h_fine = h / n_fine
+    k_start = k
     while True:
         t = t0 + k * h
         if n_stop > 0:
@@ -200,7 +209,9 @@ def run_chunk(
                     stopped_at[b] = t
                 if not (flag or failed[b]):
                     all_done = False
-            if all_done:
+            if stop_record:
+                all_done_at[k - k_start] = all_done
+            elif all_done:
                 return k, n_rec, EV_STOP, -1, 0, 0, 0
         if k >= max_steps:
             return k, n_rec, EV_TIME, -1, 0, 0, 0
@@ -310,6 +321,23 @@ def run_chunk(
             n_rec += 1
         if k >= k_limit:
             return k, n_rec, EV_CHUNK, -1, 0, 0, 0
+
+
+def recording_buffers(capacity: int, n_probe: int, batch: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Row-major recording storage and the ``rec_t``, ``rec`` views :func:`run_chunk` writes through.
+
+    Returns
+    -------
+    rows : ndarray, shape (capacity, 1 + n_probe * batch)
+        Sample ``i`` is row ``i``: its time, then each probe's members (the layout of
+        :meth:`orchestrator.recording.Recording.from_rows`, which wraps it without a copy).
+    rec_t : ndarray, shape (capacity,)
+        View of the time column.
+    rec : ndarray, shape (n_probe, capacity, batch)
+        View of the probe columns.
+    """
+    rows = np.empty((capacity, 1 + n_probe * batch))
+    return rows, rows[:, 0], rows[:, 1:].reshape(capacity, n_probe, batch).transpose(1, 0, 2)
 
 
 @njit

@@ -25,8 +25,10 @@ import numpy as np
 
 from ..errors import CncTwinError, SimulationError
 from ..recording import Recording
+from .blocks import PASS_STEPS, MemberBlocks, block_count
 from .layout import Layout, Unsupported
-from .loop import EV_CHECK, EV_CHUNK, EV_STOP, EV_TIME, KIND_CUT, KIND_DRIVE, run_chunk, sample
+from .loop import (EV_CHECK, EV_CHUNK, EV_STOP, EV_TIME, KIND_CUT, KIND_DRIVE, NO_STOP_FLAGS, recording_buffers,
+                   run_chunk, sample)
 
 if TYPE_CHECKING:
     from ..master import Master, RunResult
@@ -110,7 +112,7 @@ def run_compiled(master: "Master") -> "RunResult | None":
     h = s.step
     max_steps = int(math.floor(s.time_limit / h + 1e-9))
     expected = master.expected_duration or s.time_limit
-    capacity = max(min(max_steps, int(expected / h) + 16) // s.decimation + 2, 2)
+    capacity = max(min(max_steps, int(expected / h) + 16) // s.decimation + 3, 3)
     batch = system.batch
     t = s.t0
     k = 0
@@ -120,8 +122,7 @@ def run_compiled(master: "Master") -> "RunResult | None":
     layout.bind()
     V = layout.pack()
     n_probe = layout.probe_rows.shape[0]
-    rec_t = np.empty(capacity)
-    rec = np.empty((n_probe, capacity, batch))
+    rows, rec_t, rec = recording_buffers(capacity, n_probe, batch)
     n_rec = sample(t, V, layout.probe_rows, layout.probe_factor, rec_t, rec, 0)
     nck, mcu, drives, cut = layout.kernel_data()
     report_every = max(1, int(expected / h / 100))
@@ -129,29 +130,36 @@ def run_compiled(master: "Master") -> "RunResult | None":
     v_current = True  # V (not the components' value arrays) holds the current values
 
     def grow(needed: int) -> None:
-        nonlocal rec_t, rec
-        if needed > rec_t.shape[0]:
-            new = max(needed, 2 * rec_t.shape[0])
-            rec_t = np.resize(rec_t, new)
-            rec = np.concatenate([rec, np.empty((n_probe, new - rec.shape[1], batch))], axis=1)
+        nonlocal rows, rec_t, rec
+        if needed > rows.shape[0]:
+            old = rows
+            rows, rec_t, rec = recording_buffers(max(needed, 2 * old.shape[0]), n_probe, batch)
+            rows[:n_rec] = old[:n_rec]
 
     def progress(k: int) -> None:
         if master.progress is not None and k % report_every == 0:
             master.progress(s.t0 + k * h - s.t0, expected)
 
+    # run_chunk's arguments before and after the recording buffers (the same arrays for the whole run)
+    head = (max_steps, s.t0, h, layout.n_fine, s.check_every, s.decimation, V,
+            layout.tick_ptr, layout.tick_comp, layout.comp_kind, layout.comp_index, layout.comp_rate,
+            layout.comp_base, layout.wire_ptr, layout.wire_src, layout.wire_dst, layout.wire_factor,
+            layout.check_rows, layout.check_lo, layout.check_hi, layout.stop_rows, stopped_at, failed,
+            layout.probe_rows, layout.probe_factor)
+    tail = (layout.real_ptr, layout.real_rows, layout.comp_failed, layout.comp_has_failed, nck, mcu, drives, cut)
+    n_blocks = block_count(batch, s.threads)
+    blocks = MemberBlocks(batch, n_blocks, head, tail) if n_blocks > 1 else None
     try:
         while True:
-            k_limit = k + CHUNK_STEPS
+            k_limit = min(k + (CHUNK_STEPS if blocks is None else PASS_STEPS), max(max_steps, k))  # EV_TIME there
             if master.progress is not None:
                 k_limit = min(k_limit, (k // report_every + 1) * report_every)
             grow(n_rec + (k_limit - k) // s.decimation + 2)
-            k, n_rec, event, c, code, j, item = run_chunk(
-                k, k_limit, max_steps, s.t0, h, layout.n_fine, s.check_every, s.decimation, V,
-                layout.tick_ptr, layout.tick_comp, layout.comp_kind, layout.comp_index, layout.comp_rate,
-                layout.comp_base, layout.wire_ptr, layout.wire_src, layout.wire_dst, layout.wire_factor,
-                layout.check_rows, layout.check_lo, layout.check_hi, layout.stop_rows, stopped_at, failed,
-                layout.probe_rows, layout.probe_factor, rec_t, rec, n_rec, layout.real_ptr, layout.real_rows,
-                layout.comp_failed, layout.comp_has_failed, nck, mcu, drives, cut)
+            if blocks is None:
+                k, n_rec, event, c, code, j, item = run_chunk(k, k_limit, *head, rec_t, rec, n_rec, *tail,
+                                                              False, NO_STOP_FLAGS)
+            else:
+                k, n_rec, event, c, code, j, item = blocks.run(k, k_limit, rec_t, rec, n_rec)
             t = s.t0 + k * h
             if event == EV_CHUNK:
                 progress(k)
@@ -210,15 +218,16 @@ def run_compiled(master: "Master") -> "RunResult | None":
                 master._failures[b] = message  # noqa: SLF001
             failed[:] = True
     finally:
+        if blocks is not None:
+            blocks.close()
         if v_current:
             layout.unpack(V)
         master._terminate_all()  # noqa: SLF001
-    channels = {"t_s": rec_t[:n_rec].copy()}
-    units = {"t_s": "s"}
-    for p, (channel, unit) in enumerate(layout.channels):
-        channels[channel] = rec[p, :n_rec, 0].copy() if batch == 1 else rec[p, :n_rec, :].copy()
-        units[channel] = unit
-    recording = Recording.from_channels(channels, units, success, message, system.name)
+    if n_rec < rows.shape[0] // 2:  # do not keep a mostly unused buffer alive
+        rows = rows[:n_rec].copy()
+    units = {"t_s": "s", **dict(layout.channels)}
+    recording = Recording.from_rows(rows[:n_rec], [channel for channel, _ in layout.channels], batch, units,
+                                    success, message, system.name)
     if success and failed.any():
         diverged = all(f is None or f.startswith("diverged") for f in master._failures)  # noqa: SLF001
         message += f"; {int(failed.sum())} of {batch} members {'diverged' if diverged else 'failed'}"

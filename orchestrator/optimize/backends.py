@@ -25,8 +25,8 @@ from .evaluate import Evaluation, evaluate_population
 
 
 def _evaluate_chunk(ctx: ProblemContext, feeds: np.ndarray, spindles: np.ndarray) -> Evaluation:
-    """Module-level (picklable) task: one batched twin call."""
-    return evaluate_population(ctx, feeds, spindles)
+    """Module-level (picklable) task: one batched twin call, in one thread (the workers share the cores)."""
+    return evaluate_population(ctx, feeds, spindles, threads=1)
 
 
 class Backend(Protocol):

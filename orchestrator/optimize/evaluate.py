@@ -113,7 +113,8 @@ class Evaluation:
 
 
 def run_twin(ctx: ProblemContext, feeds: np.ndarray | None, spindles: np.ndarray | None, batch: int,
-             channels: tuple[str, ...] | None = EVAL_CHANNELS, program_text: str | None = None):
+             channels: tuple[str, ...] | None = EVAL_CHANNELS, program_text: str | None = None,
+             threads: int | None = None):
     """One batched twin run with per-line overrides; returns the Master's RunResult.
 
     Parameters
@@ -128,6 +129,8 @@ def run_twin(ctx: ProblemContext, feeds: np.ndarray | None, spindles: np.ndarray
         Recording channels (None: all of the twin's).
     program_text : str, optional
         Program to run instead of ``ctx.program_text``.
+    threads : int, optional
+        ``MasterSettings.threads`` (None: one per core, at least 4 members each).
     """
     options = TwinOptions(step=ctx.step, cutting_mode="path" if ctx.engagement is not None else "zmap",
                           engagement=ctx.engagement)
@@ -138,7 +141,7 @@ def run_twin(ctx: ProblemContext, feeds: np.ndarray | None, spindles: np.ndarray
         twin.nck.set_overrides(feed=feed, spindle=spindle)
     probes = twin.probes if channels is None else [p for p in twin.probes if p.channel in channels]
     settings = MasterSettings(step=twin.options.step, time_limit=ctx.time_limit_s, stop_when=twin.stop_when,
-                              limits=getattr(twin, "limits", None) or {})
+                              limits=getattr(twin, "limits", None) or {}, threads=threads)
     return Master(twin.system, settings, probes).run()
 
 
@@ -200,7 +203,8 @@ def figures(ctx: ProblemContext, run, batch: int) -> Evaluation:
                       feasible, reasons)
 
 
-def evaluate_population(ctx: ProblemContext, feeds: np.ndarray, spindles: np.ndarray) -> Evaluation:
+def evaluate_population(ctx: ProblemContext, feeds: np.ndarray, spindles: np.ndarray,
+                        threads: int | None = None) -> Evaluation:
     """Evaluate B individuals in one batched twin run.
 
     Parameters
@@ -211,6 +215,9 @@ def evaluate_population(ctx: ProblemContext, feeds: np.ndarray, spindles: np.nda
         Feed per cutting line, mm/min.
     spindles : ndarray, shape (B, L)
         Spindle speed per cutting line, rpm.
+    threads : int, optional
+        Threads of the batched run (``MasterSettings.threads``; None: one per core). The figures
+        do not depend on it.
 
     Returns
     -------
@@ -223,5 +230,5 @@ def evaluate_population(ctx: ProblemContext, feeds: np.ndarray, spindles: np.nda
 
         raise OptimizeError(f"feeds {feeds.shape} and spindles {spindles.shape} must both be (B, {ctx.n_lines})")
     batch = feeds.shape[0]
-    run = run_twin(ctx, feeds, spindles, batch)
+    run = run_twin(ctx, feeds, spindles, batch, threads=threads)
     return figures(ctx, run, batch)
