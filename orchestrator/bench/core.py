@@ -115,13 +115,32 @@ def _load() -> float:
         return math.nan
 
 
+#: A cost-per-step slope is measured over at least this much wall time between its two runs, s.
+MIN_SLOPE_WALL_S = 0.02
+#: ... growing ``n`` fourfold at a time up to this many steps.
+MAX_SLOPE_STEPS = 2_000_000
+
+
+def _two_runs(run: Callable[[int], None], n: int) -> tuple[int, list[float]]:
+    """Wall times of ``run(n)`` and ``run(3 n)``, with ``n`` grown until they differ by MIN_SLOPE_WALL_S.
+
+    A step of a compiled loop costs a fraction of a microsecond: over a few thousand steps the difference
+    of the two runs would be lost in the set-up's jitter.
+    """
+    while True:
+        t = []
+        for steps in (n, 3 * n):
+            t0 = time.perf_counter()
+            run(steps)
+            t.append(time.perf_counter() - t0)
+        if t[1] - t[0] >= MIN_SLOPE_WALL_S or 12 * n > MAX_SLOPE_STEPS:
+            return n, t
+        n *= 4
+
+
 def _slope(run: Callable[[int], None], n: int) -> dict:
-    """Cost per step from runs of ``n`` and ``3 n`` steps (each from a fresh set-up)."""
-    t = []
-    for steps in (n, 3 * n):
-        t0 = time.perf_counter()
-        run(steps)
-        t.append(time.perf_counter() - t0)
+    """Cost per step from runs of ``n`` and ``3 n`` steps (each from a fresh set-up; ``n`` grown as needed)."""
+    n, t = _two_runs(run, n)
     per_step = max((t[1] - t[0]) / (2 * n), 0.0)
     return {"us_per_step": per_step * 1e6, "fixed_s": max(t[0] - n * per_step, 0.0), "steps": [n, 3 * n],
             "wall_s": t}
@@ -147,11 +166,7 @@ def _fast_slope(make_system: Callable, probes: tuple[str, ...], n: int, h: float
     t0 = time.perf_counter()
     loop.run(max(2, n // 10), h)  # set-up (fmi2 initialisation) and first steps
     setup = time.perf_counter() - t0
-    t = []
-    for steps in (n, 3 * n):
-        t0 = time.perf_counter()
-        loop.run(steps, h)
-        t.append(time.perf_counter() - t0)
+    n, t = _two_runs(lambda steps: loop.run(steps, h), n)
     for comp in system.components.values():
         comp.terminate()
     per_step = max((t[1] - t[0]) / (2 * n), 0.0)
@@ -224,6 +239,8 @@ def run_bench(settings: BenchSettings | None = None, quick: bool = False,
         for integrator in ("exponential", "rk4"):
             time_twin(case, 1, 0.05, engagement=table, compiled=compiled, integrator=integrator)
     time_twin(case, 1, 0.05, cutting_mode="zmap")
+    if s.batches:  # first large batch of the process: memory from the OS, worker threads
+        time_twin(case, max(s.batches), 0.05, engagement=table)
     say(f"native twin: single, {s.twin_seconds:g} s (compiled loop, exponential drives, path-mode cutting)")
     twin = {"single": time_twin(case, 1, s.twin_seconds, engagement=table)}
     say(f"native twin: single air cut (no cutting load), {s.twin_seconds:g} s")
