@@ -377,6 +377,53 @@ class Master:
             flags &= np.asarray(self.system.components[comp].values[var], dtype=bool)
         return flags
 
+    # ---------------------------------------------- how a run ends (shared by the Python and the compiled loops)
+    def _stop_message(self, t: float) -> str:
+        """The message of a run ended by its stop signals at ``t``."""
+        return f"{' and '.join(self._stop_refs)} at t = {t:.3f} s"
+
+    def _time_limit_reached(self, stopped_at: np.ndarray) -> tuple[bool, str]:
+        """Success and message at the time limit; members still short of the stop signals fail.
+
+        Parameters
+        ----------
+        stopped_at : ndarray, shape (B,)
+            Time each member met the stop signals (NaN: not yet), s.
+        """
+        s = self.settings
+        if not self._stop_refs:
+            return True, f"time limit of {s.time_limit:g} s reached"
+        refs = " and ".join(self._stop_refs)
+        waiting = np.flatnonzero(np.isnan(stopped_at) & ~self._failed)
+        for b in waiting:
+            self._failures[b] = f"did not reach {refs} by the time limit of {s.time_limit:g} s"
+        self._failed[waiting] = True
+        batch = self.system.batch
+        success = bool(batch > 1 and not self._failed.all())
+        message = f"time limit of {s.time_limit:g} s reached before {refs}"
+        if success:
+            message += f" for {waiting.size} of {batch} members"
+        return success, message
+
+    def _run_failed(self, exc: CncTwinError, t: float) -> str:
+        """The message of a run ended by ``exc`` at ``t`` (logged); a component's error fails every member left."""
+        message = str(exc) if isinstance(exc, SimulationError) else f"simulation failed at t = {t:.6f} s: {exc}"
+        log.error("%s", message)
+        if not isinstance(exc, SimulationError):  # a component gave up on the (rest of the) batch
+            self._collect_member_failures(raise_when_all=False)
+            for b in np.flatnonzero(~self._failed):
+                self._failures[b] = message
+            self._failed[:] = True
+        return message
+
+    def _result(self, recording: Recording, success: bool, message: str, k: int, t: float,
+                stopped_at: np.ndarray) -> RunResult:
+        """The run's result; a successful batch run names its failed members in the message."""
+        if success and self._failed.any():
+            diverged = all(f is None or f.startswith("diverged") for f in self._failures)
+            message += f"; {int(self._failed.sum())} of {self.system.batch} members {'diverged' if diverged else 'failed'}"
+        return RunResult(recording, success, message, k, t, stopped_at, self._failed.copy(), list(self._failures))
+
     # ------------------------------------------------------------------ run
     def run(self) -> RunResult:
         """Initialise every component, step until the stop condition, terminate.
@@ -441,21 +488,10 @@ class Master:
                     newly = flags & np.isnan(stopped_at)
                     stopped_at[newly] = t
                     if (flags | self._failed).all():
-                        message = f"{' and '.join(self._stop_refs)} at t = {t:.3f} s"
+                        message = self._stop_message(t)
                         break
                 if k >= max_steps:
-                    if self._stop_refs:
-                        waiting = np.flatnonzero(np.isnan(stopped_at) & ~self._failed)
-                        for b in waiting:
-                            self._failures[b] = (f"did not reach {' and '.join(self._stop_refs)} "
-                                                 f"by the time limit of {s.time_limit:g} s")
-                        self._failed[waiting] = True
-                        success = bool(batch > 1 and not self._failed.all())
-                        message = f"time limit of {s.time_limit:g} s reached before {' and '.join(self._stop_refs)}"
-                        if success:
-                            message += f" for {waiting.size} of {batch} members"
-                    else:
-                        message = f"time limit of {s.time_limit:g} s reached"
+                    success, message = self._time_limit_reached(stopped_at)
                     break
                 for j, tick in enumerate(schedule):
                     t_tick = s.t0 + (k * n_fine + j) * (h / n_fine)
@@ -486,20 +522,10 @@ class Master:
                 recorder.sample(t)
         except CncTwinError as exc:
             success = False
-            message = str(exc) if isinstance(exc, SimulationError) else f"simulation failed at t = {t:.6f} s: {exc}"
-            log.error("%s", message)
-            if not isinstance(exc, SimulationError):  # a component gave up on the (rest of the) batch
-                self._collect_member_failures(raise_when_all=False)
-                for b in np.flatnonzero(~self._failed):
-                    self._failures[b] = message
-                self._failed[:] = True
+            message = self._run_failed(exc, t)
         finally:
             self._terminate_all()
-        recording = recorder.recording(success, message, system.name)
-        if success and self._failed.any():
-            diverged = all(f is None or f.startswith("diverged") for f in self._failures)
-            message += f"; {int(self._failed.sum())} of {batch} members {'diverged' if diverged else 'failed'}"
-        return RunResult(recording, success, message, k, t, stopped_at, self._failed.copy(), list(self._failures))
+        return self._result(recorder.recording(success, message, system.name), success, message, k, t, stopped_at)
 
 
 def simulate_system(

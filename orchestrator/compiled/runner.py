@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..errors import CncTwinError, SimulationError
+from ..errors import CncTwinError
 from ..recording import Recording
 from .blocks import PASS_STEPS, MemberBlocks, block_count
 from .layout import Layout, Unsupported
@@ -100,8 +100,6 @@ def run_compiled(master: "Master") -> "RunResult | None":
     RunResult or None
         The same result :meth:`Master.run` returns (bit-identical recording), or None.
     """
-    from ..master import RunResult
-
     try:
         layout = Layout(master)
     except Unsupported as exc:
@@ -165,22 +163,10 @@ def run_compiled(master: "Master") -> "RunResult | None":
                 progress(k)
                 continue
             if event == EV_STOP:
-                message = f"{' and '.join(master._stop_refs)} at t = {t:.3f} s"  # noqa: SLF001
+                message = master._stop_message(t)  # noqa: SLF001
                 break
             if event == EV_TIME:
-                stop_refs = master._stop_refs  # noqa: SLF001
-                if stop_refs:
-                    waiting = np.flatnonzero(np.isnan(stopped_at) & ~failed)
-                    for b in waiting:
-                        master._failures[b] = (f"did not reach {' and '.join(stop_refs)} "  # noqa: SLF001
-                                               f"by the time limit of {s.time_limit:g} s")
-                    failed[waiting] = True
-                    success = bool(batch > 1 and not failed.all())
-                    message = f"time limit of {s.time_limit:g} s reached before {' and '.join(stop_refs)}"
-                    if success:
-                        message += f" for {waiting.size} of {batch} members"
-                else:
-                    message = f"time limit of {s.time_limit:g} s reached"
+                success, message = master._time_limit_reached(stopped_at)  # noqa: SLF001
                 break
             layout.unpack(V)
             if event == EV_CHECK:
@@ -210,13 +196,7 @@ def run_compiled(master: "Master") -> "RunResult | None":
             n_rec = sample(t, V, layout.probe_rows, layout.probe_factor, rec_t, rec, n_rec)
     except CncTwinError as exc:
         success = False
-        message = str(exc) if isinstance(exc, SimulationError) else f"simulation failed at t = {t:.6f} s: {exc}"
-        log.error("%s", message)
-        if not isinstance(exc, SimulationError):  # a component gave up on the (rest of the) batch, as the master
-            master._collect_member_failures(raise_when_all=False)  # noqa: SLF001
-            for b in np.flatnonzero(~failed):
-                master._failures[b] = message  # noqa: SLF001
-            failed[:] = True
+        message = master._run_failed(exc, t)  # noqa: SLF001
     finally:
         if blocks is not None:
             blocks.close()
@@ -228,7 +208,4 @@ def run_compiled(master: "Master") -> "RunResult | None":
     units = {"t_s": "s", **dict(layout.channels)}
     recording = Recording.from_rows(rows[:n_rec], [channel for channel, _ in layout.channels], batch, units,
                                     success, message, system.name)
-    if success and failed.any():
-        diverged = all(f is None or f.startswith("diverged") for f in master._failures)  # noqa: SLF001
-        message += f"; {int(failed.sum())} of {batch} members {'diverged' if diverged else 'failed'}"
-    return RunResult(recording, success, message, k, t, stopped_at, failed.copy(), list(master._failures))  # noqa: SLF001
+    return master._result(recording, success, message, k, t, stopped_at)  # noqa: SLF001

@@ -35,7 +35,7 @@ import numpy as np
 
 from fmus_src.units import conversion_factor
 
-from ..errors import CncTwinError, SimulationError
+from ..errors import CncTwinError
 from ..recording import Recording
 from ..system import split_reference
 from .component import FMUComponent
@@ -104,8 +104,6 @@ def run_fast_fmu(master: "Master") -> "RunResult | None":
         The same result :meth:`Master.run` returns from its Python loop (bit-identical
         recording), or None (see :func:`fast_fmu_support`).
     """
-    from ..master import RunResult
-
     reason = fast_fmu_support(master)
     if reason is not None:
         log.debug("%s: compiled FMU loop not used: %s", master.system.name, reason)
@@ -190,27 +188,16 @@ def run_fast_fmu(master: "Master") -> "RunResult | None":
             stopped = result.event == "stop"
         if stopped:
             stopped_at[:] = t
-            message = f"{' and '.join(stop_refs)} at t = {t:.3f} s"
-        elif stop_refs:
-            master._failures[0] = (f"did not reach {' and '.join(stop_refs)} "  # noqa: SLF001
-                                   f"by the time limit of {s.time_limit:g} s")
-            master._failed[0] = True  # noqa: SLF001
-            success = False
-            message = f"time limit of {s.time_limit:g} s reached before {' and '.join(stop_refs)}"
+            message = master._stop_message(t)  # noqa: SLF001
         else:
-            message = f"time limit of {s.time_limit:g} s reached"
+            success, message = master._time_limit_reached(stopped_at)  # noqa: SLF001
         master._check_divergence(t)  # noqa: SLF001
         if k % s.decimation != 0:
             steps.append(np.array([k]))
             rows.append(np.array([[float(_value(comps, ref)) for ref in record]]).reshape(1, len(record)))
     except CncTwinError as exc:
         success = False
-        message = str(exc) if isinstance(exc, SimulationError) else f"simulation failed at t = {t:.6f} s: {exc}"
-        log.error("%s", message)
-        if not isinstance(exc, SimulationError):  # as the master: the reason of a member not failed before
-            if not master._failed[0]:  # noqa: SLF001
-                master._failures[0] = message  # noqa: SLF001
-            master._failed[:] = True  # noqa: SLF001
+        message = master._run_failed(exc, t)  # noqa: SLF001
     finally:
         master._terminate_all()  # noqa: SLF001
     ks = np.concatenate(steps)
@@ -221,8 +208,7 @@ def run_fast_fmu(master: "Master") -> "RunResult | None":
         channels[channel] = table[:, column] * factor
         units[channel] = unit
     recording = Recording.from_channels(channels, units, success, message, system.name)
-    failed, failures = master._failed, master._failures  # noqa: SLF001
-    return RunResult(recording, success, message, k, t, stopped_at, failed.copy(), list(failures))
+    return master._result(recording, success, message, k, t, stopped_at)  # noqa: SLF001
 
 
 def _value(comps: dict, reference: str) -> float:
