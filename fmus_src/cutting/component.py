@@ -1,7 +1,7 @@
 """``CuttingLoad``: milling force from the actual tool motion and a Z-map stock.
 
 A thin adapter around :mod:`.stock`, :mod:`.engagement`, :mod:`.force` and
-:mod:`.kernel` (the step itself).
+:mod:`.kernel` (the step itself; compiled: :mod:`.zmap_numba`, same results).
 
 Time discretisation of one communication step ``[t, t + h]``
 -----------------------------------------------------------
@@ -47,16 +47,19 @@ outputs are those of the baseline bit for bit.
 from __future__ import annotations
 
 import math
+from typing import ClassVar
 
 import numpy as np
 
 from ..component import Component, Variable
 from ..errors import CncTwinError
+from ..jit import NUMBA_AVAILABLE
 from .effect_model import CHATTER_SUBSTEPS_PER_PERIOD, EffectParameters, EffectState
 from .engagement import NearField, SweptPath
 from .kernel import StepResult, cut_step
 from .kernel_effects import cut_step_effects
 from .stock import ZMapStock
+from .zmap_numba import ZMapArrays, commit, cut_step_compiled
 
 #: Refuse steps needing more substeps than this (spindle speed or jump far too large).
 MAX_SUBSTEPS = 100_000
@@ -79,7 +82,15 @@ class CuttingLoad(Component):
     ---------
     See :attr:`variables`. Forces ``fx``, ``fy`` are on the **workpiece**, in
     machine axes (the drives use ``Fd = +F_workpiece``).
+
+    The members without effect terms step in the compiled kernel
+    (:func:`.zmap_numba.cut_step_compiled`, same results as the numpy
+    :func:`.kernel.cut_step`) when :attr:`use_compiled` is true.
     """
+
+    #: Step the baseline members (and the Z-map removal) in the compiled kernels of :mod:`.zmap_numba`
+    #: (default: when numba is available); False: the numpy reference :func:`.kernel.cut_step`.
+    use_compiled: ClassVar[bool] = NUMBA_AVAILABLE
 
     variables = (
         _p("tool_diameter", "m", 6e-3, "flat end mill diameter"),
@@ -140,6 +151,7 @@ class CuttingLoad(Component):
         lower = np.stack([v["stock_x_min"], v["stock_y_min"], v["stock_z_min"]], axis=1)
         upper = np.stack([v["stock_x_max"], v["stock_y_max"], v["stock_z_max"]], axis=1)
         self.stock = ZMapStock(lower, upper, np.asarray(v["stock_cell"], dtype=np.float64))
+        self._zmap = ZMapArrays.of(self.stock)
         position = self._position()
         spacing = PATH_SPACING * self._radius
         lag = self._radius + 2.0 * np.maximum(self.stock.dx, self.stock.dy)
@@ -192,6 +204,7 @@ class CuttingLoad(Component):
     def _reset(self) -> None:
         self.__dict__.pop("stock", None)
         self.__dict__.pop("path", None)
+        self.__dict__.pop("_zmap", None)
 
     def _check_parameters(self) -> None:
         v = self.values
@@ -344,7 +357,8 @@ class CuttingLoad(Component):
             :func:`.kernel.cut_step`, as each would alone.
         """
         geometric = self._geometric_members()
-        near = self.path.near_field()
+        # the compiled kernel reads the path's ring buffer itself
+        near = self.path.near_field() if (geometric.any() or not self.use_compiled) else None
         live = ~held
         if live.all() and (geometric.all() or not geometric.any()):
             return self._cut_rows(None, near, p_new, omega, h, n, bool(geometric[0]))
@@ -362,9 +376,12 @@ class CuttingLoad(Component):
         return StepResult(force=force, fc_peak=peak, mean=mean, axial_depth=axial, chip_thickness=chip,
                           engaged_teeth=engaged)
 
-    def _cut_rows(self, rows: np.ndarray | None, near: NearField, p_new: np.ndarray, omega: np.ndarray, h: float,
-                  n: np.ndarray, geometric: bool) -> StepResult:
-        """One kernel call for the members ``rows`` (``None``: all); ``n`` of shape (B,) as :meth:`_cut`."""
+    def _cut_rows(self, rows: np.ndarray | None, near: NearField | None, p_new: np.ndarray, omega: np.ndarray,
+                  h: float, n: np.ndarray, geometric: bool) -> StepResult:
+        """One kernel call for the members ``rows`` (``None``: all); ``n`` of shape (B,) as :meth:`_cut`.
+
+        ``near`` is the path's near field (``None`` only with :attr:`use_compiled` and no effect terms).
+        """
         v = self.values
         sel = slice(None) if rows is None else rows
         wear = self._wear()[sel]
@@ -378,11 +395,18 @@ class CuttingLoad(Component):
                 np.asarray(v["angle_steps_per_tooth"], dtype=np.float64)[sel], coefficients, self._eff,
                 self._effect_state, np.asarray(v["stock_z_max"], dtype=np.float64)[sel], rows,
             )
+        if self.use_compiled:
+            return cut_step_compiled(self._zmap, self.path, self._p_prev[sel], p_new[sel], self._theta[sel],
+                                     omega[sel], h, n[sel], self._radius[sel], self._flutes[sel], kt, ke, rows)
+        near = self.path.near_field() if near is None else near
         return cut_step(self.stock, near, self._p_prev[sel], p_new[sel], self._theta[sel], omega[sel], h, n[sel],
                         self._radius[sel], self._flutes[sel], kt, ke, rows)
 
     def _commit(self, position: np.ndarray) -> None:
         """Store the new tool position and move old path segments into the Z-map."""
+        if self.use_compiled:
+            commit(self._zmap, self.path, position, self._radius)
+            return
         self.path.advance(position)
         while True:
             start, end, mask = self.path.pop_ready(force_room=True)

@@ -26,6 +26,7 @@ import math
 import numpy as np
 
 from ..errors import CncTwinError
+from ..jit import njit
 
 #: Largest height field (all batch members together) this module allocates, bytes.
 MAX_STOCK_BYTES = 4 * 1024**3
@@ -115,6 +116,37 @@ def disc_sweep_cover(
     z_moving = np.minimum(az + s_lo * dz, az + s_hi * dz)
     z_cut = np.where(moving, z_moving, np.minimum(az, bz))
     return covered, np.where(covered, z_cut, np.inf)
+
+
+@njit
+def sweep_cover_z(
+    px: float, py: float, ax: float, ay: float, az: float, bx: float, by: float, bz: float, radius: float, tol: float
+) -> float:
+    """Lowest tip height of a disc swept from A to B over ``(px, py)``, m; ``inf`` if not covered.
+
+    Scalar transcription of :func:`disc_sweep_cover` (one point, one segment).
+    """
+    dx = bx - ax
+    dy = by - ay
+    wx = ax - px
+    wy = ay - py
+    qa = dx * dx + dy * dy
+    qb = 2.0 * (wx * dx + wy * dy)
+    qc = wx * wx + wy * wy - radius * radius
+    length = math.sqrt(qa)
+    if length > max(tol, 1e-15):
+        disc = qb * qb - 4.0 * qa * qc
+        if not disc > 0.0:
+            return math.inf
+        root = math.sqrt(disc)
+        s_lo = min(max((-qb - root) / (2.0 * qa), 0.0), 1.0)
+        s_hi = min(max((-qb + root) / (2.0 * qa), 0.0), 1.0)
+        if (s_hi - s_lo) * length > tol:
+            dz = bz - az
+            return min(az + s_lo * dz, az + s_hi * dz)
+        return math.inf
+    covered = qc < -2.0 * radius * tol if tol > 0.0 else qc < 0.0
+    return min(az, bz) if covered else math.inf
 
 
 class ZMapStock:

@@ -41,9 +41,11 @@ from typing import Mapping
 import numpy as np
 
 from ..jit import njit
+from ..jit_cache import guard_cache
 from .component import PATH_SPACING, CuttingError, CuttingLoad
 from .engagement import RIM_TOL, SweptPath
-from .stock import ZMapStock
+from . import engagement, stock
+from .stock import ZMapStock, sweep_cover_z
 
 #: Tops closer than this are one interval, m.
 TOP_TOL = 1e-7
@@ -63,37 +65,6 @@ def zmap_top(heights: np.ndarray, x0: float, y0: float, dx: float, dy: float, px
     if fx < 0 or fy < 0 or fx >= heights.shape[0] or fy >= heights.shape[1]:
         return -math.inf
     return float(heights[int(fx), int(fy)])
-
-
-@njit
-def sweep_cover_z(
-    px: float, py: float, ax: float, ay: float, az: float, bx: float, by: float, bz: float, radius: float, tol: float
-) -> float:
-    """Lowest tip height of a disc swept from A to B over ``(px, py)``, m; ``inf`` if not covered.
-
-    Scalar transcription of :func:`.stock.disc_sweep_cover`.
-    """
-    dx = bx - ax
-    dy = by - ay
-    wx = ax - px
-    wy = ay - py
-    qa = dx * dx + dy * dy
-    qb = 2.0 * (wx * dx + wy * dy)
-    qc = wx * wx + wy * wy - radius * radius
-    length = math.sqrt(qa)
-    if length > max(tol, 1e-15):
-        disc = qb * qb - 4.0 * qa * qc
-        if not disc > 0.0:
-            return math.inf
-        root = math.sqrt(disc)
-        s_lo = min(max((-qb - root) / (2.0 * qa), 0.0), 1.0)
-        s_hi = min(max((-qb + root) / (2.0 * qa), 0.0), 1.0)
-        if (s_hi - s_lo) * length > tol:
-            dz = bz - az
-            return min(az + s_lo * dz, az + s_hi * dz)
-        return math.inf
-    covered = qc < -2.0 * radius * tol if tol > 0.0 else qc < 0.0
-    return min(az, bz) if covered else math.inf
 
 
 @njit
@@ -449,3 +420,8 @@ def build_engagement_table(
         radius=radius, z_floor=z_floor, stock_lower=lower[0].copy(), stock_upper=upper[0].copy(),
         stock_cell=float(stock_cell),
     )
+
+
+# the cached kernels call stock.sweep_cover_z and read engagement.RIM_TOL: recompile when those change
+for _kernel in (material_top, station_intervals):
+    guard_cache(_kernel, stock, engagement)
