@@ -36,14 +36,16 @@ def test_keys(result):
     assert result["machine"]["nproc"] >= 1 and result["machine"]["cpu"]
     twin = result["native_twin"]
     threaded = twin["batch_100"]["threads"] > 1  # members in blocks on several cores: also timed in one thread
-    assert set(twin) == {"single", "single_air", "single_rk4", "single_python_master", "single_zmap", "batch_10",
+    assert set(twin) == {"single", "single_air", "single_rk4", "single_python_master", "single_zmap",
+                         "single_zmap_python_master", "batch_10",
                          "batch_100"} | ({"batch_100_one_thread"} if threaded else set())
     if threaded:
         assert twin["batch_100_one_thread"]["threads"] == 1 and twin["batch_100_one_thread"]["batch"] == 100
         assert "native_twin_batch_100_one_thread_over_threads" in result["ratios"]
     assert twin["single"]["threads"] == 1
     assert twin["single"]["compiled_loop"] and twin["batch_100"]["compiled_loop"]
-    assert not twin["single_python_master"]["compiled_loop"] and not twin["single_zmap"]["compiled_loop"]
+    assert not twin["single_python_master"]["compiled_loop"] and not twin["single_zmap_python_master"]["compiled_loop"]
+    assert twin["single_zmap"]["compiled_loop"]  # the Z-map cutting load is covered by the compiled loop
     assert twin["single_rk4"]["integrator"] == "rk4" and twin["single_zmap"]["cutting_mode"] == "zmap"
     assert set(result["fused"]) == {"single", "batch_10", "batch_100"}
     for path in ("master", "fast_loop", "plain_fmpy"):
@@ -52,7 +54,8 @@ def test_keys(result):
             "c_fmu_plain_fmpy", "pythonfmu_master", "pythonfmu_fast_loop", "pythonfmu_plain_fmpy",
             "native_twin_batch_100", "fused_batch_100", "native_twin_single_python_master",
             "native_twin_single_rk4", "native_twin_single_zmap"} <= set(result["master_us_per_step"])
-    assert {"python_master_over_compiled_loop", "rk4_over_exponential_drives", "zmap_over_path_cutting"} <= set(
+    assert {"python_master_over_compiled_loop", "rk4_over_exponential_drives", "zmap_over_path_cutting",
+            "zmap_python_master_over_compiled_loop"} <= set(
         result["ratios"])
     assert {"native_single_rt_factor", "native_population_100_rt_factor", "c_fmu_fast_loop_us_per_step"} <= set(
         result["targets"])

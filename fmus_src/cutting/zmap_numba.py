@@ -13,7 +13,9 @@ one member at a time, on the underlying arrays of the stock
   (:data:`.kernel.SECTIONS` x :data:`.kernel.SECTION_ROUNDS`), the peak and the
   step means;
 * the removal of committed path segments from the Z-map
-  (:meth:`.stock.ZMapStock.remove_sweep`, :func:`remove_sweep`).
+  (:meth:`.stock.ZMapStock.remove_sweep`, :func:`remove_sweep`);
+* the whole component step with its effect terms off (:func:`zmap_component_step`:
+  ``CuttingLoad._do_step``, used by the compiled master loop, :mod:`orchestrator.compiled`).
 
 Every floating-point operation is the numpy one, in the same order (no
 fastmath; the sums over teeth and over substeps are sequential, as numpy's
@@ -514,6 +516,166 @@ def commit(zmap: ZMapArrays, path: SweptPath, position: np.ndarray, radius: np.n
                 np.ascontiguousarray(position, dtype=np.float64), np.ascontiguousarray(radius, dtype=np.float64))
 
 
+#: Rows of the ``io`` block of :func:`zmap_component_step`: the inputs and outputs of
+#: :class:`.component.CuttingLoad`, in this order (``engaged_teeth`` as a float).
+IO_ROWS = ("x_position", "y_position", "z_position", "spindle_speed", "fx", "fy", "fc", "fc_peak", "fx_mean",
+           "fy_mean", "spindle_torque", "spindle_power", "mrr", "spindle_angle", "axial_depth", "chip_thickness",
+           "engaged_teeth", "spindle_speed_actual", "tool_vibration_x", "tool_vibration_y", "cutting_time")
+(IO_X, IO_Y, IO_Z, IO_SPEED, IO_FX, IO_FY, IO_FC, IO_PEAK, IO_MFX, IO_MFY, IO_TORQUE, IO_POWER, IO_MRR, IO_ANGLE,
+ IO_DEPTH, IO_CHIP, IO_TEETH, IO_ACTUAL, IO_VIBX, IO_VIBY, IO_TIME) = range(len(IO_ROWS))
+#: ``status`` of :func:`zmap_component_step`: the member needs more than ``max_substeps`` substeps.
+ERR_SUBSTEPS = 1
+
+
+@njit
+def zmap_component_step(
+    h: float, io: np.ndarray, heights: np.ndarray, grid: np.ndarray, cells: np.ndarray, rho: np.ndarray,
+    points: np.ndarray, arc: np.ndarray, head: np.ndarray, count: np.ndarray, spacing: np.ndarray, lag: np.ndarray,
+    p_prev: np.ndarray, theta: np.ndarray, radius: np.ndarray, flutes: np.ndarray, steps: np.ndarray,
+    kt: np.ndarray, ke: np.ndarray, failed: np.ndarray, cutting_time: np.ndarray, torque: np.ndarray,
+    angle: np.ndarray, status: np.ndarray, diag: np.ndarray, max_substeps: int,
+) -> int:
+    """``CuttingLoad._do_step`` with every effect term off and the compiled kernels, for every member.
+
+    The same floating-point operations in the same order as the component
+    (:meth:`.component.CuttingLoad._step_inputs`, ``_substeps``, the cut through
+    :func:`zmap_step`, the outputs, the spindle angle, ``_finish_effects``,
+    ``_commit`` through :func:`commit_rows`, ``_blank``), so the results are its
+    own bit for bit. Members with a non-finite input, failed earlier (``failed``)
+    or needing more than ``max_substeps`` substeps are held (not cut, spindle
+    stopped) and their outputs blanked; the last ones are reported in ``status``
+    (``ERR_SUBSTEPS``, with their spindle speed and XY move in ``diag``) for the
+    component to fail them (``CuttingLoad._fail_substeps``).
+
+    Parameters
+    ----------
+    h : float
+        Step length, s.
+    io : ndarray, shape (21, B)
+        Inputs (m, rad/s) and outputs (N, N.m, W, m3/s, rad, m, teeth, s) in :data:`IO_ROWS` order;
+        inputs read, outputs written.
+    heights, grid, cells, rho
+        As :class:`ZMapArrays` (``heights`` modified).
+    points, arc, head, count, spacing, lag
+        Ring buffer of the :class:`.engagement.SweptPath` (first four modified), as :func:`commit_rows`.
+    p_prev : ndarray, shape (B, 3)
+        Tool-tip position at the start of the step, m (set to the end position).
+    theta : ndarray, shape (B,)
+        Spindle angle of tooth 0 in ``[0, 2 pi)``, rad (advanced).
+    radius, flutes, steps, kt, ke : ndarray, shape (B,)
+        Tool radius (m), teeth (int64), angle steps per tooth (float), Kt (N/m2), Ke (1).
+    failed : ndarray of bool, shape (B,)
+        Members the component failed earlier.
+    cutting_time, torque, angle : ndarray, shape (B,)
+        Effect-state clocks (:class:`.effect_model.EffectState`): s, N.m, rad (advanced).
+    status : ndarray of int64, shape (B,)
+        Set to ``ERR_SUBSTEPS`` for the members needing too many substeps (others untouched).
+    diag : ndarray, shape (2, B)
+        Spindle speed (rad/s) and XY tool move (m) of those members.
+    max_substeps : int
+        Most substeps a step may take.
+
+    Returns
+    -------
+    int
+        Number of members newly over ``max_substeps``.
+    """
+    B = io.shape[1]
+    two_pi = 2.0 * math.pi
+    mp = np.empty((1, 11))
+    mi = np.empty((1, 3), dtype=np.int64)
+    out = np.empty((1, 10))
+    n_bad = 0
+    for b in range(B):
+        # _step_inputs
+        px, py, pz = io[IO_X, b], io[IO_Y, b], io[IO_Z, b]
+        actual = io[IO_SPEED, b]
+        hold = not (math.isfinite(px) and math.isfinite(py) and math.isfinite(pz) and math.isfinite(actual))
+        if hold or failed[b]:
+            px, py, pz = p_prev[b, 0], p_prev[b, 1], p_prev[b, 2]
+            actual = 0.0
+            hold = True
+        omega = actual if actual >= 0.0 else 0.0  # np.maximum(actual, 0.0)
+        move = math.hypot(px - p_prev[b, 0], py - p_prev[b, 1])
+        # _substeps (the chatter term is off: its count is -0.0, below 1)
+        pitch = two_pi / flutes[b]
+        lim = pitch / steps[b]
+        if not lim <= 0.5 * math.pi:
+            lim = 0.5 * math.pi
+        n_angle = np.ceil(omega * h / lim - 1e-9)
+        n_move = np.ceil(move / (0.05 * radius[b]) - 1e-9)
+        n_f = n_angle if n_angle >= n_move else n_move
+        if not n_f >= 1.0:
+            n_f = 1.0
+        if not n_f <= max_substeps + 1.0:
+            n_f = max_substeps + 1.0
+        n = int(n_f)
+        if n > max_substeps and not hold:  # _fail_substeps by the component; held meanwhile
+            status[b] = ERR_SUBSTEPS
+            diag[0, b] = omega
+            diag[1, b] = move
+            n_bad += 1
+            px, py, pz = p_prev[b, 0], p_prev[b, 1], p_prev[b, 2]
+            actual = 0.0
+            omega = 0.0
+            hold = True
+        # _cut: zmap_step of this member alone (held: zero results)
+        f0 = f1 = peak = m0 = m1 = m2 = m3 = depth = chip = 0.0
+        teeth = 0.0
+        if not hold:
+            mp[0, MP_X0] = p_prev[b, 0]
+            mp[0, MP_Y0] = p_prev[b, 1]
+            mp[0, MP_Z0] = p_prev[b, 2]
+            mp[0, MP_X1] = px
+            mp[0, MP_Y1] = py
+            mp[0, MP_Z1] = pz
+            mp[0, MP_THETA] = theta[b]
+            mp[0, MP_OMEGA] = omega
+            mp[0, MP_RADIUS] = radius[b]
+            mp[0, MP_KT] = kt[b]
+            mp[0, MP_KE] = ke[b]
+            mi[0, MI_ROW] = b
+            mi[0, MI_SUBSTEPS] = n
+            mi[0, MI_FLUTES] = flutes[b]
+            zmap_step(heights, grid, cells, points, head, count, mp, mi, h, out)
+            f0, f1, peak = out[0, OUT_FX], out[0, OUT_FY], out[0, OUT_PEAK]
+            m0, m1, m2, m3 = out[0, OUT_MFX], out[0, OUT_MFY], out[0, OUT_TORQUE], out[0, OUT_MRR]
+            depth, chip, teeth = out[0, OUT_DEPTH], out[0, OUT_CHIP], out[0, OUT_TEETH]
+        io[IO_FX, b] = -f0
+        io[IO_FY, b] = -f1
+        io[IO_FC, b] = math.hypot(f0, f1)
+        io[IO_PEAK, b] = peak
+        io[IO_MFX, b] = -m0
+        io[IO_MFY, b] = -m1
+        io[IO_TORQUE, b] = m2
+        io[IO_POWER, b] = m2 * omega
+        io[IO_MRR, b] = m3
+        io[IO_DEPTH, b] = depth
+        io[IO_CHIP, b] = chip
+        io[IO_TEETH, b] = teeth
+        theta[b] = np.mod(theta[b] + omega * h, two_pi)
+        io[IO_ANGLE, b] = theta[b]
+        # _finish_effects (no wear, droop or chatter: the tool mode stays at rest)
+        cutting_time[b] += h if m3 > 0.0 else 0.0
+        torque[b] = m2
+        angle[b] += omega * h
+        io[IO_ACTUAL, b] = actual
+        io[IO_VIBX, b] = 0.0
+        io[IO_VIBY, b] = 0.0
+        io[IO_TIME, b] = cutting_time[b]
+        p_prev[b, 0] = px
+        p_prev[b, 1] = py
+        p_prev[b, 2] = pz
+        if hold:  # _blank: NaN outputs, spindle angle kept, no engaged tooth
+            for r in range(IO_FX, IO_TIME + 1):
+                if r != IO_ANGLE:
+                    io[r, b] = math.nan
+            io[IO_TEETH, b] = 0.0
+    # _commit: path advance and Z-map removal (members are independent: after all the cuts, as the component)
+    commit_rows(heights, grid, cells, rho, points, arc, head, count, spacing, lag, p_prev, radius)
+    return n_bad
+
+
 # the cached kernels call stock.sweep_cover_z and hold constants of kernel and engagement: recompile on change
-for _kernel in (_depth, zmap_step, _remove_segment, commit_rows):
+for _kernel in (_depth, zmap_step, _remove_segment, commit_rows, zmap_component_step):
     guard_cache(_kernel, stock, kernel, engagement)

@@ -238,7 +238,8 @@ def run_bench(settings: BenchSettings | None = None, quick: bool = False,
     for compiled in (True, False):
         for integrator in ("exponential", "rk4"):
             time_twin(case, 1, 0.05, engagement=table, compiled=compiled, integrator=integrator)
-    time_twin(case, 1, 0.05, cutting_mode="zmap")
+    for compiled in (True, False):
+        time_twin(case, 1, 0.05, cutting_mode="zmap", compiled=compiled)
     if s.batches:  # first large batch of the process: memory from the OS, worker threads
         time_twin(case, max(s.batches), 0.05, engagement=table)
     say(f"native twin: single, {s.twin_seconds:g} s (compiled loop, exponential drives, path-mode cutting)")
@@ -247,7 +248,9 @@ def run_bench(settings: BenchSettings | None = None, quick: bool = False,
     twin["single_air"] = time_twin(case, 1, s.twin_seconds, cutting=False)
     for key, what, kwargs in (("single_rk4", "RK4 drives", {"integrator": "rk4"}),
                               ("single_python_master", "Python master loop", {"compiled": False}),
-                              ("single_zmap", "Z-map cutting (Python master)", {"cutting_mode": "zmap"})):
+                              ("single_zmap", "Z-map cutting", {"cutting_mode": "zmap"}),
+                              ("single_zmap_python_master", "Z-map cutting, Python master loop",
+                               {"cutting_mode": "zmap", "compiled": False})):
         say(f"native twin: single, {what}, {s.compare_seconds:g} s")
         twin[key] = time_twin(case, 1, s.compare_seconds, engagement=table, **kwargs)
     for b in s.batches:
@@ -314,6 +317,7 @@ def run_bench(settings: BenchSettings | None = None, quick: bool = False,
         "native_twin_single_rk4": twin["single_rk4"]["us_per_step"],
         "native_twin_single_python_master": twin["single_python_master"]["us_per_step"],
         "native_twin_single_zmap": twin["single_zmap"]["us_per_step"],
+        "native_twin_single_zmap_python_master": twin["single_zmap_python_master"]["us_per_step"],
         "fused_single": fused["single"]["us_per_step"],
         "native_ring_master": out["native_ring"]["master"]["us_per_step"],
         "c_fmu_master": c["master"]["us_per_step"],
@@ -339,6 +343,8 @@ def run_bench(settings: BenchSettings | None = None, quick: bool = False,
         "python_master_over_compiled_loop": ratio(us["native_twin_single_python_master"], us["native_twin_single"]),
         "rk4_over_exponential_drives": ratio(us["native_twin_single_rk4"], us["native_twin_single"]),
         "zmap_over_path_cutting": ratio(us["native_twin_single_zmap"], us["native_twin_single"]),
+        "zmap_python_master_over_compiled_loop": ratio(us["native_twin_single_zmap_python_master"],
+                                                       us["native_twin_single_zmap"]),
         "c_fmu_plain_fmpy_over_fast_loop": ratio(us["c_fmu_plain_fmpy"], us["c_fmu_fast_loop"]),
         "c_fmu_master_over_fast_loop": ratio(us["c_fmu_master"], us["c_fmu_fast_loop"]),
         "c_fmu_master_over_plain_fmpy": ratio(us["c_fmu_master"], us["c_fmu_plain_fmpy"]),

@@ -62,8 +62,13 @@ _MCU = (_Members(2), _Members(2), _Members(0), None, None, None, None, _COUNTER,
         _Members(0))
 _DRIVES = (_Members(2), _Members(1), _Members(1), _Members(1), _Members(1), None, _Members(1))
 _CUT = (_Members(1), _Members(1), _Members(0)) + (None,) * 11 + (_Members(0),) * 4
+_RO = _Members(0, copy=False)
+# Z-map heights, grid, cells, rho; ring buffer points, arc, head, count; spacing, lag; start position, angle;
+# radius, flutes, steps, Kt, Ke; clocks (time, torque, angle); status, diag (2, B); max substeps
+_ZMAP = ((_Members(0), _RO, _RO, _RO) + (_Members(0),) * 4 + (_RO, _RO, _Members(0), _Members(0)) + (_RO,) * 5
+         + (_Members(0),) * 4 + (_Members(1), None))
 HEAD = (None,) * 6 + (_Members(1),) + (None,) * 14 + (_Members(0), _Members(0, copy=False), None, None)
-TAIL = (None, None, _Members(1, copy=False), _HAS_FAILED, _NCK, _MCU, _DRIVES, _CUT)
+TAIL = (None, None, _Members(1, copy=False), _HAS_FAILED, _NCK, _MCU, _DRIVES, _CUT, _ZMAP)
 _STOP_ROWS = 20  # position of stop_rows in HEAD
 _DECIMATION = 5  # position of decimation in HEAD
 _PROBE_ROWS = 23  # position of probe_rows in HEAD

@@ -15,6 +15,10 @@ Covered (each checked per component; anything else runs on the Python master):
 * :class:`~fmus_src.servo.mcu.MCU` (at most one, compiled, no ``servo_delay``);
 * :class:`~fmus_src.servo.drive.DriveAxis` (compiled, no effect terms, either integrator);
 * :class:`~fmus_src.cutting.path_component.PathCuttingLoad` (at most one, baseline parameters only);
+* :class:`~fmus_src.cutting.component.CuttingLoad` (Z-map; at most one, compiled, every effect term off): its
+  stock heights, path ring buffer and effect clocks are the component's own arrays, stepped in place by
+  :func:`~fmus_src.cutting.zmap_numba.zmap_component_step`; its start position and spindle angle are copies
+  (the component rebinds them every step);
 * Gauss-Seidel coupling, connections between Real variables, probes / stop signals / limits on
   inputs and outputs.
 
@@ -28,7 +32,7 @@ import math
 
 import numpy as np
 
-from fmus_src.cutting.component import MAX_SUBSTEPS
+from fmus_src.cutting.component import MAX_SUBSTEPS, CuttingLoad
 from fmus_src.cutting.path_component import PathCuttingLoad
 from fmus_src.nck.component import NCKernel
 from fmus_src.servo.drive import DriveAxis
@@ -38,7 +42,7 @@ from fmus_src.units import conversion_factor
 from ..errors import CncTwinError
 from ..system import split_reference
 from .loop import (CUT_ROWS, DRIVE_ROWS, INTEGRATOR_EXPONENTIAL, INTEGRATOR_RK4,
-                   KIND_CUT, KIND_DRIVE, KIND_MCU, KIND_NCK, MCU_ROWS, NCK_ROWS)
+                   KIND_CUT, KIND_DRIVE, KIND_MCU, KIND_NCK, KIND_ZMAP, MCU_ROWS, NCK_ROWS, ZMAP_ROWS)
 
 
 class Unsupported(CncTwinError):
@@ -63,6 +67,7 @@ _CUT_KNOWN = frozenset((
     "stock_y_max", "stock_z_max", "stock_cell", "angle_steps_per_tooth", "initial_spindle_angle",
     "engagement_table", "path_tolerance",
 ))
+_ZMAP_KNOWN = _CUT_KNOWN - {"engagement_table", "path_tolerance"}
 
 _INTEGRATORS = {"rk4": INTEGRATOR_RK4, "exponential": INTEGRATOR_EXPONENTIAL}
 
@@ -121,6 +126,10 @@ def _kind(comp: object) -> tuple[int, tuple[str, ...]]:
         _unknown_parameters_off(comp, _CUT_KNOWN)
         _same_variables(comp, CUT_ROWS)
         return KIND_CUT, CUT_ROWS
+    if cls is CuttingLoad:
+        _compiled_kernel_on(comp, _ZMAP_KNOWN)
+        _same_variables(comp, ZMAP_ROWS)
+        return KIND_ZMAP, ZMAP_ROWS
     raise Unsupported(f"{comp.name}: {cls.__module__}.{cls.__name__} has no compiled kernel in the loop")
 
 
@@ -148,7 +157,7 @@ class Layout:
         self.order = list(master.order)
         self.index = {name: c for c, name in enumerate(self.order)}
         kinds, rows, base, n_rows = [], {}, [], 0
-        count = {KIND_NCK: 0, KIND_MCU: 0, KIND_DRIVE: 0, KIND_CUT: 0}
+        count = {KIND_NCK: 0, KIND_MCU: 0, KIND_DRIVE: 0, KIND_CUT: 0, KIND_ZMAP: 0}
         comp_index = []
         for name in self.order:
             comp = system.components[name]
@@ -160,7 +169,8 @@ class Layout:
             for offset, var in enumerate(block):
                 rows[(name, var)] = n_rows + offset
             n_rows += len(block)
-        for kind, what in ((KIND_NCK, "NC kernel"), (KIND_MCU, "MCU"), (KIND_CUT, "cutting load")):
+        for kind, what in ((KIND_NCK, "NC kernel"), (KIND_MCU, "MCU"), (KIND_CUT, "cutting load"),
+                           (KIND_ZMAP, "Z-map cutting load")):
             if count[kind] > 1:
                 raise Unsupported(f"{count[kind]} components of kind {what} (the compiled loop takes one)")
         self.kinds, self.rows, self.n_rows, self.counts = kinds, rows, n_rows, count
@@ -242,7 +252,7 @@ class Layout:
         """Gather the kernel data of the set-up components (plans, parameter blocks, states)."""
         comps = self.system.components
         B = self.batch
-        by_kind: dict[int, list] = {KIND_NCK: [], KIND_MCU: [], KIND_DRIVE: [], KIND_CUT: []}
+        by_kind: dict[int, list] = {KIND_NCK: [], KIND_MCU: [], KIND_DRIVE: [], KIND_CUT: [], KIND_ZMAP: []}
         for name, kind in zip(self.order, self.kinds):
             by_kind[kind].append(comps[name])
         # NC kernel
@@ -307,7 +317,41 @@ class Layout:
                         np.zeros(1), 1.0, np.zeros(1, dtype=np.int64), np.zeros((1, 1)), np.zeros((1, 1)),
                         np.zeros((1, 1)), 0.0, 0.0, 0.0, 1, np.zeros(B), np.zeros(B), np.zeros(B),
                         np.zeros(B, dtype=np.int64))
+        self._bind_zmap(by_kind[KIND_ZMAP][0] if by_kind[KIND_ZMAP] else None)
         self.bound = True
+
+    def _bind_zmap(self, c: CuttingLoad | None) -> None:
+        """The ``zmap`` tuple of :func:`.loop.run_chunk` (the component's own arrays where they can be shared)."""
+        B = self.batch
+        self._zmap_comp = c
+        if c is None:
+            f, i = np.zeros(B), np.zeros(B, dtype=np.int64)
+            self.zmap = (np.zeros((B, 1, 1), dtype=np.float32), np.ones((B, 5)), np.zeros((B, 2), dtype=np.int64),
+                         f, np.zeros((B, 3, 3)), np.zeros((B, 3)), i, i.copy(), f, f, np.zeros((B, 3)), f.copy(),
+                         f, i, f, f, f, f.copy(), f.copy(), f.copy(), i.copy(), np.zeros((2, B)), 1)
+            return
+        z = c._zmap  # noqa: SLF001
+        path = c.path
+        for name, dtype in (("points", np.float64), ("arc", np.float64), ("head", np.int64), ("count", np.int64)):
+            value = getattr(path, name)  # as zmap_numba.commit does: kept in place from then on
+            if value.dtype != dtype or not value.flags.c_contiguous or not value.flags.writeable:
+                setattr(path, name, np.array(value, dtype=dtype))
+        v = c.values
+        st = c._effect_state  # noqa: SLF001
+        self.zmap = (z.heights, z.grid, z.cells, z.rho, path.points, path.arc, path.head, path.count,
+                     np.ascontiguousarray(path.spacing, dtype=np.float64),
+                     np.ascontiguousarray(path.lag, dtype=np.float64),
+                     np.array(c._p_prev, dtype=np.float64, order="C"),  # noqa: SLF001 - copies: rebound by the
+                     np.array(c._theta, dtype=np.float64),  # noqa: SLF001 - component; see pack / unpack
+                     np.ascontiguousarray(c._radius, dtype=np.float64),  # noqa: SLF001
+                     np.ascontiguousarray(c._flutes, dtype=np.int64),  # noqa: SLF001
+                     np.array(v["angle_steps_per_tooth"], dtype=np.float64), np.array(v["kt"], dtype=np.float64),
+                     np.array(v["ke"], dtype=np.float64), st.cutting_time, st.torque, st.angle,
+                     np.zeros(B, dtype=np.int64), np.zeros((2, B)), int(MAX_SUBSTEPS))
+        for arr, name in ((z.heights, "heights"), (st.cutting_time, "cutting_time"), (st.torque, "torque"),
+                          (st.angle, "angle")):
+            if arr.dtype != (np.float32 if name == "heights" else np.float64) or not arr.flags.c_contiguous:
+                raise Unsupported(f"{c.name}: {name} is not a C-contiguous array of the kernel's type")
 
     def pack(self, V: np.ndarray | None = None) -> np.ndarray:
         """``V`` (new, or refreshed in place) and the loop's state copies from the components' current values."""
@@ -329,7 +373,23 @@ class Layout:
                 if failed is not None:
                     self.comp_failed[c] = failed
             self.comp_has_failed[:] = self.comp_failed.any(axis=1)
+            c = self._zmap_comp
+            if c is not None:  # the component may have stepped in Python (rebinding these)
+                self.zmap[10][...] = c._p_prev  # noqa: SLF001
+                self.zmap[11][...] = c._theta  # noqa: SLF001
+                self._check_zmap_shared()
         return V
+
+    def _check_zmap_shared(self) -> None:
+        """The arrays shared with the Z-map cutting load are still its own (it keeps them in place)."""
+        c = self._zmap_comp
+        st = c._effect_state  # noqa: SLF001
+        own = (c._zmap.heights, c.path.points, c.path.arc, c.path.head, c.path.count,  # noqa: SLF001
+               st.cutting_time, st.torque, st.angle)
+        shared = tuple(self.zmap[i] for i in (0, 4, 5, 6, 7, 17, 18, 19))
+        if any(a is not b for a, b in zip(own, shared)):
+            raise CncTwinError(f"compiled loop: {c.name} replaced an array the loop shares with it "
+                               "(stock heights, path ring buffer or effect clocks)")
 
     def unpack(self, V: np.ndarray) -> None:
         """Write ``V`` and the loop's state copies back into the components (values, drive states, MCU tick)."""
@@ -345,7 +405,11 @@ class Layout:
             d._state.position[...] = pos[i]  # noqa: SLF001
             d._state.velocity[...] = vel[i]  # noqa: SLF001
             d._state.direction[...] = dirn[i]  # noqa: SLF001
+        c = getattr(self, "_zmap_comp", None)
+        if c is not None:
+            c._p_prev = self.zmap[10].copy()  # noqa: SLF001
+            c._theta = self.zmap[11].copy()  # noqa: SLF001
 
     def kernel_data(self) -> tuple:
-        """The ``nck, mcu, drives, cut`` tuples of :func:`.loop.run_chunk`."""
-        return self.nck, self.mcu, self.drives, self.cut
+        """The ``nck, mcu, drives, cut, zmap`` tuples of :func:`.loop.run_chunk`."""
+        return self.nck, self.mcu, self.drives, self.cut, self.zmap

@@ -11,7 +11,9 @@ call of the compiled kernel the component itself would call:
   :func:`~fmus_src.servo.control_numba.axis_member` / :func:`~fmus_src.servo.control_numba.axis_alarm`);
 * drive axes: :func:`fmus_src.servo.stick_slip_numba.advance_kernel` or, member by member,
   :func:`fmus_src.servo.exponential_numba.exponential_member` (the drive's ``integrator``);
-* path-mode cutting: :func:`fmus_src.cutting.path_kernel.path_step`.
+* path-mode cutting: :func:`fmus_src.cutting.path_kernel.path_step`;
+* Z-map cutting (effect terms off): :func:`fmus_src.cutting.zmap_numba.zmap_component_step`, the whole
+  ``CuttingLoad._do_step`` (step kernel, outputs, clocks, path advance and Z-map removal).
 
 Connections are index triples ``(source row, target row, factor)``; probes
 are rows with factors. The floating-point operations are those of the
@@ -28,7 +30,9 @@ import math
 import numpy as np
 
 from fmus_src.cutting import kernel as cutting_kernel
-from fmus_src.cutting import path_kernel
+from fmus_src.cutting import engagement as cutting_engagement
+from fmus_src.cutting import path_kernel, zmap_numba
+from fmus_src.cutting import stock as cutting_stock
 from fmus_src.jit import njit, njit_nogil
 from fmus_src.jit_cache import guard_cache
 from fmus_src.nck import sampling
@@ -38,9 +42,10 @@ from fmus_src.servo.control_numba import axis_alarm, axis_member
 from fmus_src.servo.exponential_numba import exponential_member
 from fmus_src.servo.stick_slip_numba import OK, advance_kernel
 from fmus_src.cutting.path_kernel import path_step
+from fmus_src.cutting.zmap_numba import IO_ROWS, zmap_component_step
 
 #: Component kinds of the compiled loop.
-KIND_NCK, KIND_MCU, KIND_DRIVE, KIND_CUT = 0, 1, 2, 3
+KIND_NCK, KIND_MCU, KIND_DRIVE, KIND_CUT, KIND_ZMAP = 0, 1, 2, 3, 4
 #: Drive integrators (``DriveAxis.integrator``).
 INTEGRATOR_RK4, INTEGRATOR_EXPONENTIAL = 0, 1
 #: Events returned by :func:`run_chunk`: chunk end, stop condition, time limit, divergence check needed,
@@ -62,6 +67,8 @@ CUT_OUTPUTS = ("fx", "fy", "fc", "fc_peak", "fx_mean", "fy_mean", "spindle_torqu
 #: Outputs of the effect terms (issue 8); with the effects off: the input speed, 0, 0 and the cutting clock.
 CUT_EFFECT_OUTPUTS = ("spindle_speed_actual", "tool_vibration_x", "tool_vibration_y", "cutting_time")
 CUT_ROWS = CUT_INPUTS + CUT_OUTPUTS + ("engaged_teeth",) + CUT_EFFECT_OUTPUTS
+#: Rows of the Z-map cutting load (``CuttingLoad``), in the order of ``zmap_component_step``'s ``io``.
+ZMAP_ROWS = IO_ROWS
 _OUT_TORQUE = 4 + CUT_OUTPUTS.index("spindle_torque")
 _OUT_MRR = 4 + CUT_OUTPUTS.index("mrr")
 
@@ -132,7 +139,7 @@ def run_chunk(
     stop_rows: np.ndarray, stopped_at: np.ndarray, failed: np.ndarray,
     probe_rows: np.ndarray, probe_factor: np.ndarray, rec_t: np.ndarray, rec: np.ndarray, n_rec: int,
     real_ptr: np.ndarray, real_rows: np.ndarray, comp_failed: np.ndarray, comp_has_failed: np.ndarray,
-    nck: tuple, mcu: tuple, drives: tuple, cut: tuple, stop_record: bool, all_done_at: np.ndarray,
+    nck: tuple, mcu: tuple, drives: tuple, cut: tuple, zmap: tuple, stop_record: bool, all_done_at: np.ndarray,
 ) -> tuple[int, int, int, int, int, int, int]:
     """Advance from step ``k`` until an event (see module docstring).
 
@@ -168,7 +175,7 @@ def run_chunk(
         Real outputs of component ``c``: ``real_rows[real_ptr[c]:real_ptr[c + 1]]``.
     comp_failed, comp_has_failed : ndarray of bool, shapes (n_comp, B), (n_comp,)
         Members each component has failed (their real outputs are NaN after every step of it).
-    nck, mcu, drives, cut : tuple
+    nck, mcu, drives, cut, zmap : tuple
         Kernel data of each kind (see :mod:`.layout`).
     stop_record : bool
         False: return ``EV_STOP`` at the first step where every member meets the stop condition.
@@ -190,6 +197,9 @@ def run_chunk(
     (d_params, d_pos, d_vel, d_dir, d_step, d_integ, d_status) = drives
     (c_par, c_st, c_engaged, c_verts, c_vs, c_ds, c_count, c_alpha, c_beta, c_top, c_zfloor, c_margin, c_tol,
      c_maxsub, c_time, c_torque, c_angle, c_status) = cut
+    (z_heights, z_grid, z_cells, z_rho, z_points, z_arc, z_head, z_count, z_spacing, z_lag, z_prev, z_theta,
+     z_radius, z_flutes, z_steps, z_kt, z_ke, z_time, z_torque, z_angle, z_status, z_diag, z_maxsub) = zmap
+    n_zmap = len(ZMAP_ROWS)
     B = V.shape[1]
     m_tp2 = m_tp * m_tp
     n_stop = stop_rows.shape[0]
@@ -290,6 +300,13 @@ def run_chunk(
                 elif kind == KIND_NCK:
                     _nck_step((t_tick + h_i - n_t0) / n_period, base, V, n_pos, n_feed, n_sref, n_sact, n_line,
                               n_tool, n_done)
+                elif kind == KIND_ZMAP:  # CuttingLoad._do_step, effect terms off
+                    n_bad = zmap_component_step(
+                        h_i, V[base:base + n_zmap], z_heights, z_grid, z_cells, z_rho, z_points, z_arc, z_head,
+                        z_count, z_spacing, z_lag, z_prev, z_theta, z_radius, z_flutes, z_steps, z_kt, z_ke,
+                        comp_failed[c], z_time, z_torque, z_angle, z_status, z_diag, z_maxsub)
+                    if n_bad != 0:  # members needing too many substeps (held, blanked): the component fails them
+                        return k, n_rec, EV_FAIL, c, n_bad, j, item
                 else:  # KIND_CUT
                     n_bad = path_step(h_i, V[base:base + 4], c_par, c_st, V[base + 4:base + 16], c_engaged, c_verts,
                                       c_vs, c_ds, c_count, c_alpha, c_beta, c_top, c_zfloor, c_margin, c_tol,
@@ -353,5 +370,5 @@ def sample(t: float, V: np.ndarray, probe_rows: np.ndarray, probe_factor: np.nda
 
 # the cached loop links the kernels' code: recompile it when any of their modules changes
 guard_cache(run_chunk, control_numba, stick_slip, stick_slip_numba, exponential_numba, path_kernel, cutting_kernel,
-            sampling)
+            sampling, zmap_numba, cutting_stock, cutting_engagement)
 guard_cache(_nck_step, sampling)

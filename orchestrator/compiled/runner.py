@@ -10,7 +10,8 @@ integrator error) the loop returns right after that kernel call; the
 component's own failure handling runs (it raises, with the Python master's
 message, when no member is left), the rest of that step runs in Python (as
 the master would) and the loop resumes at the next step. The path-mode
-cutting kernel reports members off the path the same way.
+cutting kernel reports members off the path the same way, and the Z-map
+cutting step members that need more substeps than the component allows.
 
 The loop runs in chunks (at most :data:`CHUNK_STEPS` steps, and up to the
 next progress report); recording buffers grow between chunks.
@@ -27,8 +28,8 @@ from ..errors import CncTwinError
 from ..recording import Recording
 from .blocks import PASS_STEPS, MemberBlocks, block_count
 from .layout import Layout, Unsupported
-from .loop import (EV_CHECK, EV_CHUNK, EV_STOP, EV_TIME, KIND_CUT, KIND_DRIVE, NO_STOP_FLAGS, recording_buffers,
-                   run_chunk, sample)
+from .loop import (EV_CHECK, EV_CHUNK, EV_STOP, EV_TIME, KIND_CUT, KIND_DRIVE, KIND_ZMAP, NO_STOP_FLAGS,
+                   recording_buffers, run_chunk, sample)
 
 if TYPE_CHECKING:
     from ..master import Master, RunResult
@@ -66,6 +67,11 @@ def _after_kernel(layout: Layout, c: int, t_tick: float, h_i: float) -> None:
         actual = comp._actual_speed()  # noqa: SLF001
         comp._finish_effects(h_i, np.maximum(actual, 0.0), actual)  # noqa: SLF001
         comp._fail_status(h_i)  # noqa: SLF001
+    elif layout.kinds[c] == KIND_ZMAP:  # members needing too many substeps (held and blanked by the kernel)
+        status, diag = layout.zmap[20], layout.zmap[21]
+        bad = status != 0
+        status[...] = 0
+        comp._fail_substeps(bad, diag[0].copy(), diag[1].copy(), h_i)  # noqa: SLF001
     else:  # KIND_MCU: excess-error alarms
         comp._raise_alarms()  # noqa: SLF001
     if comp._failed_outputs:  # noqa: SLF001
@@ -122,7 +128,7 @@ def run_compiled(master: "Master") -> "RunResult | None":
     n_probe = layout.probe_rows.shape[0]
     rows, rec_t, rec = recording_buffers(capacity, n_probe, batch)
     n_rec = sample(t, V, layout.probe_rows, layout.probe_factor, rec_t, rec, 0)
-    nck, mcu, drives, cut = layout.kernel_data()
+    nck, mcu, drives, cut, zmap = layout.kernel_data()
     report_every = max(1, int(expected / h / 100))
     failed = master._failed  # noqa: SLF001
     v_current = True  # V (not the components' value arrays) holds the current values
@@ -144,7 +150,8 @@ def run_compiled(master: "Master") -> "RunResult | None":
             layout.comp_base, layout.wire_ptr, layout.wire_src, layout.wire_dst, layout.wire_factor,
             layout.check_rows, layout.check_lo, layout.check_hi, layout.stop_rows, stopped_at, failed,
             layout.probe_rows, layout.probe_factor)
-    tail = (layout.real_ptr, layout.real_rows, layout.comp_failed, layout.comp_has_failed, nck, mcu, drives, cut)
+    tail = (layout.real_ptr, layout.real_rows, layout.comp_failed, layout.comp_has_failed, nck, mcu, drives, cut,
+            zmap)
     n_blocks = block_count(batch, s.threads)
     blocks = MemberBlocks(batch, n_blocks, head, tail) if n_blocks > 1 else None
     try:
