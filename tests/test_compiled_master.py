@@ -64,11 +64,16 @@ def _assert_same(a, b) -> None:
     assert a.recording.message == b.recording.message
 
 
-def _cut_twin(case, table, batch=1, seconds=2.5, integrator="exponential", feeds=None, spindles=None,
-              alarms=True, members=None):
-    twin = build_twin(case, batch=batch, options=TwinOptions(cutting_mode="path", engagement=table))
-    for d in twin.drives.values():
-        d.set("integrator", integrator)
+def _cut_twin(case, table, batch=1, seconds=2.5, integrator="exponential", **changes):
+    """A path-mode cutting twin of ``case`` (see :func:`_twin`)."""
+    return _twin(case, TwinOptions(cutting_mode="path", engagement=table, drive_integrator=integrator), batch,
+                 seconds, **changes)
+
+
+def _twin(case, options, batch=1, seconds=2.5, feeds=None, spindles=None, alarms=True, members=None):
+    """Twin and settings: ``feeds``/``spindles`` overrides, excess-error ``alarms`` off on request, and
+    ``members = {b: {(component, parameter): value}}`` changed per member."""
+    twin = build_twin(case, batch=batch, options=options)
     if feeds or spindles:
         twin.nck.set_overrides(feed=feeds, spindle=spindles)
     if not alarms:

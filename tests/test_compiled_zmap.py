@@ -19,7 +19,7 @@ from orchestrator.compiled import compiled_support
 from orchestrator.master import Master, MasterSettings
 from orchestrator.twin import TwinOptions, build_twin
 
-from test_compiled_master import MM_PER_MIN, RPM, _assert_same, _runs
+from test_compiled_master import MM_PER_MIN, RPM, _assert_same, _runs, _twin
 
 
 @pytest.fixture(scope="module")
@@ -27,23 +27,8 @@ def case():
     return bench_case()
 
 
-def _zmap_twin(case, batch=1, seconds=2.5, feeds=None, spindles=None, alarms=True, members=None):
-    twin = build_twin(case, batch=batch, options=TwinOptions(cutting_mode="zmap"))
-    if feeds or spindles:
-        twin.nck.set_overrides(feed=feeds, spindle=spindles)
-    if not alarms:
-        for a in "xyz":
-            for key in ("excess_error_in_motion", "excess_error_at_stop"):
-                twin.mcu.set(f"{a}_{key}", 0.0)
-    for b, changes in (members or {}).items():
-        for (comp, name), value in changes.items():
-            component = twin.system.components[comp]
-            arr = component.get(name)
-            arr[b] = value
-            component.set(name, arr)
-    settings = MasterSettings(step=twin.options.step, time_limit=seconds, stop_when=twin.stop_when,
-                              limits=twin.limits or {}, check_every=10)
-    return twin, settings
+def _zmap_twin(case, batch=1, seconds=2.5, **changes):
+    return _twin(case, TwinOptions(cutting_mode="zmap"), batch, seconds, **changes)
 
 
 def test_default_twin_is_covered(case):
