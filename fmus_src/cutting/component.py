@@ -59,12 +59,20 @@ from .engagement import NearField, SweptPath
 from .kernel import StepResult, cut_step
 from .kernel_effects import cut_step_effects
 from .stock import ZMapStock
-from .zmap_numba import ZMapArrays, commit, cut_step_compiled
+from .zmap_numba import IO_ROWS, ZMapArrays, commit, cut_step_compiled, zmap_component_step
 
 #: Refuse steps needing more substeps than this (spindle speed or jump far too large).
 MAX_SUBSTEPS = 100_000
 #: XY spacing of the stored near-field path, as a fraction of the tool radius.
 PATH_SPACING = 0.1
+
+
+#: Parameters of the baseline model (Eq. 10-13 on a Z-map stock); every other parameter is an effect term,
+#: off at 0 (:meth:`CuttingLoad.effects_off`).
+BASELINE_PARAMETERS = frozenset((
+    "tool_diameter", "flutes", "kt", "ke", "stock_x_min", "stock_y_min", "stock_z_min", "stock_x_max",
+    "stock_y_max", "stock_z_max", "stock_cell", "angle_steps_per_tooth", "initial_spindle_angle",
+))
 
 
 class CuttingError(CncTwinError):
@@ -160,6 +168,11 @@ class CuttingLoad(Component):
         self._p_prev = position
         self._theta = np.mod(np.asarray(v["initial_spindle_angle"], dtype=np.float64), 2.0 * math.pi)
         self._setup_effects(self._theta)
+        # the whole step compiled (zmap_component_step) when no effect term is on
+        self._whole_step_compiled = self.use_compiled and self.effects_off()
+        self._io = np.zeros((len(IO_ROWS), self.batch))
+        self._kernel_status = np.zeros(self.batch, dtype=np.int64)
+        self._kernel_diag = np.zeros((2, self.batch))
         # no motion known at t0: no chip, no force
         for name in ("fx", "fy", "fc", "fc_peak", "fx_mean", "fy_mean", "spindle_torque", "spindle_power",
                      "mrr", "axial_depth", "chip_thickness"):
@@ -292,7 +305,40 @@ class CuttingLoad(Component):
         return ((e.eccentricity != 0) | (e.tan_helix != 0) | (e.kte != 0) | (e.kre != 0) | (e.stiffness != 0)
                 | (e.chatter_wn != 0))
 
+    def effects_off(self) -> bool:
+        """Every parameter beyond :data:`BASELINE_PARAMETERS` is at its off value (0) for every member."""
+        return all(np.all(np.asarray(self.values[name]) == 0)
+                   for name in self.names("parameter") if name not in BASELINE_PARAMETERS)
+
+    def compiled_step_arrays(self) -> tuple:
+        """The arrays :func:`.zmap_numba.zmap_component_step` steps, after ``io``, without ``failed``.
+
+        The component's own arrays (stock heights, path ring buffer, start position, spindle angle,
+        effect clocks, failure status) are returned, not copies, so the compiled master loop can
+        step them in place; ``spacing``, ``lag`` and the coefficients are fresh arrays.
+        """
+        v = self.values
+        z = self._zmap
+        path = self.path
+        st = self._effect_state
+        return (z.heights, z.grid, z.cells, z.rho, path.points, path.arc, path.head, path.count,
+                np.ascontiguousarray(path.spacing, dtype=np.float64), np.ascontiguousarray(path.lag, dtype=np.float64),
+                self._p_prev, self._theta, np.ascontiguousarray(self._radius, dtype=np.float64),
+                np.ascontiguousarray(self._flutes, dtype=np.int64),
+                np.array(v["angle_steps_per_tooth"], dtype=np.float64), np.array(v["kt"], dtype=np.float64),
+                np.array(v["ke"], dtype=np.float64), st.cutting_time, st.torque, st.angle, self._kernel_status,
+                self._kernel_diag, int(MAX_SUBSTEPS))
+
+    def fail_kernel_substeps(self, h: float) -> None:
+        """Fail the members :func:`.zmap_numba.zmap_component_step` reported (too many substeps); clear them."""
+        bad = self._kernel_status != 0
+        self._kernel_status[...] = 0
+        self._fail_substeps(bad, self._kernel_diag[0].copy(), self._kernel_diag[1].copy(), h)
+
     def _do_step(self, t: float, h: float) -> None:
+        if self._whole_step_compiled:
+            self._do_step_compiled(h)
+            return
         v = self.values
         p_new, actual, held = self._step_inputs()
         failed = self.failed_members & ~held
@@ -331,6 +377,19 @@ class CuttingLoad(Component):
         self._commit(p_new)
         if held.any():
             self._blank(held)
+
+    def _do_step_compiled(self, h: float) -> None:
+        """:meth:`_do_step` with every effect term off, in one compiled call (the same numbers)."""
+        v = self.values
+        io = self._io
+        for r in range(4):  # inputs
+            io[r] = v[IO_ROWS[r]]
+        arrays = self.compiled_step_arrays()
+        n_bad = zmap_component_step(h, io, *arrays[:17], self.failed_members, *arrays[17:])
+        for r in range(4, len(IO_ROWS)):  # outputs
+            v[IO_ROWS[r]][...] = io[r]
+        if n_bad:
+            self.fail_kernel_substeps(h)
 
     def _cut(self, p_new: np.ndarray, omega: np.ndarray, h: float, n: np.ndarray, held: np.ndarray) -> StepResult:
         """Kernel results of one step for every member.

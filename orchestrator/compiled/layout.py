@@ -15,10 +15,10 @@ Covered (each checked per component; anything else runs on the Python master):
 * :class:`~fmus_src.servo.mcu.MCU` (at most one, compiled, no ``servo_delay``);
 * :class:`~fmus_src.servo.drive.DriveAxis` (compiled, no effect terms, either integrator);
 * :class:`~fmus_src.cutting.path_component.PathCuttingLoad` (at most one, baseline parameters only);
-* :class:`~fmus_src.cutting.component.CuttingLoad` (Z-map; at most one, compiled, every effect term off): its
-  stock heights, path ring buffer and effect clocks are the component's own arrays, stepped in place by
-  :func:`~fmus_src.cutting.zmap_numba.zmap_component_step`; its start position and spindle angle are copies
-  (the component rebinds them every step);
+* :class:`~fmus_src.cutting.component.CuttingLoad` (Z-map; at most one, compiled, every effect term off): the
+  arrays of :meth:`~fmus_src.cutting.component.CuttingLoad.compiled_step_arrays` (stock heights, path ring
+  buffer, start position, spindle angle, effect clocks) are the component's own, stepped in place by
+  :func:`~fmus_src.cutting.zmap_numba.zmap_component_step`, which is also the component's own step;
 * Gauss-Seidel coupling, connections between Real variables, probes / stop signals / limits on
   inputs and outputs.
 
@@ -32,7 +32,7 @@ import math
 
 import numpy as np
 
-from fmus_src.cutting.component import MAX_SUBSTEPS, CuttingLoad
+from fmus_src.cutting.component import BASELINE_PARAMETERS, MAX_SUBSTEPS, CuttingLoad
 from fmus_src.cutting.path_component import PathCuttingLoad
 from fmus_src.nck.component import NCKernel
 from fmus_src.servo.drive import DriveAxis
@@ -67,7 +67,6 @@ _CUT_KNOWN = frozenset((
     "stock_y_max", "stock_z_max", "stock_cell", "angle_steps_per_tooth", "initial_spindle_angle",
     "engagement_table", "path_tolerance",
 ))
-_ZMAP_KNOWN = _CUT_KNOWN - {"engagement_table", "path_tolerance"}
 
 _INTEGRATORS = {"rk4": INTEGRATOR_RK4, "exponential": INTEGRATOR_EXPONENTIAL}
 
@@ -127,7 +126,7 @@ def _kind(comp: object) -> tuple[int, tuple[str, ...]]:
         _same_variables(comp, CUT_ROWS)
         return KIND_CUT, CUT_ROWS
     if cls is CuttingLoad:
-        _compiled_kernel_on(comp, _ZMAP_KNOWN)
+        _compiled_kernel_on(comp, BASELINE_PARAMETERS)
         _same_variables(comp, ZMAP_ROWS)
         return KIND_ZMAP, ZMAP_ROWS
     raise Unsupported(f"{comp.name}: {cls.__module__}.{cls.__name__} has no compiled kernel in the loop")
@@ -330,27 +329,17 @@ class Layout:
                          f, np.zeros((B, 3, 3)), np.zeros((B, 3)), i, i.copy(), f, f, np.zeros((B, 3)), f.copy(),
                          f, i, f, f, f, f.copy(), f.copy(), f.copy(), i.copy(), np.zeros((2, B)), 1)
             return
-        z = c._zmap  # noqa: SLF001
         path = c.path
         for name, dtype in (("points", np.float64), ("arc", np.float64), ("head", np.int64), ("count", np.int64)):
             value = getattr(path, name)  # as zmap_numba.commit does: kept in place from then on
             if value.dtype != dtype or not value.flags.c_contiguous or not value.flags.writeable:
                 setattr(path, name, np.array(value, dtype=dtype))
-        v = c.values
-        st = c._effect_state  # noqa: SLF001
-        self.zmap = (z.heights, z.grid, z.cells, z.rho, path.points, path.arc, path.head, path.count,
-                     np.ascontiguousarray(path.spacing, dtype=np.float64),
-                     np.ascontiguousarray(path.lag, dtype=np.float64),
-                     np.array(c._p_prev, dtype=np.float64, order="C"),  # noqa: SLF001 - copies: rebound by the
-                     np.array(c._theta, dtype=np.float64),  # noqa: SLF001 - component; see pack / unpack
-                     np.ascontiguousarray(c._radius, dtype=np.float64),  # noqa: SLF001
-                     np.ascontiguousarray(c._flutes, dtype=np.int64),  # noqa: SLF001
-                     np.array(v["angle_steps_per_tooth"], dtype=np.float64), np.array(v["kt"], dtype=np.float64),
-                     np.array(v["ke"], dtype=np.float64), st.cutting_time, st.torque, st.angle,
-                     np.zeros(B, dtype=np.int64), np.zeros((2, B)), int(MAX_SUBSTEPS))
-        for arr, name in ((z.heights, "heights"), (st.cutting_time, "cutting_time"), (st.torque, "torque"),
-                          (st.angle, "angle")):
-            if arr.dtype != (np.float32 if name == "heights" else np.float64) or not arr.flags.c_contiguous:
+        self.zmap = c.compiled_step_arrays()  # the component's own arrays: it steps them in place too
+        for i, name, dtype in ((0, "heights", np.float32), (10, "start position", np.float64),
+                               (11, "spindle angle", np.float64), (17, "cutting_time", np.float64),
+                               (18, "torque", np.float64), (19, "angle", np.float64)):
+            arr = self.zmap[i]
+            if arr.dtype != dtype or not arr.flags.c_contiguous:
                 raise Unsupported(f"{c.name}: {name} is not a C-contiguous array of the kernel's type")
 
     def pack(self, V: np.ndarray | None = None) -> np.ndarray:
@@ -373,10 +362,7 @@ class Layout:
                 if failed is not None:
                     self.comp_failed[c] = failed
             self.comp_has_failed[:] = self.comp_failed.any(axis=1)
-            c = self._zmap_comp
-            if c is not None:  # the component may have stepped in Python (rebinding these)
-                self.zmap[10][...] = c._p_prev  # noqa: SLF001
-                self.zmap[11][...] = c._theta  # noqa: SLF001
+            if self._zmap_comp is not None:
                 self._check_zmap_shared()
         return V
 
@@ -385,8 +371,8 @@ class Layout:
         c = self._zmap_comp
         st = c._effect_state  # noqa: SLF001
         own = (c._zmap.heights, c.path.points, c.path.arc, c.path.head, c.path.count,  # noqa: SLF001
-               st.cutting_time, st.torque, st.angle)
-        shared = tuple(self.zmap[i] for i in (0, 4, 5, 6, 7, 17, 18, 19))
+               c._p_prev, c._theta, st.cutting_time, st.torque, st.angle)  # noqa: SLF001
+        shared = tuple(self.zmap[i] for i in (0, 4, 5, 6, 7, 10, 11, 17, 18, 19))
         if any(a is not b for a, b in zip(own, shared)):
             raise CncTwinError(f"compiled loop: {c.name} replaced an array the loop shares with it "
                                "(stock heights, path ring buffer or effect clocks)")
@@ -405,10 +391,6 @@ class Layout:
             d._state.position[...] = pos[i]  # noqa: SLF001
             d._state.velocity[...] = vel[i]  # noqa: SLF001
             d._state.direction[...] = dirn[i]  # noqa: SLF001
-        c = getattr(self, "_zmap_comp", None)
-        if c is not None:
-            c._p_prev = self.zmap[10].copy()  # noqa: SLF001
-            c._theta = self.zmap[11].copy()  # noqa: SLF001
 
     def kernel_data(self) -> tuple:
         """The ``nck, mcu, drives, cut, zmap`` tuples of :func:`.loop.run_chunk`."""

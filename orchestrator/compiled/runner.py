@@ -68,10 +68,7 @@ def _after_kernel(layout: Layout, c: int, t_tick: float, h_i: float) -> None:
         comp._finish_effects(h_i, np.maximum(actual, 0.0), actual)  # noqa: SLF001
         comp._fail_status(h_i)  # noqa: SLF001
     elif layout.kinds[c] == KIND_ZMAP:  # members needing too many substeps (held and blanked by the kernel)
-        status, diag = layout.zmap[20], layout.zmap[21]
-        bad = status != 0
-        status[...] = 0
-        comp._fail_substeps(bad, diag[0].copy(), diag[1].copy(), h_i)  # noqa: SLF001
+        comp.fail_kernel_substeps(h_i)
     else:  # KIND_MCU: excess-error alarms
         comp._raise_alarms()  # noqa: SLF001
     if comp._failed_outputs:  # noqa: SLF001
