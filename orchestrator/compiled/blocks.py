@@ -56,7 +56,7 @@ _COUNTER = "counter"  # an array all members share and every block advances alik
 _HAS_FAILED = "has_failed"  # per component, "some member failed": recomputed for the block's members
 
 # Member axes of run_chunk's arguments (None: shared by all members). HEAD: max_steps ... probe_factor;
-# TAIL: real_ptr ... cut. The recording buffers (between them) and the stop flags are the blocks' own.
+# TAIL: real_ptr ... cut, zmap. The recording buffers (between them) and the stop flags are the blocks' own.
 _NCK = (_Members(0, copy=False),) * 7 + (None, None)  # plans (B, K, ...), done index; period, start
 _MCU = (_Members(2), _Members(2), _Members(0), None, None, None, None, _COUNTER, _Members(0), _Members(2),
         _Members(0))
