@@ -5,6 +5,7 @@ import argparse
 import json
 import math
 
+import numpy as np
 import pytest
 
 from orchestrator.bench import BenchSettings, format_table, run_bench
@@ -37,8 +38,9 @@ def test_keys(result):
     twin = result["native_twin"]
     threaded = twin["batch_100"]["threads"] > 1  # members in blocks on several cores: also timed in one thread
     assert set(twin) == {"single", "single_air", "single_rk4", "single_python_master", "single_zmap",
-                         "single_zmap_python_master", "batch_10",
-                         "batch_100"} | ({"batch_100_one_thread"} if threaded else set())
+                         "single_zmap_python_master", "batch_10", "batch_100",
+                         "batch_100_variants"} | ({"batch_100_one_thread"} if threaded else set())
+    assert twin["batch_100_variants"]["variants"] and not twin["batch_100"]["variants"]
     if threaded:
         assert twin["batch_100_one_thread"]["threads"] == 1 and twin["batch_100_one_thread"]["batch"] == 100
         assert "native_twin_batch_100_one_thread_over_threads" in result["ratios"]
@@ -81,3 +83,21 @@ def test_cli_parser():
     add_parsers(parser.add_subparsers(dest="command"))
     args = parser.parse_args(["bench", "--quick", "--json", "out.json"])
     assert args.quick and args.json == "out.json" and callable(args.func)
+
+
+def test_bench_variants_change_the_program_s_own_f_and_s_words():
+    """The lines the variants override carry the F and S words they name, and member 0 is the program as written."""
+    from orchestrator.bench.native import BENCH_FEED_LINES, BENCH_PROGRAM, BENCH_SPINDLE_LINE, variant_overrides
+    lines = BENCH_PROGRAM.read_text().splitlines()
+    for line, f in BENCH_FEED_LINES.items():
+        assert f"F{f:g}" in lines[line - 1].split("(")[0]
+    s_line, s = BENCH_SPINDLE_LINE
+    assert f"S{s:g}" in lines[s_line - 1]
+    feed, spindle = variant_overrides(100, seed=0)
+    mm_per_min = 1e-3 / 60.0
+    for line, f in BENCH_FEED_LINES.items():
+        values = feed[line] / mm_per_min
+        assert values[0] == pytest.approx(f) and len(set(np.round(values).tolist())) > 10
+        assert np.all((values >= 0.8 * f - 5.0) & (values <= 1.25 * f + 5.0))
+    rpm = spindle[s_line] * 60.0 / (2.0 * math.pi)
+    assert rpm[0] == pytest.approx(s) and np.all((rpm >= 5000.0 - 1e-6) & (rpm <= 7000.0 + 1e-6))

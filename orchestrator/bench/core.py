@@ -257,6 +257,9 @@ def run_bench(settings: BenchSettings | None = None, quick: bool = False,
         say(f"native twin: batch {b}, {s.batch_seconds:g} s")
         twin[f"batch_{b}"] = time_twin(case, b, s.batch_seconds, engagement=table)
     big = max(s.batches) if s.batches else 1
+    if s.batches:  # an optimiser's population: distinct F and S per member (issue 9's "100 variants")
+        say(f"native twin: batch {big} of distinct variants, {s.batch_seconds:g} s")
+        twin[f"batch_{big}_variants"] = time_twin(case, big, s.batch_seconds, engagement=table, variants=True)
     if s.batches and twin[f"batch_{big}"]["threads"] > 1:
         say(f"native twin: batch {big} in one thread, {s.batch_seconds:g} s")
         twin[f"batch_{big}_one_thread"] = time_twin(case, big, s.batch_seconds, engagement=table, threads=1)
@@ -365,7 +368,7 @@ def run_bench(settings: BenchSettings | None = None, quick: bool = False,
 
     targets = {
         "native_single_rt_factor": (twin["single"]["rt_factor"], TARGETS["native_single_rt_factor_min"], ">="),
-        f"native_population_{big}_rt_factor": (twin.get(f"batch_{big}", twin["single"])["rt_factor"],
+        f"native_population_{big}_rt_factor": (twin.get(f"batch_{big}_variants", twin["single"])["rt_factor"],
                                                TARGETS["native_population_100_rt_factor_min"], ">="),
         "c_fmu_fast_loop_us_per_step": (us["c_fmu_fast_loop"], TARGETS["c_fmu_master_us_per_step_max"], "<="),
         "c_fmu_master_us_per_step": (us["c_fmu_master"], TARGETS["c_fmu_master_us_per_step_max"], "<="),

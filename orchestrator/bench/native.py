@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from fmus_src.cutting.table import EngagementTable
+from fmus_src.nck.interpreter import MM, RPM
 
 from ..case import Case
 from ..compiled import compiled_support
@@ -20,6 +21,33 @@ from ..twin import TwinOptions, build_twin, engagement_table
 BENCH_PROGRAM = Path(__file__).resolve().parent / "bench_part.nc"
 #: Its case (stock, tool, material, machine).
 BENCH_CASE = Path(__file__).resolve().parents[2] / "models" / "examples" / "paper_part"
+#: Source lines of :data:`BENCH_PROGRAM` with the F words of its three cuts (mm/min) and its S word (rpm): what the
+#: variants of a population change (:func:`variant_overrides`).
+BENCH_FEED_LINES = {10: 300.0, 14: 400.0, 18: 400.0}
+BENCH_SPINDLE_LINE = (7, 6000.0)
+
+
+def variant_overrides(batch: int, seed: int = 0) -> tuple[dict[int, np.ndarray], dict[int, np.ndarray]]:
+    """F and S overrides of ``batch`` distinct variants of :data:`BENCH_PROGRAM`, as an optimiser's population.
+
+    Each cut's feed is drawn from 0.8-1.25 times the program's (on a 10 mm/min grid) and the spindle speed from
+    5000-7000 rpm (on a 50 rpm grid), seeded; member 0 is the program as written.
+
+    Returns
+    -------
+    feed, spindle : dict line -> ndarray (B,)
+        m/s and rad/s, for :meth:`fmus_src.nck.component.NCKernel.set_overrides`.
+    """
+    rng = np.random.default_rng(seed)
+    feed = {}
+    for line, f in BENCH_FEED_LINES.items():
+        values = np.round(f * rng.uniform(0.8, 1.25, batch) / 10.0) * 10.0
+        values[0] = f
+        feed[line] = values * MM / 60.0
+    line, s = BENCH_SPINDLE_LINE
+    speeds = np.round(rng.uniform(5000.0, 7000.0, batch) / 50.0) * 50.0
+    speeds[0] = s
+    return feed, {line: speeds * RPM}
 
 
 def bench_case() -> Case:
@@ -29,7 +57,7 @@ def bench_case() -> Case:
 
 def time_twin(case: Case, batch: int, seconds: float, cutting: bool = True, step: float = 1e-3,
               cutting_mode: str = "path", engagement: EngagementTable | None = None, compiled: bool = True,
-              integrator: str = "exponential", threads: int | None = None) -> dict:
+              integrator: str = "exponential", threads: int | None = None, variants: bool = False) -> dict:
     """Run the native twin for ``seconds`` of simulated time and time it.
 
     Parameters
@@ -54,6 +82,8 @@ def time_twin(case: Case, batch: int, seconds: float, cutting: bool = True, step
         ``TwinOptions.drive_integrator``.
     threads : int, optional
         ``MasterSettings.threads`` (None: one per core, at least 4 members each).
+    variants : bool
+        Distinct members (:func:`variant_overrides`, seeded) instead of ``B`` copies of the program.
 
     Returns
     -------
@@ -70,6 +100,9 @@ def time_twin(case: Case, batch: int, seconds: float, cutting: bool = True, step
     options = TwinOptions(step=step, cutting=cutting, cutting_mode=cutting_mode, engagement=engagement,
                           drive_integrator=integrator)
     twin = build_twin(case, batch=batch, options=options)
+    if variants:
+        feed, spindle = variant_overrides(batch)
+        twin.nck.set_overrides(feed=feed, spindle=spindle)
     build = time.perf_counter() - t_build
     settings = MasterSettings(step=step, time_limit=seconds, stop_when=twin.stop_when, limits=twin.limits or {},
                               compiled=compiled, threads=threads)
@@ -92,6 +125,7 @@ def time_twin(case: Case, batch: int, seconds: float, cutting: bool = True, step
         "success": run.success, "message": run.message, "compiled_loop": compiled_loop,
         "threads": block_count(batch, threads) if compiled_loop else 1,
         "cutting_mode": cutting_mode if twin.cutting is not None else "none", "integrator": integrator,
+        "variants": variants,
     }
 
 
