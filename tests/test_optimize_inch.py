@@ -160,3 +160,26 @@ def test_inch_grid_words_read_back_as_the_genes():
         feed = [b.feed for b in interpret(written).blocks if isinstance(b, Linear) and b.line == 4][0]
         assert feed == word * INCH / 60.0  # the optimiser's override conversion, bit for bit
         assert feed == pytest.approx(gene * 1e-3 / 60.0, rel=1e-12)
+
+
+def test_cli_passes_the_grids_to_the_settings(monkeypatch, tmp_path):
+    """``--feed-step``, ``--feed-step-in-per-min`` and ``--spindle-step`` reach ``OptimizeSettings`` unchanged."""
+    import orchestrator.optimize as optimize_package
+    from orchestrator.cli import main as cnctwin_main
+
+    seen = {}
+
+    class Result:
+        before = after = {"cycle_time_s": 1.0, "cost_KRW": 1.0, "max_cutting_load_N": 1.0}
+        evaluations, front, files = 0, [], {}
+
+    def fake_optimize(program=None, case=None, settings=None, out=None, machine=None):
+        seen["settings"] = settings
+        return Result()
+
+    monkeypatch.setattr(optimize_package, "optimize", fake_optimize)
+    assert cnctwin_main(["optimize", "--case", str(tmp_path), "--feed-step", "5", "--feed-step-in-per-min", "0.5",
+                         "--spindle-step", "100", "--out", str(tmp_path / "o")]) == 0
+    s = seen["settings"]
+    assert (s.feed_step, s.feed_step_in_per_min, s.spindle_step) == (5.0, 0.5, 100.0)
+    assert s.ranges().feed_step_in_per_min == 0.5
