@@ -13,7 +13,10 @@ from __future__ import annotations
 
 import csv
 import io
+import logging
 import math
+import re
+from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Iterable, Mapping
@@ -37,6 +40,23 @@ SPEC_COLUMNS: dict[str, str] = {
     **{f"f{a}_N": "N" for a in "xyz"},
     "fc_N": "N",
 }
+
+
+_log = logging.getLogger(__name__)
+#: A plain decimal number: sign, digits with ``.`` as the decimal point, optional exponent (as written by
+#: loggers and by :meth:`Recording.to_csv_text`); no thousands separators, underscores, hex, NaN or infinity.
+_DECIMAL = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?")
+
+
+def _cell_problem(cell: str) -> str | None:
+    """Why a stripped, non-empty CSV cell is not a plain finite decimal number (None when it is one)."""
+    if _DECIMAL.fullmatch(cell) is None:
+        if cell.lower().lstrip("+-") in ("nan", "inf", "infinity"):
+            return "is not finite; write an empty cell for 'not measured'"
+        return "is not a plain decimal number"
+    if not math.isfinite(float(cell)):
+        return "is not finite; write an empty cell for 'not measured'"
+    return None
 
 
 class RecordingError(CncTwinError):
@@ -245,10 +265,20 @@ class Recording:
         Raises
         ------
         RecordingError
-            Missing file, no header, no ``t_s``, duplicated columns, a cell
-            that is not a plain decimal number, NaN/empty ``t_s``, time not
-            strictly increasing, or a required column missing. The message
-            names the file, the line and the column.
+            Missing file, no header, no ``t_s``, a contract column (``x_mm``,
+            ``fc_N``, ...) twice, a cell of a contract column that is not a
+            plain finite decimal number, an empty ``t_s``, time not strictly
+            increasing, a row with a different number of cells, or a required
+            column missing. The message names the file, the line and the column.
+
+        Notes
+        -----
+        Columns the contract does not define are extra columns: they are kept
+        when every cell is a number (or empty) and ignored otherwise, as are
+        columns without a name and unknown names that appear twice
+        (recording.md: "Extra columns are allowed and must be ignored by
+        readers that do not know them"). Empty cells after the last column
+        (a trailing comma) are not cells.
         """
         path = Path(path)
         if not path.is_file():
@@ -263,36 +293,35 @@ class Recording:
         header = [cell.strip() for cell in rows[0]]
         if "t_s" not in header:
             raise RecordingError(f"{path}:1: no 't_s' column; header is {header}")
-        seen: set[str] = set()
+        counts = Counter(header)
         for name in header:
-            if not name:
-                raise RecordingError(f"{path}:1: a column has no name")
-            if name in seen:
+            if name in SPEC_COLUMNS and counts[name] > 1:
                 raise RecordingError(f"{path}:1: column {name!r} appears twice")
-            seen.add(name)
         missing = [c for c in required if c not in header]
         if missing:
             raise RecordingError(f"{path}:1: missing column(s) {missing} needed here; header is {header}")
+        # Extra columns are kept when every cell is a number and ignored otherwise (recording.md); columns
+        # without a name (a trailing comma) and repeated unknown names are extra columns nobody can name.
+        ignored = {j for j, name in enumerate(header) if not name or counts[name] > 1}
         body = [(i + 2, r) for i, r in enumerate(rows[1:]) if any(cell.strip() for cell in r)]
         values = np.full((len(body), len(header)), np.nan)
         for k, (lineno, row) in enumerate(body):
+            if len(row) > len(header) and not any(cell.strip() for cell in row[len(header):]):
+                row = row[: len(header)]  # empty cells after the last column (a trailing comma)
             if len(row) != len(header):
                 raise RecordingError(f"{path}:{lineno}: {len(row)} cells, header has {len(header)} columns")
             for j, cell in enumerate(row):
                 cell = cell.strip()
-                if not cell:
+                if not cell or j in ignored:
                     continue
-                try:
-                    value = float(cell)
-                except ValueError:
-                    raise RecordingError(
-                        f"{path}:{lineno}: column {header[j]!r}: {cell!r} is not a plain decimal number"
-                    ) from None
-                if not math.isfinite(value):
-                    raise RecordingError(
-                        f"{path}:{lineno}: column {header[j]!r}: {cell!r}; write an empty cell for 'not measured'"
-                    )
-                values[k, j] = value
+                problem = _cell_problem(cell)
+                if problem is None:
+                    values[k, j] = float(cell)
+                elif header[j] in SPEC_COLUMNS:
+                    raise RecordingError(f"{path}:{lineno}: column {header[j]!r}: {cell!r} {problem}")
+                else:
+                    ignored.add(j)
+                    _log.info("%s:%d: extra column %r ignored: %r %s", path, lineno, header[j], cell, problem)
         it = header.index("t_s")
         t = values[:, it]
         if np.isnan(t).any():
@@ -306,6 +335,6 @@ class Recording:
                 raise RecordingError(
                     f"{path}:{body[k][0]}: t_s {what} ({float(t[k - 1])!r} then {float(t[k])!r}); rows must be in strictly increasing time"
                 )
-        order = [it] + [j for j in range(len(header)) if j != it]
+        order = [it] + [j for j in range(len(header)) if j != it and j not in ignored]
         channels = {header[j]: values[:, j] for j in order}
         return cls.from_channels(channels, source=str(path))

@@ -52,10 +52,35 @@ def test_extra_columns_are_kept_and_uneven_sampling_allowed(tmp_path):
     np.testing.assert_allclose(rec.t, [10.0, 10.003, 10.0041])
 
 
+def test_extra_columns_that_are_not_numbers_are_ignored_not_fatal(tmp_path):
+    # recording.md: "Extra columns are allowed and must be ignored by readers that do not know them."
+    path = tmp_path / "log.csv"
+    path.write_text("stamp,t_s,x_mm,alarm,note,note,,fc_N,\n"
+                    "10:00:00.000,0.0,1.5,,a,b,,2.0,\n"
+                    "10:00:00.001,0.001,1.6,SV0410,c,d,,2.5,\n")
+    rec = Recording.read_csv(path)
+    assert rec.channels == ["t_s", "x_mm", "fc_N"]
+    np.testing.assert_array_equal(rec["x_mm"], [1.5, 1.6])
+    np.testing.assert_array_equal(rec["fc_N"], [2.0, 2.5])
+
+
+def test_numbers_are_plain_decimals_with_optional_exponent(tmp_path):
+    path = tmp_path / "r.csv"
+    path.write_text("t_s,x_mm,y_mm\n0,-.5,+2.\n1E-3,2.5e+1,3\n")
+    rec = Recording.read_csv(path)
+    np.testing.assert_array_equal(rec.t, [0.0, 0.001])
+    np.testing.assert_array_equal(rec["x_mm"], [-0.5, 25.0])
+    np.testing.assert_array_equal(rec["y_mm"], [2.0, 3.0])
+
+
 @pytest.mark.parametrize(
     "body, match",
     [
         ("", "empty file"),
+        ("t_s,x_mm\n0,1_000\n", r":2: column 'x_mm': '1_000' is not a plain decimal"),
+        ("t_s,x_mm\n0,1\n0.001,0x10\n", r":3: column 'x_mm': '0x10'"),
+        ("t_s,x_mm\n0,-inf\n", "empty cell"),
+        ("t_s,x_mm,fc_N,fc_N\n0,1,2,3\n", "'fc_N' appears twice"),
         ("x_mm\n1\n", "no 't_s' column"),
         ("t_s,x_mm,x_mm\n0,1,2\n", "appears twice"),
         ("t_s,x_mm\n0,1\n0.001,abc\n", r":3: column 'x_mm': 'abc'"),
