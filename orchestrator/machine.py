@@ -61,6 +61,7 @@ SCHEMA: dict[str, set[str]] = {
         "corner_velocity_difference_mm_per_min", "arc_accel_mm_per_s2",
         "cutting_time_constant_ms", "cutting_filter", "rapid_time_constant_ms", "rapid_filter",
         "in_position_width_mm", "tool_change_time_s",
+        "reference_x_mm", "reference_y_mm", "reference_z_mm", "g73_retract_mm", "g83_clearance_mm",
     },
     "spindle": {"max_speed_rpm", "ramp_rpm_per_s", "speed_arrival_tolerance_percent", "power_kW"},
     "servo": {"position_loop_period_ms", "velocity_loop_period_ms"},
@@ -77,6 +78,11 @@ SCHEMA: dict[str, set[str]] = {
 
 #: Keys that may be left out of a machine file (the component default is used).
 OPTIONAL_SECTIONS: set[str] = {"machine", "material.*", *(f"axis.{a}.effects" for a in AXES), "cutting.effects"}
+#: Keys of required sections that may be left out (the component default, equal to default.toml's value, is
+#: used): keys added after machine files were written, so that a user's older file still loads.
+OPTIONAL_KEYS: dict[str, set[str]] = {
+    "nck": {"reference_x_mm", "reference_y_mm", "reference_z_mm", "g73_retract_mm", "g83_clearance_mm"},
+}
 
 
 class MachineFileError(CncTwinError):
@@ -233,7 +239,7 @@ def _check_complete(path: Path, text: str, values: dict[str, Any]) -> None:
             node = node.get(part) if isinstance(node, dict) else None
         if node is None:
             raise MachineFileError(f"{path}: missing section [{section}] with keys {sorted(keys)}")
-        missing = sorted(keys - set(node))
+        missing = sorted(keys - set(node) - OPTIONAL_KEYS.get(section, set()))
         if missing:
             raise MachineFileError(
                 f"{path}:{_line_of(text, section, None)}: section [{section}] is missing {missing}"

@@ -59,6 +59,26 @@ def test_missing_key_and_missing_file(tmp_path):
         load_machine("nonesuch")
 
 
+
+def test_machine_file_without_the_newer_nck_keys_loads_with_the_shipped_values(tmp_path):
+    # a user's machine file written before G28 and the peck cycles existed: the NC kernel's own defaults apply,
+    # and they are the shipped file's values (380/225/300 mm, 0.2 mm, 0.5 mm)
+    from fmus_src.nck import NCKernel
+    from orchestrator.machine import OPTIONAL_KEYS
+    from orchestrator.twin import nck_parameters
+
+    newer = OPTIONAL_KEYS["nck"]
+    text = load_machine("default").path.read_text()
+    text = "\n".join(l for l in text.splitlines() if l.split(" = ")[0] not in newer)
+    path = tmp_path / "older.toml"
+    path.write_text(text)
+    params = nck_parameters(load_machine(path))
+    assert not {k[: -len("_mm")] for k in newer} & set(params)
+    shipped = load_machine("default").values["nck"]
+    defaults = {v.name: v.start for v in NCKernel.variables}
+    for key in newer:
+        assert defaults[key[: -len("_mm")]] == pytest.approx(shipped[key] * 1e-3, rel=1e-12)
+
 def write_case(folder, body):
     folder.mkdir(parents=True, exist_ok=True)
     (folder / "case.toml").write_text(body)

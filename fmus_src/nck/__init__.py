@@ -16,7 +16,8 @@ NCParams, plan_batch, plan_member, build_schedule
 from __future__ import annotations
 
 from .blocks import (
-    Arc, Block, Coolant, Dwell, Linear, Program, ProgramEnd, Rapid, SpindleSpeed, SpindleStop, ToolChange,
+    Arc, Block, Coolant, Dwell, Linear, Program, ProgramEnd, ProgramStop, Rapid, SpindleSpeed, SpindleStop,
+    ToolChange,
 )
 from .component import NCKernel
 from .errors import GCodeError, NCParameterError
@@ -28,6 +29,7 @@ from .writer import rewrite_program
 
 __all__ = [
     "Arc", "BatchPlan", "Block", "Coolant", "Dwell", "GCodeError", "InterpreterSettings", "Linear", "MemberPlan",
-    "NCKernel", "NCParameterError", "NCParams", "Program", "ProgramEnd", "Rapid", "SpindleSpeed", "SpindleStop",
-    "ToolChange", "build_schedule", "interpret", "plan_batch", "plan_member", "read_program", "rewrite_program",
+    "NCKernel", "NCParameterError", "NCParams", "Program", "ProgramEnd", "ProgramStop", "Rapid", "SpindleSpeed",
+    "SpindleStop", "ToolChange", "build_schedule", "interpret", "plan_batch", "plan_member", "read_program",
+    "rewrite_program",
 ]

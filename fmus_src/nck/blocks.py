@@ -35,6 +35,9 @@ class Linear:
         Programmed path feed (m/s), before any clamp.
     feed_line : int
         Source line whose F word set ``feed`` (used to apply per-line overrides).
+    exact_stop : bool
+        The path decelerates to rest at the end of this block and the next block waits for the
+        in-position check (G61 mode, one-shot G9, or a canned-cycle feed).
     """
 
     line: int
@@ -42,6 +45,7 @@ class Linear:
     end: Vec3
     feed: float
     feed_line: int
+    exact_stop: bool = False
 
 
 @dataclass(frozen=True, slots=True)
@@ -62,6 +66,8 @@ class Arc:
     turns : int
         1 for an ordinary arc (at most one revolution). A full circle
         (IJK, end == start) has ``turns = 1`` and a sweep of 2 pi.
+    exact_stop : bool
+        As for :class:`Linear`.
     """
 
     line: int
@@ -73,6 +79,7 @@ class Arc:
     feed: float
     feed_line: int
     turns: int = 1
+    exact_stop: bool = False
 
     @property
     def axes(self) -> tuple[int, int, int]:
@@ -172,6 +179,18 @@ class Coolant:
 
 
 @dataclass(frozen=True, slots=True)
+class ProgramStop:
+    """M0 program stop or M1 optional stop: the axes come to rest (in-position check), no added time.
+
+    The twin does not wait for an operator and its optional-stop switch is off; the path still stops
+    because FANUC does not pre-read the block after M00/M01. ``code`` is ``"M0"`` or ``"M1"``.
+    """
+
+    line: int
+    code: str
+
+
+@dataclass(frozen=True, slots=True)
 class ProgramEnd:
     """Program end: ``reason`` is ``"M30"``, ``"M2"``, ``"%"`` or ``"end of file"``."""
 
@@ -179,7 +198,7 @@ class ProgramEnd:
     reason: str
 
 
-Block = Rapid | Linear | Arc | Dwell | SpindleSpeed | SpindleStop | ToolChange | Coolant | ProgramEnd
+Block = Rapid | Linear | Arc | Dwell | SpindleSpeed | SpindleStop | ToolChange | Coolant | ProgramStop | ProgramEnd
 Motion = (Rapid, Linear, Arc)
 
 

@@ -17,8 +17,9 @@ import numpy as np
 
 from ..component import Component, ComponentError, Variable
 from .blocks import Block, Program
+from .cycles import CycleMachine
 from .errors import NCParameterError
-from .interpreter import InterpreterSettings, interpret
+from .interpreter import DEFAULT_REFERENCE, InterpreterSettings, interpret
 from .overrides import insert_spindle_commands, resolve_values
 from .params import NCParams
 from .planner import BatchPlan, build_schedule, plan_batch
@@ -69,6 +70,13 @@ def _variables() -> tuple[Variable, ...]:
     for h in range(1, N_TOOL_LENGTHS + 1):
         v.append(Variable(f"tool_length_{h}", p, "m", 0.0, f"tool length offset H{h} (added to Z with G43)"))
     v.append(Variable("tool_change_time", p, "s", _D.tool_change_time, "M6 tool change time (assumption: 3 s)"))
+    for i, a in enumerate("xyz"):
+        v.append(Variable(f"reference_{a}", p, "m", DEFAULT_REFERENCE[i],
+                          f"{a.upper()} of the G28 reference position, machine coordinates (FANUC No. 1240)"))
+    v.append(Variable("g73_retract", p, "m", CycleMachine().g73_retract,
+                      "return amount d of the G73 high-speed peck cycle (FANUC No. 5114)"))
+    v.append(Variable("g83_clearance", p, "m", CycleMachine().g83_clearance,
+                      "clearance d of the G83 peck cycle above the previous bottom (FANUC No. 5115)"))
     v.append(Variable("block_delete", p, "1", False, "block delete switch: skip blocks starting with /", "Boolean"))
     o = "output"
     v += [
@@ -177,7 +185,11 @@ class NCKernel(Component):
             work_offsets={g: tuple(self._uniform(f"g{g}_{a}") for a in "xyz") for g in WORK_OFFSETS},  # type: ignore[misc]
             tool_lengths=[self._uniform(f"tool_length_{h}") for h in range(1, N_TOOL_LENGTHS + 1)],
             block_delete=bool(self.values["block_delete"][0]),  # type: ignore[index]
+            reference=tuple(self._uniform(f"reference_{a}") for a in "xyz"),  # type: ignore[arg-type]
+            cycles=CycleMachine(self._uniform("g73_retract"), self._uniform("g83_clearance")),
         )
+        if not all(np.isfinite(settings.reference)):
+            raise NCParameterError(f"{self.name}: reference_x/y/z must be finite, got {settings.reference}")
         self.program_: Program = interpret(text, file, settings)
         blocks: tuple[Block, ...] = insert_spindle_commands(self.program_.blocks, list(self._spindle_over))
         self.blocks_ = blocks

@@ -1,16 +1,57 @@
 """Modal interpreter of the FANUC milling dialect → typed blocks.
 
 Supported: G0 G1 G2 G3 (arcs by R, negative R for > 180 deg, or by I/J/K incl.
-full circles), G4 (dwell), G17/G18/G19, G20/G21, G40, G43/G44/G49 with H,
-G54-G59, G64, G80, G90/G91, G94; M2 M3 M4 M5 M6 M7 M8 M9 M30; F S T H N O
-words; ``( )`` and ``;`` comments, ``%`` lines, block delete ``/``.
-Rejected with a :class:`GCodeError`: cutter compensation G41/G42, feed per
-revolution G95, canned cycles and every other G/M code or address.
+full circles), G4 (dwell), G9 (exact stop, one block), G17/G18/G19, G20/G21,
+G28 (reference position return), G40, G43/G44/G49 with H, G53 (machine
+coordinates), G54-G59, G61/G64 (exact stop mode / cutting mode), canned
+drilling cycles G73 G81 G82 G83 G85 G86 G89 with G98/G99 and G80 (see
+:mod:`.cycles`), G90/G91, G94; M0 M1 M2 M3 M4 M5 M6 M7 M8 M9 M30; F S T H P Q
+N O words (K: arc centre, or repeat count in a canned cycle); ``( )`` and
+``;`` comments, ``%`` lines, block delete ``/``.
+Accepted as no-ops, because they cancel features that are never switched on
+(CAM posts emit them in safe-start lines): G15 (polar coordinates cancel),
+G50 (scaling cancel; a mill: G50 with X/Y/Z/S, the lathe meaning, is an
+error), G50.1 (programmable mirror image cancel), G69 (coordinate rotation
+cancel), G67 (macro modal call cancel), G13.1 (polar interpolation cancel).
+Rejected with a :class:`GCodeError`: the codes switching those features on
+(G16, G51, G51.1, G68, G66, G65, G12.1), cutter compensation G41/G42, feed
+per revolution G95, tapping cycles G74/G84, G76/G87/G88, G29/G30, and every
+other G/M code or address.
 
 Conventions
 -----------
 * Calculator-type decimal input (FANUC No. 3401#0 DPI = 1): ``X10`` is 10 mm.
-* Power-on modes: G0, G17, G21, G40, G49, G54, G64, G80, G90, G94.
+* Power-on modes: G0, G17, G21, G40, G49, G54, G64, G80, G90, G94, G98.
+* Decimal G codes (``G50.1``, ``G13.1``) are single codes; the lexer reads
+  them as one number.
+* G28 (FANUC 0i-MF/31i-B, "reference position return"): non-modal, rapid
+  traverse, only the named axes move: first to the intermediate point, which
+  is programmed like a G0 end point in the current G90/G91 mode (``G28 G91
+  Z0`` has its intermediate point at the current position, so Z goes straight
+  up to the reference; ``G28 G90 X0 Y0`` goes via work X0 Y0), then to the
+  reference position :attr:`InterpreterSettings.reference`, a machine position
+  (FANUC No. 1240): neither work offset nor tool length is added to it. After
+  G28 Z the tool-length vector is no longer in the Z position (as FANUC
+  cancels it at the reference position); G43/G44 stay modal and the next Z
+  move applies the offset again. The programmed position of a returned axis
+  is reference - work offset (Z: - the tool length still contained, i.e.
+  none), so following G90/G91 moves are consistent. G28 without an axis word,
+  and G28/G53 in canned-cycle mode are errors. G30 (2nd reference position)
+  and G29 are rejected.
+* G53 (machine coordinate positioning): non-modal, rapid traverse whatever
+  the G0/G1 mode (FANUC moves G53 at rapid), machine coordinates without work
+  offset or tool length (the tool-length vector is left out as after G28).
+  FANUC ignores G53 under G91; the twin rejects it (G90 required) so that a
+  program cannot silently do something else than it reads.
+* G61 (modal) and G9 (one block): the feed block decelerates to rest at its
+  end and the next block starts after the in-position check; G64 cancels G61.
+  Rapids always end with an exact stop.
+* M0 (program stop) and M1 (optional stop): the twin does not wait for an
+  operator (and its optional-stop switch is off), so neither adds time, but
+  the axes come to rest and are in position (like an exact stop): FANUC does
+  not pre-read the block after M00/M01/M02/M30 (buffering is suppressed), so
+  the path decelerates to rest there even with the switch off. The spindle
+  and coolant keep their state.
 * G4: a value with a decimal point is in seconds (``G4 X1.5``, ``G4 P1.5``),
   without it in milliseconds (``G4 P1500`` as FANUC).
 * An offset change takes effect on the next move of the axis: the machine
@@ -38,9 +79,10 @@ from dataclasses import dataclass, field
 from typing import Mapping, Sequence
 
 from .blocks import (
-    PLANE_AXES, Arc, Block, Coolant, Dwell, Linear, Program, ProgramEnd, Rapid, SpindleSpeed, SpindleStop,
-    ToolChange, Vec3,
+    PLANE_AXES, Arc, Block, Coolant, Dwell, Linear, Program, ProgramEnd, ProgramStop, Rapid, SpindleSpeed,
+    SpindleStop, ToolChange, Vec3,
 )
+from .cycles import CYCLES, MAX_CYCLE_MOVES, CycleError, CycleMachine, Hole, expand_hole
 from .errors import GCodeError
 from .lexer import LexError, Word, lex_line, split_lines
 
@@ -57,35 +99,59 @@ MAX_COORDINATE = {"mm": 99999.999, "in": 9999.9999}
 MAX_DWELL = 99999.999
 #: Largest tool number (FANUC: 8 digits).
 MAX_TOOL = 99999999
+#: Largest repeat count K of a canned cycle (FANUC: 4 digits).
+MAX_REPEAT = 9999
+#: Reference position (G28) of the default machine, machine coordinates (m): ``reference_*_mm`` of
+#: models/machines/default.toml (assumption, see there).
+DEFAULT_REFERENCE: Vec3 = (0.380, 0.225, 0.300)
 
 # G code -> modal group
-_G_GROUP: dict[int, str] = {
+_G_GROUP: dict[int | float, str] = {
     0: "motion", 1: "motion", 2: "motion", 3: "motion",
-    4: "non-modal",
+    4: "non-modal", 28: "non-modal", 53: "non-modal",
+    9: "exact stop",
     17: "plane", 18: "plane", 19: "plane",
     20: "units", 21: "units",
     40: "cutter compensation",
     43: "tool length", 44: "tool length", 49: "tool length",
     54: "work offset", 55: "work offset", 56: "work offset", 57: "work offset", 58: "work offset",
     59: "work offset",
-    64: "path mode",
-    80: "canned cycle",
+    61: "path mode", 64: "path mode",
+    80: "canned cycle", **{c: "canned cycle" for c in CYCLES},
     90: "distance", 91: "distance",
     94: "feed mode",
+    98: "return level", 99: "return level",
+    # cancel codes of features never switched on: accepted as no-ops
+    15: "polar coordinates", 50: "scaling", 50.1: "mirror image", 69: "coordinate rotation",
+    67: "macro modal call", 13.1: "polar interpolation",
 }
-_G_REJECT: dict[int, str] = {
+_G_REJECT: dict[int | float, str] = {
     41: "cutter radius compensation G41 is not supported (program the tool-centre path and use G40)",
     42: "cutter radius compensation G42 is not supported (program the tool-centre path and use G40)",
     95: "feed per revolution G95 is not supported",
-    **{c: f"canned cycle G{c} is not supported" for c in (73, 74, 76, 81, 82, 83, 84, 85, 86, 87, 88, 89)},
+    74: "tapping cycle G74 is not supported (needs rigid tapping with the feed per revolution)",
+    84: "tapping cycle G84 is not supported (needs rigid tapping with the feed per revolution)",
+    76: "fine boring cycle G76 is not supported (needs spindle orientation and a tool shift)",
+    87: "back boring cycle G87 is not supported (needs spindle orientation and a tool shift)",
+    88: "boring cycle G88 is not supported (needs a manual operation at the hole bottom)",
+    16: "polar coordinate command G16 is not supported (only its cancel G15)",
+    51: "scaling G51 is not supported (only its cancel G50)",
+    51.1: "programmable mirror image G51.1 is not supported (only its cancel G50.1)",
+    68: "coordinate rotation G68 is not supported (only its cancel G69)",
+    65: "macro call G65 is not supported",
+    66: "macro modal call G66 is not supported (only its cancel G67)",
+    12.1: "polar coordinate interpolation G12.1 is not supported (only its cancel G13.1)",
+    29: "return from the reference position G29 is not supported (program the move back with G0)",
+    30: "2nd/3rd/4th reference position return G30 is not supported (use G28 or a G53 move)",
 }
 _M_GROUP: dict[int, str] = {
-    2: "end", 30: "end", 3: "spindle", 4: "spindle", 5: "spindle", 6: "tool change",
+    0: "stop", 1: "stop", 2: "end", 30: "end", 3: "spindle", 4: "spindle", 5: "spindle", 6: "tool change",
     7: "coolant", 8: "coolant", 9: "coolant",
 }
-_SUPPORTED_G = "G0 G1 G2 G3 G4 G17 G18 G19 G20 G21 G40 G43 G44 G49 G54-G59 G64 G80 G90 G91 G94"
-_SUPPORTED_M = "M2 M3 M4 M5 M6 M7 M8 M9 M30"
-_LETTERS = set("GMXYZIJKRFSTHPNO")
+_SUPPORTED_G = ("G0 G1 G2 G3 G4 G9 G13.1 G15 G17 G18 G19 G20 G21 G28 G40 G43 G44 G49 G50 G50.1 G53 G54-G59 "
+                "G61 G64 G67 G69 G73 G80 G81 G82 G83 G85 G86 G89 G90 G91 G94 G98 G99")
+_SUPPORTED_M = "M0 M1 M2 M3 M4 M5 M6 M7 M8 M9 M30"
+_LETTERS = set("GMXYZIJKRFSTHPQNO")
 _AXIS = {"X": 0, "Y": 1, "Z": 2}
 _CENTRE = {"I": 0, "J": 1, "K": 2}
 _PLANE_OF_G = {17: "XY", 18: "ZX", 19: "YZ"}
@@ -105,12 +171,18 @@ class InterpreterSettings:
         Tool length offsets (m) for H1..Hn (index 0 is H1). H0 is always zero.
     block_delete : bool
         Block delete switch: True skips blocks starting with ``/``.
+    reference : Vec3
+        G28 reference position (m, machine coordinates; FANUC No. 1240). Default: the default machine's.
+    cycles : CycleMachine
+        Return amount of G73 (No. 5114) and clearance of G83 (No. 5115).
     """
 
     initial: Vec3 = (0.0, 0.0, 0.0)
     work_offsets: Mapping[int, Vec3] = field(default_factory=dict)
     tool_lengths: Sequence[float] = ()
     block_delete: bool = False
+    reference: Vec3 = DEFAULT_REFERENCE
+    cycles: CycleMachine = field(default_factory=CycleMachine)
 
 
 class _State:
@@ -135,6 +207,20 @@ class _State:
         self.settings = settings
         off = self.work_offset()
         self.prog = [self.machine[a] - off[a] for a in range(3)]
+        self.exact_stop = False  # G61 (True) / G64
+        self.return_initial = True  # G98 (True) / G99
+        self.cycle: int | None = None  # active canned cycle, None under G80
+        self.cycle_initial = 0.0  # initial level (work Z, m)
+        self.cycle_r: float | None = None  # R point (work Z, m)
+        self.cycle_bottom: float | None = None  # hole bottom (work Z, m)
+        self.cycle_q: float | None = None  # peck depth (m)
+        self.cycle_dwell = 0.0  # s
+
+    def sync_prog(self, axes: Sequence[int]) -> None:
+        """Programmed position of ``axes`` from the machine position (after a machine-coordinate move)."""
+        off = self.work_offset()
+        for i in axes:
+            self.prog[i] = self.machine[i] - off[i] - (self.applied_tool if i == 2 else 0.0)
 
     def work_offset(self) -> Vec3:
         return tuple(self.settings.work_offsets.get(self.work, (0.0, 0.0, 0.0)))  # type: ignore[return-value]
@@ -211,7 +297,7 @@ def _block(st: _State, words: tuple[Word, ...], line: int, text: str, file: str,
             raise err(w.letter + w.text, f"address {w.letter} is not supported",
                       "one of the addresses " + " ".join(sorted(_LETTERS)))
         if w.letter == "G":
-            code = _integer_code(w)
+            code = _g_code(w)
             if code is None or (code not in _G_GROUP and code not in _G_REJECT):
                 raise err("G" + w.text, f"G code G{w.text} is not supported", f"one of {_SUPPORTED_G}")
             if code in _G_REJECT:
@@ -234,6 +320,11 @@ def _block(st: _State, words: tuple[Word, ...], line: int, text: str, file: str,
             if w.letter in vals:
                 raise err(w.letter + w.text, f"word {w.letter} appears twice", f"at most one {w.letter} word per block")
             vals[w.letter] = w
+    if "scaling" in gs:
+        for a in "XYZIJKPS":
+            if a in vals:
+                raise err(a + vals[a].text, f"word {a} with G50: on a mill G50 only cancels scaling "
+                          "(G50 with X/Z/S is the lathe's coordinate setting or spindle clamp)", "G50 alone")
 
     # 1. units first: they apply to every number of the block
     if "units" in gs:
@@ -307,39 +398,81 @@ def _block(st: _State, words: tuple[Word, ...], line: int, text: str, file: str,
         st.tool_sign = {43: 1, 44: -1, 49: 0}[code]
         if code != 49 and "H" not in vals and st.h == 0:
             raise err(f"G{code}", f"G{code} without an H word", f"G{code} H<n> with n in 1..{len(st.settings.tool_lengths)}")
-    # 8. dwell (non-modal)
-    if "non-modal" in gs:
+    if "path mode" in gs:
+        st.exact_stop = gs["path mode"][0] == 61
+    if "return level" in gs:
+        st.return_initial = gs["return level"][0] == 98
+    # 8. dwell, reference return, machine coordinates (non-modal), canned cycles, motion
+    non_modal = gs["non-modal"][0] if "non-modal" in gs else None
+    cycle = gs["canned cycle"][0] if "canned cycle" in gs else None
+    if cycle not in (None, 80) and ("motion" in gs or non_modal is not None):
+        other = gs["motion"][1] if "motion" in gs else gs["non-modal"][1]
+        raise err("G" + other.text, f"G{other.text} and the canned cycle G{cycle} in one block",
+                  "a canned cycle block without G0-G3, G4, G28 or G53 (G80 or G0-G3 cancel the cycle)")
+    if non_modal == 4:
         if "motion" in gs:
             raise err(f"G{gs['motion'][0]}", "G4 and a motion G code in one block", "G4 alone in its block")
-        for a in ("Y", "Z", "I", "J", "K", "R"):
+        for a in ("Y", "Z", "I", "J", "K", "R", "Q"):
             if a in vals:
                 raise err(a + vals[a].text, f"word {a} in a G4 dwell block", "G4 X<time> or G4 P<time>")
         if ("X" in vals) == ("P" in vals):
             raise err("G4", "G4 needs exactly one of X or P", "G4 X1.5 (s), G4 P1500 (ms)")
-        w = vals.get("X") or vals["P"]
-        seconds = w.value if w.has_point else w.value * 1e-3
-        if seconds < 0:
-            raise err(w.letter + w.text, "negative dwell time", "a time >= 0")
-        if seconds > MAX_DWELL:
-            raise err(w.letter + w.text, f"dwell of {_fmt(seconds)} s is beyond the input range",
-                      f"a dwell of at most {MAX_DWELL} s")
-        out.append(Dwell(line, seconds))
-    elif "P" in vals:
-        raise err("P" + vals["P"].text, "word P outside a G4 dwell block", "P only with G4")
+        out.append(Dwell(line, _dwell_seconds(vals.get("X") or vals["P"], err)))
     else:
         limit = MAX_COORDINATE[unit_name]
-        for a in "XYZIJKR":
+        for a in "XYZIJKRQ":
             if a in vals and abs(vals[a].value) > limit:
                 raise err(a + vals[a].text, f"{a}{vals[a].text} is beyond the input range of {limit} {unit_name}",
                           f"|{a}| <= {limit} {unit_name}")
         if "motion" in gs:
             st.motion = gs["motion"][0]
-        _motion(st, vals, "motion" in gs, line, err, unit_name, out)
-    # 9. end
+            st.cycle = None  # a group 01 code cancels the canned cycle
+        if cycle == 80:
+            st.cycle = None
+        if non_modal is not None:
+            if st.cycle is not None:
+                raise err(f"G{non_modal}", f"G{non_modal} in canned-cycle mode G{st.cycle}",
+                          f"G80 (or G0) before G{non_modal}")
+            _machine_move(st, non_modal, vals, line, err, out)
+        elif st.cycle is not None or cycle not in (None, 80):
+            _canned_cycle(st, vals, cycle, line, err, out)
+        else:
+            for a in "PQ":
+                if a in vals:
+                    raise err(a + vals[a].text, f"word {a} outside a G4 dwell or canned-cycle block",
+                              "P only with G4 or a canned cycle, Q only with a canned cycle")
+            _motion(st, vals, "exact stop" in gs, line, err, unit_name, out)
+    # 9. program stop (after the motion of the block, as FANUC); no operator wait, but the path stops
+    if "stop" in ms:
+        out.append(ProgramStop(line, f"M{ms['stop'][0]}"))
+    # 10. end
     if "end" in ms:
         out.append(ProgramEnd(line, f"M{ms['end'][0]}"))
         return True
     return False
+
+
+def _g_code(w: Word) -> int | float | None:
+    """The code of a G word: an int (``G01``, ``G1.``), a one-decimal float (``G50.1``), else None."""
+    if w.value < 0:
+        return None
+    if w.value == int(w.value):
+        return int(w.value)
+    tenths = round(w.value * 10.0)
+    if abs(w.value * 10.0 - tenths) < 1e-9:
+        return tenths / 10.0
+    return None
+
+
+def _dwell_seconds(w: Word, err) -> float:
+    """Dwell of a P or X word (s): with a decimal point in s, without in ms (as FANUC G4 P)."""
+    seconds = w.value if w.has_point else w.value * 1e-3
+    if seconds < 0:
+        raise err(w.letter + w.text, "negative dwell time", "a time >= 0")
+    if seconds > MAX_DWELL:
+        raise err(w.letter + w.text, f"dwell of {_fmt(seconds)} s is beyond the input range",
+                  f"a dwell of at most {MAX_DWELL} s")
+    return seconds
 
 
 def _integer_code(w: Word) -> int | None:
@@ -349,8 +482,10 @@ def _integer_code(w: Word) -> int | None:
     return int(w.value)
 
 
-def _motion(st: _State, vals: dict[str, Word], motion_word: bool, line: int, err, unit_name: str,
+def _motion(st: _State, vals: dict[str, Word], g9: bool, line: int, err, unit_name: str,
             out: list[Block]) -> None:
+    """G0-G3 of a block; ``g9``: one-shot exact stop in this block."""
+    exact = g9 or st.exact_stop
     axes = [a for a in "XYZ" if a in vals]
     centre = [c for c in "IJK" if c in vals]
     has_r = "R" in vals
@@ -381,7 +516,7 @@ def _motion(st: _State, vals: dict[str, Word], motion_word: bool, line: int, err
         raise err(f"G{st.motion}", f"G{st.motion} feed move with no feed rate (F was never set)",
                   "an F word on this or an earlier block")
     if st.motion == 1:
-        out.append(Linear(line, start, end, st.feed, st.feed_line))
+        out.append(Linear(line, start, end, st.feed, st.feed_line, exact))
         return
     i1, i2, i3 = PLANE_AXES[st.plane]
     plane_letters = {"XY": "IJ", "ZX": "KI", "YZ": "JK"}[st.plane]
@@ -406,7 +541,8 @@ def _motion(st: _State, vals: dict[str, Word], motion_word: bool, line: int, err
         c[i1] = start[i1] + 0.5 * d1 - side * h * d2 / chord
         c[i2] = start[i2] + 0.5 * d2 + side * h * d1 / chord
         c[i3] = start[i3]
-        out.append(Arc(line, start, end, tuple(c), st.plane, clockwise, st.feed, st.feed_line))  # type: ignore[arg-type]
+        out.append(Arc(line, start, end, tuple(c), st.plane, clockwise, st.feed, st.feed_line,  # type: ignore[arg-type]
+                       exact_stop=exact))
         return
     if not centre:
         raise err(gname, f"{gname} without R or I/J/K", f"R or {plane_letters[0]}/{plane_letters[1]} for the centre")
@@ -430,4 +566,136 @@ def _motion(st: _State, vals: dict[str, Word], motion_word: bool, line: int, err
         raise err(gname, f"end point is {_fmt(r2 * u)} {unit_name} from the centre but the start is "
                   f"{_fmt(r1 * u)} {unit_name} (difference {_fmt(abs(r2 - r1) * u)} {unit_name})",
                   f"start and end radii equal within {_fmt(ARC_RADIUS_TOLERANCE * u)} {unit_name}")
-    out.append(Arc(line, start, end, tuple(c), st.plane, clockwise, st.feed, st.feed_line))  # type: ignore[arg-type]
+    out.append(Arc(line, start, end, tuple(c), st.plane, clockwise, st.feed, st.feed_line,  # type: ignore[arg-type]
+                   exact_stop=exact))
+
+
+def _machine_move(st: _State, code: int, vals: dict[str, Word], line: int, err, out: list[Block]) -> None:
+    """G28 (reference position return via the intermediate point) or G53 (machine coordinates); see the module
+    docstring for the FANUC behaviour followed."""
+    gname = f"G{code}"
+    for a in "IJKRPQ":
+        if a in vals:
+            raise err(a + vals[a].text, f"word {a} in a {gname} block", f"{gname} with X, Y, Z words only")
+    axes = [_AXIS[a] for a in "XYZ" if a in vals]
+    if not axes:
+        raise err(gname, f"{gname} without an axis word",
+                  "the axes to move named by X/Y/Z, e.g. G28 G91 Z0. or G90 G53 Z0.")
+    start: Vec3 = tuple(st.machine)  # type: ignore[assignment]
+    scale = st.scale
+    if code == 53:
+        if not st.absolute:
+            raise err("G53", "G53 in incremental mode G91 (FANUC ignores it there)", "G90 with G53")
+        for i in axes:
+            st.machine[i] = vals["XYZ"[i]].value * scale
+        if 2 in axes:
+            st.applied_tool = 0.0
+        st.sync_prog(axes)
+        out.append(Rapid(line, start, tuple(st.machine)))  # type: ignore[arg-type]
+        return
+    off = st.work_offset()
+    tool = st.tool_length()
+    for i in axes:  # intermediate point: as a G0 end point in the current G90/G91 mode
+        v = vals["XYZ"[i]].value * scale
+        st.prog[i] = v if st.absolute else st.prog[i] + v
+        st.machine[i] = st.prog[i] + off[i] + (tool if i == 2 else 0.0)
+    if 2 in axes:
+        st.applied_tool = tool
+    mid: Vec3 = tuple(st.machine)  # type: ignore[assignment]
+    if max(abs(mid[i] - start[i]) for i in range(3)) > SAME_POINT:
+        out.append(Rapid(line, start, mid))
+    ref = st.settings.reference
+    for i in axes:
+        st.machine[i] = ref[i]
+    if 2 in axes:
+        st.applied_tool = 0.0  # the reference position is a machine position: no tool length in it
+    st.sync_prog(axes)
+    out.append(Rapid(line, mid, tuple(st.machine)))  # type: ignore[arg-type]
+
+
+def _canned_cycle(st: _State, vals: dict[str, Word], code: int | None, line: int, err, out: list[Block]) -> None:
+    """A block in canned-cycle mode: store the drilling data and drill the hole(s) (see :mod:`.cycles`).
+
+    FANUC semantics: the initial level is the Z position when the cycle mode starts; R (G91: from the initial
+    level) and Z (G91: from the R point) are stored as absolute levels; Q, P are modal; K (repeat count, not
+    modal) repeats the hole, moving by the X/Y increments each time under G91; a hole is drilled when the block
+    holds X, Y, Z or R; K0 stores the data only.
+    """
+    if code is not None:
+        if st.cycle is None:
+            st.cycle_initial = st.prog[2]
+        st.cycle = code
+    gname = f"G{st.cycle}"
+    for a in "IJ":
+        if a in vals:
+            raise err(a + vals[a].text, f"word {a} in canned cycle {gname}", "X Y Z R Q P K F words in a cycle block")
+    scale = st.scale
+    if "R" in vals:
+        r = vals["R"].value * scale
+        st.cycle_r = r if st.absolute else st.cycle_initial + r
+    if "Z" in vals:
+        if not st.absolute and st.cycle_r is None:
+            raise err("Z" + vals["Z"].text, f"incremental Z in {gname} before any R point",
+                      "an R word on this or an earlier cycle block (G91 Z counts from the R point)")
+        z = vals["Z"].value * scale
+        st.cycle_bottom = z if st.absolute else st.cycle_r + z  # type: ignore[operator]
+    if "Q" in vals:
+        q = vals["Q"]
+        if q.value <= 0.0:
+            raise err("Q" + q.text, f"peck depth Q{q.text} is not positive", "Q > 0 (depth of each peck)")
+        st.cycle_q = q.value * scale
+    if "P" in vals:
+        st.cycle_dwell = _dwell_seconds(vals["P"], err)
+    repeat = 1
+    if "K" in vals:
+        k = vals["K"]
+        if k.has_point or k.value < 0 or k.value > MAX_REPEAT:
+            raise err("K" + k.text, f"repeat count K{k.text} is not an integer in 0..{MAX_REPEAT}",
+                      "K0 (store the data only), K1 (default), ... K9999")
+        repeat = int(k.value)
+    if repeat == 0 or not any(a in vals for a in "XYZR"):
+        return
+    if st.cycle_r is None:
+        raise err(gname, f"canned cycle {gname} without an R point", "an R word on this or an earlier cycle block")
+    if st.cycle_bottom is None:
+        raise err(gname, f"canned cycle {gname} without a hole bottom Z", "a Z word on this or an earlier cycle block")
+    u = 1.0 / scale
+    unit_name = "in" if scale == INCH else "mm"
+    if st.cycle_bottom >= st.cycle_r - SAME_POINT:
+        word = "Z" + vals["Z"].text if "Z" in vals else ("R" + vals["R"].text if "R" in vals else gname)
+        raise err(word, f"hole bottom Z {_fmt(st.cycle_bottom * u)} {unit_name} is not below the R point "
+                  f"{_fmt(st.cycle_r * u)} {unit_name}", "Z below R (the cycles drill towards -Z)")
+    assert st.cycle is not None
+    if st.cycle in (73, 83) and st.cycle_q is None:
+        raise err(gname, f"{gname} without a peck depth Q", "Q > 0 on this or an earlier cycle block")
+    if st.feed is None:
+        raise err(gname, f"canned cycle {gname} with no feed rate (F was never set)",
+                  "an F word on this or an earlier block")
+    pecks = 1 if st.cycle not in (73, 83) else math.ceil((st.cycle_r - st.cycle_bottom) / st.cycle_q - 1e-9)
+    moves = repeat * (3 * pecks + 4)
+    if moves > MAX_CYCLE_MOVES:
+        raise err("Q" + vals["Q"].text if "Q" in vals else gname,
+                  f"the cycle would expand to {moves} moves ({repeat} holes x {pecks} pecks)",
+                  f"at most {MAX_CYCLE_MOVES} moves per block (a larger Q or a smaller K)")
+    off = st.work_offset()
+    tool = st.tool_length()
+    z_off = off[2] + tool
+    levels = (st.cycle_initial + z_off, st.cycle_r + z_off, st.cycle_bottom + z_off)
+    for _ in range(repeat):
+        for a in "XY":
+            if a in vals:
+                i = _AXIS[a]
+                v = vals[a].value * scale
+                st.prog[i] = v if st.absolute else st.prog[i] + v
+        hole = Hole(code=st.cycle, line=line, x=st.prog[0] + off[0], y=st.prog[1] + off[1], initial=levels[0],
+                    r_level=levels[1], bottom=levels[2], return_to_initial=st.return_initial, feed=st.feed,
+                    feed_line=st.feed_line, peck=st.cycle_q, dwell=st.cycle_dwell,
+                    spindle=(st.speed, st.direction, st.speed_line))
+        try:
+            blocks, end = expand_hole(hole, tuple(st.machine), st.settings.cycles)  # type: ignore[arg-type]
+        except CycleError as exc:
+            raise err(exc.word, exc.problem, exc.expected) from None
+        out.extend(blocks)
+        st.machine = list(end)
+        st.applied_tool = tool
+        st.prog[2] = st.cycle_initial if st.return_initial else st.cycle_r

@@ -4,8 +4,10 @@ The program and the parameters fully determine the reference, so the NC
 kernel plans everything at setup, sampled at the interpolation period Ts:
 
 1. the block list is cut into *items*: chains of consecutive feed blocks
-   (G1/G2/G3, coolant blocks do not interrupt them), single rapids, dwells,
-   spindle commands, tool changes and the program end;
+   (G1/G2/G3, coolant blocks do not interrupt them; a block with
+   ``exact_stop`` — G61 mode, G9, canned-cycle feeds — ends its chain),
+   single rapids, dwells, spindle commands, tool changes, M0 program stops
+   and the program end;
 2. each chain is planned with look-ahead (:mod:`.lookahead`) and interpolated
    with acc/dec before interpolation (:mod:`.interpolator`); each rapid is
    interpolated at its linear-positioning speed;
@@ -14,7 +16,9 @@ kernel plans everything at setup, sampled at the interpolation period Ts:
 4. waits are inserted as a FANUC-like controller does: exact stop after a
    rapid (filtered reference within ``in_position_width`` of its end point,
    computed on the move's own filtered reference), in-position before dwell,
-   tool change and program end, spindle speed arrival before the next chain
+   tool change, M0 and program end and after a chain that ends in an exact
+   stop (FANUC G61/G9: deceleration to rest, then the in-position check
+   before the next block), spindle speed arrival before the next chain
    of feed blocks, ``tool_change_time`` for M6.
 
 A spindle command that changes the commanded speed (or direction), M5 and a
@@ -41,7 +45,7 @@ from typing import Sequence
 import numpy as np
 
 from .blocks import (
-    Arc, Block, Coolant, Dwell, Linear, ProgramEnd, Rapid, SpindleSpeed, SpindleStop, ToolChange,
+    Arc, Block, Coolant, Dwell, Linear, ProgramEnd, ProgramStop, Rapid, SpindleSpeed, SpindleStop, ToolChange,
 )
 from .errors import GCodeError, NCParameterError
 from .filters import apply_fir, box_lengths, filter_extension
@@ -62,11 +66,13 @@ MAX_PLAN_SAMPLES = 10_000_000
 @dataclass(frozen=True)
 class Item:
     """One step of the schedule: ``kind`` in {"chain", "rapid", "dwell", "spindle", "stop", "tool",
-    "coolant", "end"}; ``blocks`` are indices into the block list."""
+    "coolant", "halt", "end"}; ``blocks`` are indices into the block list. ``exact_stop``: a chain whose
+    last block is an exact stop (the next item waits for the in-position check)."""
 
     kind: str
     blocks: tuple[int, ...]
     geometry: ChainGeometry | None = None
+    exact_stop: bool = False
 
 
 @dataclass(frozen=True)
@@ -173,7 +179,8 @@ def build_schedule(blocks: Sequence[Block], initial: Sequence[float], file: str 
         if chain:
             moving = tuple(i for i in chain if _length(blocks[i]) > MIN_LENGTH)
             if moving:
-                items.append(Item("chain", moving, chain_geometry([blocks[i] for i in moving])))
+                exact = bool(blocks[chain[-1]].exact_stop)  # type: ignore[union-attr]
+                items.append(Item("chain", moving, chain_geometry([blocks[i] for i in moving]), exact))
             chain.clear()
 
     for i, b in enumerate(blocks):
@@ -181,13 +188,15 @@ def build_schedule(blocks: Sequence[Block], initial: Sequence[float], file: str 
             continue
         if isinstance(b, (Linear, Arc)):
             chain.append(i)
+            if b.exact_stop:
+                flush()
             continue
         if isinstance(b, Coolant):
             items.append(Item("coolant", (i,)))  # zero time, keeps the chain going
             continue
         flush()
         kind = {Rapid: "rapid", Dwell: "dwell", SpindleSpeed: "spindle", SpindleStop: "stop",
-                ToolChange: "tool", ProgramEnd: "end"}[type(b)]
+                ToolChange: "tool", ProgramStop: "halt", ProgramEnd: "end"}[type(b)]
         items.append(Item(kind, (i,)))
     flush()
     # coolant items inside a chain were appended before the chain: order by first block index
@@ -341,6 +350,8 @@ def plan_member(schedule: Schedule, params: NCParams, feeds: np.ndarray, speeds:
             segments.append((k0, "cut", seg))
             last = (k0, seg, cut_boxes)
             k = k0 + seg.n
+            if item.exact_stop:
+                k = settled(k)
         elif item.kind == "rapid":
             line_cp.append((k, b.line))
             seg = interpolate_rapid(np.array(b.start), np.array(b.end), params.rapid_feed, ts)  # type: ignore[union-attr]
@@ -368,6 +379,9 @@ def plan_member(schedule: Schedule, params: NCParams, feeds: np.ndarray, speeds:
             ready = k + _ceil_periods(arrival_time(w, cmd, params.spindle_ramp,
                                                    params.spindle_speed_arrival_tolerance), ts)
         elif item.kind == "coolant":
+            line_cp.append((k, b.line))
+        elif item.kind == "halt":
+            k = settled(k)
             line_cp.append((k, b.line))
         elif item.kind == "end":
             k = settled(k)
