@@ -52,10 +52,10 @@ def _cell_problem(cell: str) -> str | None:
     """Why a stripped, non-empty CSV cell is not a plain finite decimal number (None when it is one)."""
     if _DECIMAL.fullmatch(cell) is None:
         if cell.lower().lstrip("+-") in ("nan", "inf", "infinity"):
-            return "is not finite; write an empty cell for 'not measured'"
-        return "is not a plain decimal number"
+            return "; write an empty cell for 'not measured'"
+        return " is not a plain decimal number"
     if not math.isfinite(float(cell)):
-        return "is not finite; write an empty cell for 'not measured'"
+        return " is beyond the floating-point range; write an empty cell for 'not measured'"
     return None
 
 
@@ -318,10 +318,10 @@ class Recording:
                 if problem is None:
                     values[k, j] = float(cell)
                 elif header[j] in SPEC_COLUMNS:
-                    raise RecordingError(f"{path}:{lineno}: column {header[j]!r}: {cell!r} {problem}")
+                    raise RecordingError(f"{path}:{lineno}: column {header[j]!r}: {cell!r}{problem}")
                 else:
                     ignored.add(j)
-                    _log.info("%s:%d: extra column %r ignored: %r %s", path, lineno, header[j], cell, problem)
+                    _log.info("%s:%d: extra column %r ignored: %r%s", path, lineno, header[j], cell, problem)
         it = header.index("t_s")
         t = values[:, it]
         if np.isnan(t).any():
