@@ -121,7 +121,7 @@ def test_block_delete():
         ("G0 X0\n\nG95 G1 X1 F1\n", 3, "G95", "feed per revolution"),
         ("G41 D1 X1\n", 1, "G41", "cutter radius compensation"),
         ("G0 X0\nG7 X1\n", 2, "G7", "not supported"),
-        ("M99\n", 1, "M99", "not supported"),
+        ("M99\n", 1, "M99", "M99 in the main program"),
         ("G0 G1 X1 F1\n", 1, "G1", "modal group"),
         ("G0 X1.2.3\n", 1, "X1.2.3", "malformed number"),
         ("G0 X\n", 1, "X", "no value"),

@@ -214,8 +214,15 @@ class Program:
         Typed blocks in execution order; the last one is a :class:`ProgramEnd`.
     initial : Vec3
         Machine position before the first block (m).
+    segments : tuple of (int, int)
+        The source lines in execution order, as runs ``(first, last)`` of 1-based lines executed one after the
+        other (inclusive). ``((1, n),)`` for a program without subprogram calls; every M98 call and M99 return
+        (or repeat) starts a new run, so a subprogram's lines appear once per call. Empty: not known (read as
+        one run from line 1 to the last block's line). Per-line overrides follow it
+        (:mod:`fmus_src.nck.overrides`).
     """
 
     file: str
     blocks: tuple[Block, ...]
     initial: Vec3
+    segments: tuple[tuple[int, int], ...] = ()

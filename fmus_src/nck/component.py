@@ -191,9 +191,10 @@ class NCKernel(Component):
         if not all(np.isfinite(settings.reference)):
             raise NCParameterError(f"{self.name}: reference_x/y/z must be finite, got {settings.reference}")
         self.program_: Program = interpret(text, file, settings)
-        blocks: tuple[Block, ...] = insert_spindle_commands(self.program_.blocks, list(self._spindle_over))
+        segments = self.program_.segments
+        blocks: tuple[Block, ...] = insert_spindle_commands(self.program_.blocks, list(self._spindle_over), segments)
         self.blocks_ = blocks
-        feeds, speeds = resolve_values(blocks, self.batch, self._feed_over, self._spindle_over)
+        feeds, speeds = resolve_values(blocks, self.batch, self._feed_over, self._spindle_over, segments)
         self._uniform("interpolation_period")
         params = [self._member_params(b) for b in range(self.batch)]
         schedule = build_schedule(blocks, settings.initial, file)

@@ -5,9 +5,10 @@ full circles), G4 (dwell), G9 (exact stop, one block), G17/G18/G19, G20/G21,
 G28 (reference position return), G40, G43/G44/G49 with H, G53 (machine
 coordinates), G54-G59, G61/G64 (exact stop mode / cutting mode), canned
 drilling cycles G73 G81 G82 G83 G85 G86 G89 with G98/G99 and G80 (see
-:mod:`.cycles`), G90/G91, G94; M0 M1 M2 M3 M4 M5 M6 M7 M8 M9 M30; F S T H P Q
-N O words (K: arc centre, or repeat count in a canned cycle); ``( )`` and
-``;`` comments, ``%`` lines, block delete ``/``.
+:mod:`.cycles`), G90/G91, G94; M0 M1 M2 M3 M4 M5 M6 M7 M8 M9 M30; subprograms
+M98/M99 in the same file (see :mod:`.subprograms`); F S T H P Q N O L words
+(K: arc centre, or repeat count in a canned cycle; L: repeat count of M98);
+``( )`` and ``;`` comments, ``%`` lines, block delete ``/``.
 Accepted as no-ops, because they cancel features that are never switched on
 (CAM posts emit them in safe-start lines): G15 (polar coordinates cancel),
 G50 (scaling cancel; a mill: G50 with X/Y/Z/S, the lathe meaning, is an
@@ -69,8 +70,20 @@ Conventions
 * Lines end at LF, CRLF or CR only (form feed, U+2028 etc. stay in the line
   and are rejected as unexpected characters), so line numbers match editors.
 * Execution stops at M30/M2 or at a second ``%``; lines after it are not
-  read. End of file without M30/M2 also ends the program (``ProgramEnd`` with
-  reason ``"end of file"``).
+  read, except the subprograms ``O<n>`` ... ``M99`` written there (indexed
+  at the first M98, see :mod:`.subprograms`). End of file without M30/M2
+  also ends the program (``ProgramEnd`` with reason ``"end of file"``).
+* Subprograms (FANUC 0i-MF/31i-B): ``M98 P1001``, ``M98 P1001 L2`` and
+  ``M98 P21001`` (twice) call O1001; other words of the M98 block (a move)
+  run first, then the call. M99 returns to the block after the M98 (or runs
+  the subprogram again while repeats remain). The modal state is one: a
+  subprogram that switches to G91 must switch back itself, and its F, S,
+  offsets and canned cycle carry over to the caller. Calls nest at most 10
+  levels (31i-B); deeper (e.g. a subprogram calling itself), a missing
+  program, M99 in the main program, M99 P<seq> and M98 with G4/G28/G53 or a
+  canned-cycle code are errors. Blocks from a subprogram carry the
+  subprogram's own source lines; :attr:`Program.segments` gives the order in
+  which lines ran.
 """
 from __future__ import annotations
 
@@ -85,6 +98,7 @@ from .blocks import (
 from .cycles import CYCLES, MAX_CYCLE_MOVES, CycleError, CycleMachine, Hole, expand_hole
 from .errors import GCodeError
 from .lexer import LexError, Word, lex_line, split_lines
+from .subprograms import MAX_CALLED_LINES, MAX_NESTING, Call, Subprogram, index_subprograms, read_call
 
 MM = 1e-3
 INCH = 25.4e-3
@@ -146,12 +160,12 @@ _G_REJECT: dict[int | float, str] = {
 }
 _M_GROUP: dict[int, str] = {
     0: "stop", 1: "stop", 2: "end", 30: "end", 3: "spindle", 4: "spindle", 5: "spindle", 6: "tool change",
-    7: "coolant", 8: "coolant", 9: "coolant",
+    7: "coolant", 8: "coolant", 9: "coolant", 98: "subprogram", 99: "subprogram",
 }
 _SUPPORTED_G = ("G0 G1 G2 G3 G4 G9 G13.1 G15 G17 G18 G19 G20 G21 G28 G40 G43 G44 G49 G50 G50.1 G53 G54-G59 "
                 "G61 G64 G67 G69 G73 G80 G81 G82 G83 G85 G86 G89 G90 G91 G94 G98 G99")
-_SUPPORTED_M = "M0 M1 M2 M3 M4 M5 M6 M7 M8 M9 M30"
-_LETTERS = set("GMXYZIJKRFSTHPQNO")
+_SUPPORTED_M = "M0 M1 M2 M3 M4 M5 M6 M7 M8 M9 M30 M98 M99"
+_LETTERS = set("GMXYZIJKRFSTHPQNOL")
 _AXIS = {"X": 0, "Y": 1, "Z": 2}
 _CENTRE = {"I": 0, "J": 1, "K": 2}
 _PLANE_OF_G = {17: "XY", 18: "ZX", 19: "YZ"}
@@ -256,35 +270,110 @@ def interpret(text: str, file: str = "<text>", settings: InterpreterSettings | N
     settings = settings or InterpreterSettings()
     st = _State(settings)
     out: list[Block] = []
+    lines = split_lines(text)
     seen_percent = False
-    last_line = 0
-    for number, raw in enumerate(split_lines(text), start=1):
-        last_line = number
+    subs: dict[int, Subprogram] | None = None  # indexed at the first M98
+    stack: list[_Frame] = []
+    segments: list[tuple[int, int]] = []
+    seg_start = 1
+    called_lines = 0
+    pc = 0  # 0-based index of the next line
+
+    def done(number: int, end: ProgramEnd) -> Program:
+        out.append(end)
+        segments.append((seg_start, number))
+        return Program(file, tuple(out), tuple(settings.initial), tuple(segments))  # type: ignore[arg-type]
+
+    while pc < len(lines):
+        number = pc + 1
+        raw = lines[pc]
+        pc += 1
         try:
             lexed = lex_line(raw)
         except LexError as exc:
             raise GCodeError(file, number, exc.word, exc.expected, exc.problem, raw.strip()) from None
-        if lexed.percent:
+        if lexed.percent:  # never inside a subprogram: its M99 comes first (see index_subprograms)
             if seen_percent or out:
-                out.append(ProgramEnd(number, "%"))
-                return Program(file, tuple(out), tuple(settings.initial))  # type: ignore[arg-type]
+                return done(number, ProgramEnd(number, "%"))
             seen_percent = True
             continue
         if not lexed.words or (lexed.block_delete and settings.block_delete):
             continue
-        end = _block(st, lexed.words, number, lexed.text, file, out)
-        if end:
-            return Program(file, tuple(out), tuple(settings.initial))  # type: ignore[arg-type]
-    out.append(ProgramEnd(last_line, "end of file"))
-    return Program(file, tuple(out), tuple(settings.initial))  # type: ignore[arg-type]
+        if stack:
+            called_lines += 1
+            if called_lines > MAX_CALLED_LINES:
+                top = stack[0]
+                raise GCodeError(file, top.call_line, f"M98 P{top.sub.number}", f"at most {MAX_CALLED_LINES} "
+                                 "lines executed in subprograms (smaller repeat counts L)",
+                                 f"the subprogram calls execute more than {MAX_CALLED_LINES} lines",
+                                 lines[top.call_line - 1].strip())
+        action = _block(st, lexed.words, number, lexed.text, file, out)
+        if action is None:
+            continue
+        if action == _END:
+            segments.append((seg_start, number))
+            return Program(file, tuple(out), tuple(settings.initial), tuple(segments))  # type: ignore[arg-type]
+        segments.append((seg_start, number))
+        if isinstance(action, Call):
+            if subs is None:
+                subs = index_subprograms(lines, number - 1, file, settings.block_delete)
+            sub = _called(action, subs, stack, number, lexed.text, file)
+            stack.append(_Frame(sub, number, pc, action.repeats))
+            pc = sub.start
+        else:  # M99
+            if not stack:
+                raise GCodeError(file, number, "M99", "M99 only at the end of a subprogram O<n> called by M98, "
+                                 "M30 at the end of the main program",
+                                 "M99 in the main program (FANUC restarts the program: an endless loop)", lexed.text)
+            frame = stack[-1]
+            frame.remaining -= 1
+            if frame.remaining > 0:
+                pc = frame.sub.start
+            else:
+                stack.pop()
+                pc = frame.return_pc
+        seg_start = pc + 1
+    return done(len(lines), ProgramEnd(len(lines), "end of file"))
+
+
+@dataclass
+class _Frame:
+    """An active subprogram call: what runs, where it was called from, and how many runs remain."""
+
+    sub: Subprogram
+    call_line: int  # 1-based line of the M98 block
+    return_pc: int  # 0-based index of the line after the M98 block
+    remaining: int
+
+
+def _called(call: Call, subs: dict[int, Subprogram], stack: list[_Frame], line: int, text: str,
+            file: str) -> Subprogram:
+    """The subprogram an M98 block calls, or a :class:`GCodeError` (missing program, nesting too deep)."""
+    word = f"M98 P{call.number}"
+    if call.number not in subs:
+        have = ", ".join(f"O{n} (line {s.start + 1})" for n, s in sorted(subs.items())) or "none"
+        raise GCodeError(file, line, word, f"one of the subprograms after the main program's M30: {have}",
+                         f"subprogram O{call.number} is not in the file", text)
+    if len(stack) >= MAX_NESTING:
+        active = " -> ".join(f"O{f.sub.number}" for f in stack)
+        again = " (recursion: it is already running)" if any(f.sub.number == call.number for f in stack) else ""
+        raise GCodeError(file, line, word, f"subprogram calls nested at most {MAX_NESTING} levels deep (FANUC 31i-B)",
+                         f"calling O{call.number}{again} would nest {len(stack) + 1} levels ({active})", text)
+    return subs[call.number]
 
 
 def _fmt(value: float) -> str:
     return f"{value:.6g}"
 
 
-def _block(st: _State, words: tuple[Word, ...], line: int, text: str, file: str, out: list[Block]) -> bool:
-    """Execute one block; return True at program end."""
+#: What :func:`_block` returns at a program end (M30/M2) and at M99.
+_END = "end"
+_RETURN = "return"
+
+
+def _block(st: _State, words: tuple[Word, ...], line: int, text: str, file: str,
+           out: list[Block]) -> str | Call | None:
+    """Execute one block; return :data:`_END` at M30/M2, a :class:`Call` at M98, :data:`_RETURN` at M99."""
 
     def err(word: str, problem: str, expected: str) -> GCodeError:
         return GCodeError(file, line, word, expected, problem, text)
@@ -320,6 +409,24 @@ def _block(st: _State, words: tuple[Word, ...], line: int, text: str, file: str,
             if w.letter in vals:
                 raise err(w.letter + w.text, f"word {w.letter} appears twice", f"at most one {w.letter} word per block")
             vals[w.letter] = w
+    call: Call | None = None
+    if "subprogram" in ms:
+        code = ms["subprogram"][0]
+        if "end" in ms:
+            raise err(f"M{ms['end'][0]}", f"M{code} and M{ms['end'][0]} in one block",
+                      f"M{code} and the program end M30/M2 in separate blocks")
+        if code == 98:
+            drill = "canned cycle" in gs and gs["canned cycle"][0] != 80
+            if "non-modal" in gs or drill:
+                other = (gs.get("non-modal") or gs["canned cycle"])[1]
+                raise err("G" + other.text, f"G{other.text} and M98 in one block",
+                          "M98 P<n> alone or with a G0-G3 move (the move runs first, then the call)")
+            call = read_call(vals.pop("P", None), vals.pop("L", None), err)
+        elif "P" in vals and gs.get("non-modal", (None,))[0] != 4:
+            raise err("P" + vals["P"].text, f"M99 P{vals['P'].text} (return to sequence number "
+                      f"N{vals['P'].text}) is not supported", "M99 alone: return to the block after the M98 call")
+    if "L" in vals:
+        raise err("L" + vals["L"].text, "word L outside an M98 block", "L only as the repeat count of M98 P<n> L<k>")
     if "scaling" in gs:
         for a in "XYZIJKPS":
             if a in vals:
@@ -448,8 +555,13 @@ def _block(st: _State, words: tuple[Word, ...], line: int, text: str, file: str,
     # 10. end
     if "end" in ms:
         out.append(ProgramEnd(line, f"M{ms['end'][0]}"))
-        return True
-    return False
+        return _END
+    # 11. subprogram call / return, after the motion of the block (FANUC)
+    if call is not None:
+        return call
+    if "subprogram" in ms:
+        return _RETURN
+    return None
 
 
 def _g_code(w: Word) -> int | float | None:

@@ -4,12 +4,13 @@ An override of source line ``L`` behaves exactly like rewriting the F (or S)
 word of line ``L`` with :func:`fmus_src.nck.writer.rewrite_program` and
 re-interpreting: F and S are modal, so the new value governs every block from
 line ``L`` on until the next line that sets F (S) in the program or in the
-overrides. A spindle override on a line without an S word inserts a spindle
-command there (as appending an S word would).
+overrides, in execution order (:attr:`fmus_src.nck.blocks.Program.segments`:
+a subprogram line runs once per M98 call). A spindle override on a line
+without an S word inserts a spindle command there at each run of the line
+(as appending an S word would).
 """
 from __future__ import annotations
 
-import bisect
 from typing import Mapping, Sequence
 
 import numpy as np
@@ -32,44 +33,86 @@ def as_batch(values: object, batch: int, what: str, *, positive: bool) -> np.nda
     return arr
 
 
-def insert_spindle_commands(blocks: Sequence[Block], lines: Sequence[int]) -> tuple[Block, ...]:
-    """Insert a spindle command at override lines that have none (modal speed and direction).
+def _walk(blocks: Sequence[Block], segments: Sequence[tuple[int, int]]):
+    """Yield ``(line, i0, i1)`` for every source line in execution order: ``blocks[i0:i1]`` are its blocks.
+
+    ``segments`` are the runs of :attr:`fmus_src.nck.blocks.Program.segments`; empty means one run from line 1
+    to the last block's line (a program without subprogram calls).
 
     Raises
     ------
     NCParameterError
-        If a line lies after the program end.
+        The blocks do not follow the runs (blocks of another program).
     """
-    blocks = list(blocks)
+    if not segments:
+        segments = ((1, blocks[-1].line),) if blocks else ()
+    i, n = 0, len(blocks)
+    for first, last in segments:
+        for line in range(first, last + 1):
+            i0 = i
+            while i < n and blocks[i].line == line:
+                i += 1
+            yield line, i0, i
+    if i != n:
+        raise NCParameterError(f"block {i} (line {blocks[i].line}) does not follow the program's execution order "
+                               "(pass the segments of the program the blocks come from)")
+
+
+def insert_spindle_commands(blocks: Sequence[Block], lines: Sequence[int],
+                            segments: Sequence[tuple[int, int]] = ()) -> tuple[Block, ...]:
+    """Insert a spindle command at override lines that have none (modal speed and direction).
+
+    The command goes before the blocks of the line, at every execution of the line (a subprogram line runs
+    once per call, see ``segments``).
+
+    Parameters
+    ----------
+    blocks : sequence of Block
+        Interpreted program.
+    lines : sequence of int
+        Lines with a spindle override.
+    segments : sequence of (int, int), optional
+        :attr:`fmus_src.nck.blocks.Program.segments` (empty: the lines run in order).
+
+    Raises
+    ------
+    NCParameterError
+        If a line is never executed (e.g. after the program end).
+    """
     has = {b.line for b in blocks if isinstance(b, SpindleSpeed)}
-    end_line = blocks[-1].line if blocks else 0
-    for line in sorted(set(lines) - has):
-        if line < 1 or line > end_line:
-            raise NCParameterError(f"spindle override for line {line}: the program runs from line 1 to {end_line}")
-        speed, direction, speed_line = 0.0, 0, 0
-        pos = len(blocks)
-        for i, b in enumerate(blocks):
-            if b.line >= line:
-                pos = i
-                break
+    need = set(lines) - has
+    if not need:
+        return tuple(blocks)
+    out: list[Block] = []
+    executed: set[int] = set()
+    speed, direction, speed_line = 0.0, 0, 0
+    for line, i0, i1 in _walk(blocks, segments):
+        if line in need:
+            out.append(SpindleSpeed(line, speed, direction, speed_line))
+            executed.add(line)
+        for b in blocks[i0:i1]:
+            out.append(b)
             if isinstance(b, SpindleSpeed):
                 speed, direction, speed_line = b.speed, b.direction, b.speed_line
             elif isinstance(b, SpindleStop):
                 direction = 0
-        blocks.insert(pos, SpindleSpeed(line, speed, direction, speed_line))
-    return tuple(blocks)
-
-
-def _governing(source_line: int, line: int, override_lines: list[int]) -> int:
-    k = bisect.bisect_right(override_lines, line) - 1
-    if k >= 0 and override_lines[k] > source_line:
-        return override_lines[k]
-    return source_line
+    missing = sorted(need - executed)
+    if missing:
+        end_line = blocks[-1].line if blocks else 0
+        raise NCParameterError(f"spindle override for line {missing[0]}: the line is never executed "
+                               f"(the program runs from line 1 to {end_line})")
+    return tuple(out)
 
 
 def resolve_values(blocks: Sequence[Block], batch: int, feed: Mapping[int, object] | None = None,
-                   spindle: Mapping[int, object] | None = None) -> tuple[np.ndarray, np.ndarray]:
+                   spindle: Mapping[int, object] | None = None,
+                   segments: Sequence[tuple[int, int]] = ()) -> tuple[np.ndarray, np.ndarray]:
     """Feed of every feed block and speed of every spindle command, per batch member.
+
+    An override of line L governs a block when L ran after the line whose F (S) word set the block's value
+    (:attr:`Linear.feed_line`, :attr:`SpindleSpeed.speed_line`), or is that line, and no later override line ran
+    before the block: exactly what rewriting the F (S) word of L and re-interpreting gives, also when L is in a
+    subprogram (execution order from ``segments``).
 
     Parameters
     ----------
@@ -79,6 +122,8 @@ def resolve_values(blocks: Sequence[Block], batch: int, feed: Mapping[int, objec
         B.
     feed : mapping line -> scalar or (B,), m/s
     spindle : mapping line -> scalar or (B,), rad/s
+    segments : sequence of (int, int), optional
+        :attr:`fmus_src.nck.blocks.Program.segments` (empty: the lines run in order).
 
     Returns
     -------
@@ -91,13 +136,21 @@ def resolve_values(blocks: Sequence[Block], batch: int, feed: Mapping[int, objec
     f_over = {int(k): as_batch(v, batch, f"feed override of line {k}", positive=True) for k, v in (feed or {}).items()}
     s_over = {int(k): as_batch(v, batch, f"spindle override of line {k}", positive=False)
               for k, v in (spindle or {}).items()}
-    f_lines = sorted(f_over)
-    s_lines = sorted(s_over)
-    for i, b in enumerate(blocks):
-        if isinstance(b, (Linear, Arc)):
-            g = _governing(b.feed_line, b.line, f_lines)
-            feeds[:, i] = f_over[g] if g in f_over else b.feed
-        elif isinstance(b, SpindleSpeed):
-            g = _governing(b.speed_line, b.line, s_lines)
-            speeds[:, i] = s_over[g] if g in s_over else b.speed
+    ran: dict[int, int] = {}  # line -> step of its latest execution
+    f_cur: tuple[int, int] | None = None  # (step, line) of the latest feed override line that ran
+    s_cur: tuple[int, int] | None = None
+    for step, (line, i0, i1) in enumerate(_walk(blocks, segments)):
+        ran[line] = step
+        if line in f_over:
+            f_cur = (step, line)
+        if line in s_over:
+            s_cur = (step, line)
+        for i in range(i0, i1):
+            b = blocks[i]
+            if isinstance(b, (Linear, Arc)):
+                use = f_cur is not None and f_cur[0] >= ran.get(b.feed_line, -1)
+                feeds[:, i] = f_over[f_cur[1]] if use else b.feed  # type: ignore[index]
+            elif isinstance(b, SpindleSpeed):
+                use = s_cur is not None and s_cur[0] >= ran.get(b.speed_line, -1)
+                speeds[:, i] = s_over[s_cur[1]] if use else b.speed  # type: ignore[index]
     return feeds, speeds

@@ -1,0 +1,184 @@
+"""Subprograms in the same file (FANUC M98/M99): finding the ``O<n>`` programs and reading an M98 call.
+
+CAM posts (Fusion 360's FANUC post with "use subprograms", Mastercam transforms) write the main program, its
+M30, and then the subprograms, each ``O<n>`` ... ``M99``, before the closing ``%``. FANUC loads every
+``O<n>`` of such a file as a program of its own; the twin does the same, for one file:
+
+* The main program ends at its first M30/M2 (a block-deleted one is skipped when the switch is on) or at a
+  ``%``. After it, every line starting with an ``O<n>`` word opens subprogram ``n`` (1..9999), which runs up to
+  and including the first line holding M99 (a block-deleted ``/M99`` is skipped when the switch is on, as
+  in execution). Lines between such programs are not read (comments, stray text).
+  A ``%`` ends the file's programs.
+* Inside a subprogram every line must be well formed; an ``O`` line, ``%`` or the end of the file before its
+  M99 is an error, and so is a program number defined twice.
+* ``M98 P<n>`` calls O<n> once, ``M98 P<n> L<k>`` k times (1..9999), and the FANUC packed form ``M98
+  P<kkkk><nnnn>`` (more than 4 digits: the last 4 are the program number, the leading ones the repeat count;
+  ``P21001`` calls O1001 twice). L together with a packed P is an error.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable, Sequence
+
+from .errors import GCodeError
+from .lexer import LexedLine, LexError, Word, lex_line
+
+#: Deepest nesting of subprogram calls (FANUC 31i-B: 10 levels).
+MAX_NESTING = 10
+#: Largest program number O<n> (4 digits).
+MAX_PROGRAM_NUMBER = 9999
+#: Largest repeat count of an M98 call (FANUC: 4 digits of L, or of the packed P).
+MAX_CALL_REPEAT = 9999
+#: Most source lines executed inside subprograms per program (guards against L9999 nested 10 deep).
+MAX_CALLED_LINES = 2_000_000
+
+
+@dataclass(frozen=True)
+class Subprogram:
+    """One ``O<n>`` ... ``M99`` program of the file.
+
+    Attributes
+    ----------
+    number : int
+        Program number n.
+    start : int
+        0-based index of the ``O<n>`` line (its 1-based line number is ``start + 1``).
+    end : int
+        0-based index of the line holding M99.
+    """
+
+    number: int
+    start: int
+    end: int
+
+
+@dataclass(frozen=True)
+class Call:
+    """An M98 call read from a block: program ``number``, called ``repeats`` times."""
+
+    number: int
+    repeats: int
+
+
+def _has_m(words: Sequence[Word], codes: tuple[float, ...]) -> bool:
+    return any(w.letter == "M" and w.value in codes for w in words)
+
+
+def index_subprograms(lines: Sequence[str], first: int, file: str, block_delete: bool) -> dict[int, Subprogram]:
+    """Find the subprograms that follow the main program's end.
+
+    Parameters
+    ----------
+    lines : sequence of str
+        The program's source lines (without line endings).
+    first : int
+        0-based index of a main-program line (the first M98 call) to start looking for the main program's
+        M30/M2 from.
+    file : str
+        Name used in error messages.
+    block_delete : bool
+        Block delete switch (a ``/M30`` block is skipped when True, as by the interpreter).
+
+    Returns
+    -------
+    dict of int -> Subprogram
+        By program number; empty when the main program has no end or nothing follows it.
+
+    Raises
+    ------
+    GCodeError
+        A malformed main-program line before its end, a malformed line inside a subprogram, an ``O`` line, a
+        ``%`` or the end of the file before a subprogram's M99, an invalid or repeated program number.
+    """
+    i = first
+    n = len(lines)
+    while i < n:  # the main program's end
+        lexed = _lex(lines[i], i, file)
+        i += 1
+        if lexed.percent:
+            break
+        if _has_m(lexed.words, (2.0, 30.0)) and not (lexed.block_delete and block_delete):
+            break
+    else:
+        return {}
+    found: dict[int, Subprogram] = {}
+    while i < n:
+        try:
+            lexed = lex_line(lines[i])
+        except LexError:  # a line outside any program is not read
+            i += 1
+            continue
+        if lexed.percent:
+            break
+        if not lexed.words or lexed.words[0].letter != "O":
+            i += 1
+            continue
+        number = _program_number(lexed.words[0], i, file, lexed.text)
+        if number in found:
+            raise GCodeError(file, i + 1, "O" + lexed.words[0].text, "each program number once in the file",
+                             f"program O{number} is defined twice (first at line {found[number].start + 1})",
+                             lexed.text)
+        start = i
+        i += 1
+        while True:
+            if i >= n:
+                raise GCodeError(file, start + 1, f"O{number}", "M99 at the end of every subprogram",
+                                 f"subprogram O{number} has no M99 before the end of the file", lines[start].strip())
+            body = _lex(lines[i], i, file)
+            if body.percent or (body.words and body.words[0].letter == "O"):
+                raise GCodeError(file, start + 1, f"O{number}", "M99 at the end of every subprogram",
+                                 f"subprogram O{number} has no M99 before line {i + 1}", lines[start].strip())
+            i += 1
+            if _has_m(body.words, (99.0,)) and not (body.block_delete and block_delete):
+                break
+        found[number] = Subprogram(number, start, i - 1)
+    return found
+
+
+def _lex(raw: str, i: int, file: str) -> LexedLine:
+    try:
+        return lex_line(raw)
+    except LexError as exc:
+        raise GCodeError(file, i + 1, exc.word, exc.expected, exc.problem, raw.strip()) from None
+
+
+def _program_number(w: Word, i: int, file: str, text: str) -> int:
+    if w.has_point or w.value < 1 or w.value > MAX_PROGRAM_NUMBER:
+        raise GCodeError(file, i + 1, "O" + w.text, f"O1..O{MAX_PROGRAM_NUMBER} (an integer)",
+                         f"program number O{w.text} is not an integer in 1..{MAX_PROGRAM_NUMBER}", text)
+    return int(w.value)
+
+
+def read_call(p: Word | None, l_word: Word | None, err: Callable[[str, str, str], GCodeError]) -> Call:
+    """The program number and repeat count of an M98 block (FANUC 0i-MF/31i-B forms).
+
+    Parameters
+    ----------
+    p, l_word : Word or None
+        The block's P and L words.
+    err : callable (word, problem, expected) -> GCodeError
+        Builds the error for this block.
+
+    Raises
+    ------
+    GCodeError
+        No P, a P or L that is not a positive integer, L with a packed P, L0, numbers out of range.
+    """
+    forms = "M98 P1001 (once), M98 P1001 L2 or M98 P21001 (twice)"
+    if p is None:
+        raise err("M98", "M98 without a P word (the program to call)", forms)
+    if p.has_point or p.value < 1 or p.value > 99999999:
+        raise err("P" + p.text, f"P{p.text} is not a program number", forms)
+    value = int(p.value)
+    if l_word is not None:
+        if l_word.has_point or l_word.value < 1 or l_word.value > MAX_CALL_REPEAT:
+            raise err("L" + l_word.text, f"repeat count L{l_word.text} is not an integer in 1..{MAX_CALL_REPEAT}",
+                      "L1..L9999 (the number of calls)")
+        if value > MAX_PROGRAM_NUMBER:
+            raise err("P" + p.text, f"P{p.text} packs a repeat count and L{l_word.text} gives one too",
+                      "either M98 P<program> L<count> or M98 P<count><program 4 digits>")
+        return Call(value, int(l_word.value))
+    repeats, number = divmod(value, 10000) if value > MAX_PROGRAM_NUMBER else (1, value)
+    if number == 0:
+        raise err("P" + p.text, f"P{p.text} calls program O0", "a program number 1..9999 in the last 4 digits of P")
+    return Call(number, repeats)

@@ -1,0 +1,230 @@
+"""FANUC subprograms in one file (M98/M99), as CAM posts write them: expected positions derived by hand."""
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import pytest
+
+from fmus_src.nck.blocks import Linear, Rapid, SpindleSpeed
+from fmus_src.nck.errors import GCodeError, NCParameterError
+from fmus_src.nck.interpreter import interpret
+from fmus_src.nck.overrides import insert_spindle_commands, resolve_values
+from fmus_src.nck.writer import rewrite_program
+
+MPM = 1e-3 / 60.0  # mm/min -> m/s
+RPM = 2.0 * np.pi / 60.0
+
+# the Fusion/Mastercam layout of the task: main, M30, then O1001 before the closing %
+POST = """%
+O1000 (MAIN)
+G90 G17 G21 G94
+T1 M6
+S6000 M3
+G0 X0 Y0 Z5.
+M98 P1001
+G0 X10.
+M98 P1001 L2
+G0 Z50.
+M30
+O1001 (SLOT)
+G91 G1 Z-6. F200
+X5. F300
+G0 Z6.
+G90
+M99
+%
+"""
+
+
+def _mm(p):
+    return [round(v * 1e3, 6) for v in p]
+
+
+def _moves(program):
+    return [(b.line, _mm(b.end)) for b in program.blocks if isinstance(b, (Rapid, Linear))]
+
+
+def test_post_layout_three_slots_by_hand():
+    program = interpret(POST)
+    # O1001 is incremental: Z-6 from Z5 to Z-1, X+5, Z+6 back to Z5; it runs at X0, at X10, and again at X15
+    # (the second run of L2 starts where the first ended). Then G90 (set by the subprogram) G0 Z50.
+    def slot(x):
+        return [(13, [x, 0, -1]), (14, [x + 5, 0, -1]), (15, [x + 5, 0, 5])]
+
+    assert _moves(program) == ([(6, [0, 0, 5])] + slot(0) + [(8, [10, 0, 5])] + slot(10) + slot(15)
+                               + [(10, [20, 0, 50])])
+    assert program.blocks[-1].line == 11 and program.blocks[-1].reason == "M30"
+    # the run order of the source lines: main 1-7, O1001 12-17, main 8-9, O1001 twice, main 10-11
+    assert program.segments == ((1, 7), (12, 17), (8, 9), (12, 17), (12, 17), (10, 11))
+    feeds = [(b.line, b.feed / MPM, b.feed_line) for b in program.blocks if isinstance(b, Linear)]
+    assert feeds == [(13, pytest.approx(200), 13), (14, pytest.approx(300), 14)] * 3
+
+
+def test_packed_p_and_l_repeat_the_same_way():
+    with_l = interpret(POST)
+    packed = interpret(POST.replace("M98 P1001 L2", "M98 P21001"))
+    three = interpret(POST.replace("M98 P1001 L2", "M98 P31001"))
+    assert packed.blocks == with_l.blocks
+    assert len([b for b in three.blocks if isinstance(b, Linear)]) == 2 * 4  # 1 + 3 calls, 2 feeds each
+    assert _mm(three.blocks[-2].end) == [25, 0, 50]  # slots at X0, X10, X15, X20 -> ends at X25
+
+
+def test_program_without_calls_is_one_segment_and_text_after_m30_is_not_read():
+    program = interpret("G0 X1\nM30\nthis is not G-code (\nO12\nG1 X1 F100\nM99\n")
+    assert program.segments == ((1, 2),)
+    assert _moves(program) == [(1, [1, 0, 0])]
+
+
+def test_move_in_the_m98_block_runs_first_and_modes_carry_over():
+    text = ("G90 G0 X0 Y0 Z0\nG1 F100\nX10. M98 P7\nX1.\nY2. F50\nM30\n"
+            "O7\nG91 X1. F200\nM99\n")
+    program = interpret(text)
+    # line 3 moves to X10 (G90) and calls O7: G91 X+1 -> X11; O7 leaves G91 on, so line 4 is X+1 -> X12
+    assert _moves(program) == [(1, [0, 0, 0]), (3, [10, 0, 0]), (8, [11, 0, 0]), (4, [12, 0, 0]),
+                               (5, [12, 2, 0])]
+    lin = {b.line: b for b in program.blocks if isinstance(b, Linear)}
+    # the subprogram's F200 stays modal after the return: line 4 runs at 200 mm/min, set by line 8
+    assert lin[4].feed == pytest.approx(200 * MPM) and lin[4].feed_line == 8
+    assert lin[5].feed == pytest.approx(50 * MPM)
+
+
+def test_nesting_two_deep():
+    text = ("G0 X0 Y0 Z0\nM98 P1\nG0 Z9.\nM30\n"
+            "O1\nG0 X1.\nM98 P2 L2\nG0 X5.\nM99\n"
+            "(between programs)\n"
+            "O2\nG91 G0 Y1.\nG90\nM99\n%\n")
+    program = interpret(text)
+    assert _moves(program) == [(1, [0, 0, 0]), (6, [1, 0, 0]), (12, [1, 1, 0]), (12, [1, 2, 0]),
+                               (8, [5, 2, 0]), (3, [5, 2, 9])]
+    assert program.segments == ((1, 2), (5, 7), (11, 14), (11, 14), (8, 9), (3, 4))
+
+
+def test_canned_cycle_modal_through_a_subprogram_hole_pattern():
+    text = ("G90 G0 X0 Y0 Z10.\nG81 Z-2. R1. F100 K0\nM98 P10\nG80\nM30\n"
+            "O10\nX5. Y5.\nX15.\nM99\n")
+    program = interpret(text)
+    bottoms = [(b.line, _mm(b.end)) for b in program.blocks if isinstance(b, Linear)]
+    assert bottoms == [(7, [5, 5, -2]), (8, [15, 5, -2])]
+
+
+def test_overrides_of_subprogram_lines_equal_rewriting_the_file():
+    # independent reference: the writer changes the words in the file, the interpreter runs it again
+    text = ("G90 G0 X0 Y0 Z0\nS1000 M3\nG1 F100\nM98 P5\nG1 F120\nM98 P5 L2\nX0\nM30\n"
+            "O5\nG91 X1.\nY1. F300\nG90\nM99\n")
+    program = interpret(text)
+    for feed_lines, spindle_lines in (({10: 77.0}, {}), ({5: 66.0}, {}), ({11: 55.0, 3: 44.0}, {10: 2000.0}),
+                                      ({}, {7: 1500.0, 11: 900.0})):
+        rewritten = interpret(rewrite_program(text, feed_lines, spindle_lines))
+        blocks = insert_spindle_commands(program.blocks, list(spindle_lines), program.segments)
+        feeds, speeds = resolve_values(blocks, 1, {k: v * MPM for k, v in feed_lines.items()},
+                                       {k: v * RPM for k, v in spindle_lines.items()}, program.segments)
+        assert [type(b) for b in blocks] == [type(b) for b in rewritten.blocks]
+        assert [b.line for b in blocks] == [b.line for b in rewritten.blocks]
+        for i, b in enumerate(rewritten.blocks):
+            if isinstance(b, Linear):
+                assert feeds[0, i] == pytest.approx(b.feed, rel=1e-12), (feed_lines, b)
+            elif isinstance(b, SpindleSpeed):
+                assert speeds[0, i] == pytest.approx(b.speed, rel=1e-12), (spindle_lines, b)
+
+
+def test_a_spindle_override_on_a_line_that_never_runs_is_an_error():
+    program = interpret(POST)
+    with pytest.raises(NCParameterError, match="line 18: the line is never executed"):
+        insert_spindle_commands(program.blocks, [18], program.segments)
+
+
+@pytest.mark.parametrize("text, line, word, fragment", [
+    ("M98 P2\nM30\nO1\nM99\nO3\nM99\n", 1, "M98 P2", "O1 (line 3), O3 (line 5)"),
+    ("M98 P2\nM30\n", 1, "M98 P2", "none"),
+    ("G0 X1\nM99\nM30\n", 2, "M99", "M99 in the main program"),
+    ("M98 P1\nM30\nO1\nG0 X1\nM98 P1\nM99\n", 5, "M98 P1", "recursion"),
+    ("M98 P1\nM30\nO1\nM99 P20\n", 4, "P20", "return to sequence number"),
+    ("G0 X1 L2\nM30\n", 1, "L2", "outside an M98"),
+    ("M98 P21001 L3\nM30\nO1001\nM99\n", 1, "P21001", "packs a repeat count"),
+    ("M98 P1 L0\nM30\nO1\nM99\n", 1, "L0", "1..9999"),
+    ("M98\nM30\n", 1, "M98", "without a P word"),
+    ("M98 P1.5\nM30\n", 1, "P1.5", "not a program number"),
+    ("M98 P1 M30\nO1\nM99\n", 1, "M30", "in separate blocks"),
+    ("G4 P100 M98 P1\nM30\n", 1, "P1", "appears twice"),
+    ("G28 Z0 M98 P1\nM30\nO1\nM99\n", 1, "G28", "G28 and M98"),
+    ("M98 P1\nM30\nO1\nG0 X1\nO2\nM99\n", 3, "O1", "no M99 before line 5"),
+    ("M98 P1\nM30\nO1\nG0 X1\n", 3, "O1", "before the end of the file"),
+    ("M98 P1\nM30\nO1\nM99\nO1\nM99\n", 5, "O1", "defined twice (first at line 3)"),
+    ("M98 P1\nM30\nO1\nG0 X1 (\nM99\n", 4, "(", "not closed"),
+])
+def test_errors_name_the_line(text, line, word, fragment):
+    with pytest.raises(GCodeError) as info:
+        interpret(text, "sub.nc")
+    err = info.value
+    assert err.line == line and err.word == word, str(err)
+    assert fragment in str(err) and str(err).startswith(f"sub.nc:{line}: ")
+
+
+def test_nesting_limit_is_ten_levels():
+    def chain(depth: int) -> str:
+        subs = "".join(f"O{n}\nM98 P{n + 1}\nM99\n" for n in range(1, depth)) + f"O{depth}\nG0 X1\nM99\n"
+        return "M98 P1\nM30\n" + subs
+
+    assert _moves(interpret(chain(10))) == [(31, [1, 0, 0])]  # O10 at line 3 + 3 * 9 = 30, its G0 at 31
+    with pytest.raises(GCodeError, match="would nest 11 levels") as info:
+        interpret(chain(11))
+    assert info.value.line == 31  # the M98 P11 inside O10 (O<n> at line 3 + 3 (n - 1), O10 at line 30)
+
+
+def test_optimize_keeps_the_subprogram_structure(tmp_path):
+    from orchestrator.case import load_case
+    from orchestrator.optimize import OptimizeSettings, build_reference, optimize
+    from orchestrator.simulate import simulate
+
+    # paper_part's stock and tool; the slots across the block are cut by the subprogram's line 16
+    text = ("%\nO1000 (MAIN)\nG21 G17 G40 G49 G90 G94\nG54\nT1 M6\nS6000 M3\nG0 X-5. Y6. Z1.\nM98 P1001\n"
+            "G0 X-5. Y14.\nM98 P1001\nG0 Z50.\nM5\nM30\n"
+            "O1001 (SLOT)\nG91 G1 Z-2. F200\nX40. F600\nG0 Z2.\nG90\nM99\n%\n")
+    (tmp_path / "case.toml").write_text('program = "sub.nc"\n[stock]\nmin = [0.0, 0.0, -10.0]\n'
+                                        'max = [30.0, 20.0, 0.0]\n[tool]\ndiameter_mm = 6.0\nflutes = 2\n')
+    (tmp_path / "sub.nc").write_text(text)
+    settings = OptimizeSettings(objective="time", load_limit_N=200.0, feed_range=(100.0, 900.0), pop=4, gens=1,
+                                seed=3, progress=False, plot=False, check_front=False)
+    reference = build_reference(load_case(tmp_path), ranges=settings.ranges(), load_limit_N=settings.load_limit_N)
+    assert reference.context.lines.tolist() == [16]  # one optimiser line, run twice
+    out = tmp_path / "opt"
+    result = optimize(case=tmp_path, settings=settings, out=out, reference=reference)
+    written = (out / "optimized.nc").read_text()
+    strip = re.compile(r"\s*[FS]\s*[0-9.]+")
+    old, new = text.splitlines(), written.splitlines()
+    assert [strip.sub("", ln) for ln in new] == [strip.sub("", ln) for ln in old]
+    assert [ln for ln in new if "M98" in ln or "M99" in ln or ln.startswith("O")] == \
+        [ln for ln in old if "M98" in ln or "M99" in ln or ln.startswith("O")]
+    again = interpret(written, "optimized.nc")
+    feed = result.X["L0016.feed"]
+    line16 = [b for b in again.blocks if isinstance(b, Linear) and b.line == 16]
+    assert len(line16) == 2 and all(b.feed == pytest.approx(feed * MPM, rel=1e-12) for b in line16)
+    # the optimiser's batched (override) run of the chosen feeds equals the written file run alone
+    alone = simulate(out / "optimized.nc", case=tmp_path, plot=False)
+    assert alone.success and alone.summary["cycle_time_s"] == result.after["cycle_time_s"]
+
+
+def test_runaway_repeat_counts_stop_with_an_error_naming_the_outer_call(monkeypatch):
+    import fmus_src.nck.interpreter as interpreter
+
+    monkeypatch.setattr(interpreter, "MAX_CALLED_LINES", 50)
+    text = "G0 X0\nM98 P1 L9999\nM30\nO1\nM98 P2 L9999\nM99\nO2\nG91 G0 X1.\nM99\n"
+    with pytest.raises(GCodeError, match="more than 50 lines") as info:
+        interpret(text)
+    assert info.value.line == 2
+
+
+def test_block_deleted_m99_is_skipped_when_the_switch_is_on():
+    from fmus_src.nck.interpreter import InterpreterSettings
+
+    text = "M98 P1\nM30\nO1\nG0 X1.\n/M99\nG0 X2.\nM99\n"
+    assert _moves(interpret(text)) == [(4, [1, 0, 0])]
+    on = interpret(text, settings=InterpreterSettings(block_delete=True))
+    assert _moves(on) == [(4, [1, 0, 0]), (6, [2, 0, 0])]
+
+
+def test_g80_in_the_m98_block_and_a_drilling_code_rejected():
+    assert _moves(interpret("G80 M98 P1\nM30\nO1\nG0 X3.\nM99\n")) == [(4, [3, 0, 0])]
+    with pytest.raises(GCodeError, match="G81 and M98 in one block"):
+        interpret("G81 Z-1. R1. F100 M98 P1\nM30\nO1\nM99\n")
