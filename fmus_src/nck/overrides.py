@@ -15,7 +15,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from .blocks import Arc, Block, Linear, SpindleSpeed, SpindleStop
+from .blocks import Arc, Block, Linear, ProgramEnd, SpindleSpeed, SpindleStop
 from .errors import NCParameterError
 
 
@@ -37,7 +37,8 @@ def _walk(blocks: Sequence[Block], segments: Sequence[tuple[int, int]]):
     """Yield ``(line, i0, i1)`` for every source line in execution order: ``blocks[i0:i1]`` are its blocks.
 
     ``segments`` are the runs of :attr:`fmus_src.nck.blocks.Program.segments`; empty means one run from line 1
-    to the last block's line (a program without subprogram calls).
+    to the last block's line (a program without subprogram calls). The end block of an empty program (line 0)
+    comes after the runs.
 
     Raises
     ------
@@ -53,6 +54,9 @@ def _walk(blocks: Sequence[Block], segments: Sequence[tuple[int, int]]):
             while i < n and blocks[i].line == line:
                 i += 1
             yield line, i0, i
+    if i < n and all(isinstance(b, ProgramEnd) for b in blocks[i:]):
+        yield blocks[i].line, i, n  # the end block of an empty program (line 0, before any run)
+        i = n
     if i != n:
         raise NCParameterError(f"block {i} (line {blocks[i].line}) does not follow the program's execution order "
                                "(pass the segments of the program the blocks come from)")
