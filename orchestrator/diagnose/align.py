@@ -86,6 +86,25 @@ def time_offset_from_signal(t_rec: np.ndarray, y_rec: np.ndarray, t_nc: np.ndarr
     return float(g_rec_t[0] - (grid[0] + lag * grid_s))
 
 
+def recorded_quantum(values: np.ndarray, tolerance: float = 1e-3) -> float:
+    """Resolution of a recorded channel whose values lie on a grid (an encoder's 1 µm), else 0.
+
+    The grid step is the smallest positive difference between distinct finite values; it is the
+    resolution only when every value is a multiple of it within ``tolerance`` of a step (a logger
+    that writes 0.001 mm steps), so smooth or noisy channels give 0.
+    """
+    v = np.asarray(values, float)
+    u = np.unique(v[np.isfinite(v)])
+    if u.size < 10:  # a few distinct values (an axis that only stood) say nothing about a grid
+        return 0.0
+    d = np.diff(u)
+    q = float(d.min())
+    if q <= 0.0:
+        return 0.0
+    k = u / q
+    return q if float(np.max(np.abs(k - np.round(k)))) < tolerance else 0.0
+
+
 def noise_floor(residual: np.ndarray, quantum: float = 0.0) -> float:
     """White-noise standard deviation of a residual from its first differences.
 
@@ -106,14 +125,16 @@ def noise_floor(residual: np.ndarray, quantum: float = 0.0) -> float:
     return max(sigma, quantum / np.sqrt(12.0), 1e-12)
 
 
-def refine_offset_by_commands(t_rec: np.ndarray, ref_rec: dict[str, np.ndarray], t_nc: np.ndarray,
-                              ref_nc: dict[str, np.ndarray], offset: float, span_s: float = 0.005,
-                              step_s: float = 2.5e-5) -> float:
-    """Offset minimising the spread of recorded minus twin commanded positions (constant part removed).
+def refine_offset(t_rec: np.ndarray, ref_rec: dict[str, np.ndarray], t_nc: np.ndarray,
+                  ref_nc: dict[str, np.ndarray], offset: float, span_s: float = 0.005,
+                  step_s: float = 2.5e-5) -> float:
+    """Offset minimising the spread of recorded minus twin positions (constant part removed).
 
-    A grid search over ``offset +- span_s`` with ``step_s`` resolution, refined by a parabola: the
-    commanded positions carry the program's timing exactly, up to the NC-kernel differences that the
-    median removal and the squared error tolerate.
+    A grid search over ``offset +- span_s`` with ``step_s`` resolution, refined by a parabola. With
+    commanded positions (``{a}_ref_mm`` against the twin's commands) this is the program's timing
+    exactly, up to the NC-kernel differences that the median removal and the squared error tolerate;
+    with actual positions (``{a}_mm`` against the twin's servo response) it is the timing that makes the
+    twin's drives follow as the machine's did.
     """
     shifts = offset + np.arange(-span_s, span_s + step_s / 2, step_s)
     cost = np.zeros(shifts.size)

@@ -5,7 +5,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .align import noise_floor
+from .align import noise_floor, recorded_quantum
 from .library import Column, Variant, candidate_variants, dynamic_columns
 from .model import Model, Simulated, simulate
 from .prepare import Prepared
@@ -145,12 +145,15 @@ def build(prep: Prepared, base: Model, lead_mm: dict[str, float], vertical: tupl
         fe_meas = prep.fe[a]
         rows_fe = np.flatnonzero(v & np.isfinite(fe_meas))
         r_fe = fe_meas[rows_fe] - sim.fe[a][rows_fe, 0]
-        s_fe = noise_floor(r_fe, POSITION_QUANTUM_UM)
+        # a standing axis read through a quantised encoder gives a residual that is mostly exactly 0: its
+        # noise is then the quantisation's, q / sqrt(12), not the (vanishing) spread of its differences
+        q_fe = max(POSITION_QUANTUM_UM, 1e3 * recorded_quantum(prep.recording[f"{a}_mm"]))
+        s_fe = noise_floor(r_fe, q_fe)
         cur = prep.current[a]
         if cur is not None:
             rows_tc = np.flatnonzero(v & np.isfinite(cur))
             r_tc = cur[rows_tc] - sim.current[a][rows_tc, 0]
-            s_tc = noise_floor(r_tc, CURRENT_QUANTUM_A)
+            s_tc = noise_floor(r_tc, max(CURRENT_QUANTUM_A, recorded_quantum(cur)))
         else:
             rows_tc, r_tc, s_tc = np.zeros(0, int), np.zeros(0), float("nan")
         nf, nt = rows_fe.size, rows_tc.size

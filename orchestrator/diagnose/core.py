@@ -389,6 +389,8 @@ def diagnose(
     drive_rec = _cnc_rows(recording) if do_cut else recording
     prep = prepare(case, drive_rec, base_machine, axes, disturbance=forces)
     log: list[str] = [f"time offset: {prep.offset:.6f} s ({prep.offset_method})"]
+    if prep.forces_source == "predicted":
+        log.append("no fx_N/fy_N recorded: the replayed drives carry the twin's predicted cutting forces")
     if drives:
         d = _diagnose_drives(case, prep, base_machine, holdout, vertical, refit_scales, say, log)
     else:

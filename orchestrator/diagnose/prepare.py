@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from typing import Callable
 
 import numpy as np
 
@@ -11,7 +12,7 @@ from ..recording import Recording, RecordingError
 from ..simulate import simulate as simulate_twin
 from ..twin import TwinOptions, nck_parameters
 from ..validation import validate_recording
-from .align import fill_gaps, refine_offset_by_commands, time_offset_from_lines, time_offset_from_signal
+from .align import fill_gaps, refine_offset, time_offset_from_lines, time_offset_from_signal
 from .errors import DiagnosisError
 
 #: Samples closer than this to the start of the recording are not compared (replay start-up), s.
@@ -60,6 +61,10 @@ class Prepared:
     disturbance : dict axis -> callable, or None
         The recorded cutting force on the workpiece (``fx_N``, ``fy_N``) as ``f(t)`` [N]: the drives
         of the replays carry what the machine's drives carried (commanded versus actual, for loads).
+        Without recorded forces, a case with a ``[stock]`` takes the twin's predicted forces
+        (:func:`predicted_forces`), since the machine's drives carried a cutting load all the same.
+    forces_source : str
+        Where ``disturbance`` comes from: ``"recorded"``, ``"predicted"`` or ``"none"``.
     """
 
     recording: Recording
@@ -80,6 +85,7 @@ class Prepared:
     t_start: float | None = None
     phase_from_commands: bool = False
     disturbance: dict | None = None
+    forces_source: str = "none"
 
     def shifted_commands(self) -> dict:
         """Axis -> ``f(s)``: the twin's commands at ``t - offset - s`` [m], for axes without a recorded command."""
@@ -118,6 +124,26 @@ def recorded_forces(recording: Recording) -> dict | None:
     return out or None
 
 
+def predicted_forces(case: Case, machine: Machine, offset: Callable[[], float]) -> dict | None:
+    """``{axis: f(t)}``: the twin's cutting force on the workpiece (``fx_N``, ``fy_N``) on the logger clock.
+
+    For recordings of a cutting program without a dynamometer (a servo log: positions and currents
+    only): the machine's drives carried the cutting load, so the replays must carry it too, else the
+    load shows up as friction or inertia. ``offset()`` is read at every call (the servo-phase alignment
+    refines it after this is built). None when the program does not cut the case's stock.
+    """
+    result = simulate_twin(case=replace(case, machine=machine), plot=False)
+    rec = result.recording
+    out = {}
+    t_twin = np.asarray(rec.t, float)
+    for a in "xy":
+        name = f"f{a}_N"
+        if name in rec and np.any(np.asarray(rec[name], float) != 0.0):
+            out[a] = (lambda q, f=np.asarray(rec[name], float): np.interp(np.asarray(q, float) - offset(), t_twin, f,
+                                                                          left=0.0, right=0.0))
+    return out or None
+
+
 def prepare(case: Case, recording: Recording, machine: Machine, axes: list[str] | None = None,
             nc: Recording | None = None, disturbance: dict | None = None) -> Prepared:
     """Align a recording with the twin and collect what the diagnosis compares.
@@ -137,6 +163,7 @@ def prepare(case: Case, recording: Recording, machine: Machine, axes: list[str] 
     t = np.asarray(recording.t, dtype=float)
     # --- time offset: block transitions first (pure timing), else velocities
     offset, method = float("nan"), ""
+    refined_on_positions = False
     if "line" in recording and np.isfinite(recording["line"]).any():
         offset, matched = time_offset_from_lines(t, recording["line"], nc.t, nc["line"])
         method = f"{matched} matched block transitions"
@@ -148,8 +175,19 @@ def prepare(case: Case, recording: Recording, machine: Machine, axes: list[str] 
                      and np.ptp(nc[f"{a}_ref_mm"]) > MIN_STROKE_M * 1e3]
             if cands:
                 a = max(cands, key=lambda c: np.ptp(nc[f"{c}_ref_mm"]))
-                offset = time_offset_from_signal(t, recording[f"{a}{suffix}"], nc.t, nc[f"{a}_ref_mm"])
-                method = f"cross-correlation of {a}{suffix} with the twin's command"
+                # like with like: recorded commands with the twin's commands, recorded (actual) positions
+                # with the twin's actual positions, which lag the commands by the servo's following error
+                # (about 1/Kp, tens of ms), a lag that would otherwise become a clock offset
+                twin = f"{a}_ref_mm" if suffix == "_ref_mm" else f"{a}_mm"
+                offset = time_offset_from_signal(t, recording[f"{a}{suffix}"], nc.t, nc[twin])
+                method = (f"cross-correlation of {a}{suffix} with the twin's "
+                          + ("command" if suffix == "_ref_mm" else "position"))
+                if suffix == "_mm":  # the correlation peak is good to a fraction of its 1 ms grid: refine
+                    offset = refine_offset(t, {c: np.asarray(recording[f"{c}_mm"], float) for c in cands},
+                                           np.asarray(nc.t, float),
+                                           {c: np.asarray(nc[f"{c}_mm"], float) for c in cands}, offset)
+                    method += "; refined on the positions"
+                    refined_on_positions = True
                 break
     if not np.isfinite(offset):
         raise DiagnosisError(f"{src}: cannot align the recording with the program: no 'line' transitions and no "
@@ -157,7 +195,7 @@ def prepare(case: Case, recording: Recording, machine: Machine, axes: list[str] 
     with_ref = {a: np.asarray(recording[f"{a}_ref_mm"], float) for a in "xyz"
                 if _finite_fraction(recording, f"{a}_ref_mm") > 0.5 and np.ptp(nc[f"{a}_ref_mm"]) > MIN_STROKE_M * 1e3}
     if with_ref:
-        offset = refine_offset_by_commands(t, with_ref, np.asarray(nc.t, float),
+        offset = refine_offset(t, with_ref, np.asarray(nc.t, float),
                                            {a: np.asarray(nc[f"{a}_ref_mm"], float) for a in with_ref}, offset)
         method += "; refined on the recorded commands"
     t_prog = t - offset
@@ -198,9 +236,19 @@ def prepare(case: Case, recording: Recording, machine: Machine, axes: list[str] 
     prep = Prepared(recording, machine, t, float(offset), method, list(commands), commands, recorded, fe, cur,
                     valid, line, nc, nc_diff, ref_off, t_start,
                     disturbance=disturbance if disturbance is not None else recorded_forces(recording))
+    if prep.disturbance is not None:
+        prep.forces_source = "recorded"
+    elif case.stock is not None:
+        prep.disturbance = predicted_forces(case, machine, lambda: prep.offset)
+        prep.forces_source = "predicted" if prep.disturbance is not None else "none"
     same_commands = bool(nc_diff) and all(
         float(np.sqrt(np.nanmean(d ** 2))) < SAME_COMMANDS_MM for d in nc_diff.values())
-    if not (with_ref and same_commands):
+    if refined_on_positions:
+        # the positions fixed the clock to microseconds already; a logger sampling at the servo period sees
+        # the 1 ms current ripple aliased, so its phase search could only move the clock off (by 0.06 ms on a
+        # clean twin run). A servo delay is then one with the logger offset (both shift the positions).
+        prep.offset_method += "; servo phase from that offset"
+    elif not (with_ref and same_commands):
         # recorded commands equal to the twin's fix the program clock, and with it the servo phase, to a
         # small fraction of a tick; otherwise (no commands, or a controller that interpolates differently)
         # only the block transitions do, to a sample period: take the phase from the current ripple.
@@ -213,6 +261,8 @@ def prepare(case: Case, recording: Recording, machine: Machine, axes: list[str] 
 
 #: Candidate servo-clock phases tried per position-loop period.
 PHASE_STEPS = 8
+#: Relative spread of the phase costs below which the current ripple is taken to say nothing about the phase.
+PHASE_MIN_CONTRAST = 0.01
 
 
 def _phase_cost(prep: Prepared, t_start: float) -> float:
@@ -246,6 +296,13 @@ def align_servo_phase(prep: Prepared) -> None:
     tp = float(prep.machine.si("servo")["position_loop_period"])
     phases = tp * np.arange(PHASE_STEPS) / PHASE_STEPS
     costs = np.array([_phase_cost(prep, prep.t_start + p) for p in phases])
+    contrast = float((costs.max() - costs.min()) / max(costs.min(), 1e-300))
+    if contrast < PHASE_MIN_CONTRAST:
+        # no ripple to see (sparse or uneven samples, a clean recording): every phase fits alike, and the
+        # phase that the offset already implies stays
+        prep.offset_method += (f"; the current ripple does not fix the servo phase (cost contrast {contrast:.1e}), "
+                               "phase from the offset")
+        return
     i = int(np.argmin(costs))
     c_m, c_0, c_p = costs[i - 1], costs[i], costs[(i + 1) % PHASE_STEPS]
     den = c_m - 2.0 * c_0 + c_p

@@ -141,14 +141,29 @@ def artefact_values(prep: Prepared, cols: dict[str, AxisColumns], sim: Simulated
     return out
 
 
+#: Smallest moving mass a refit may give an axis, as a fraction of the parameter set's mass.
+MIN_MASS_FRACTION = 0.1
+
+
+def _bounds(prep: Prepared, p: Parameter) -> tuple[float, float]:
+    """Box of a refitted parameter (spec units): :data:`STEPS`, and a mass difference that keeps the axis's
+    moving mass above :data:`MIN_MASS_FRACTION` of the parameter set's (the replay rejects a mass <= 0)."""
+    lo, hi = STEPS[(p.effect, p.name)][1:]
+    if (p.effect, p.name) == ("inertia_mismatch", "mass_kg"):
+        mass = float(prep.machine.values["axis"][p.axis]["mass_kg"])
+        lo = max(lo, -(1.0 - MIN_MASS_FRACTION) * mass)
+    return lo, hi
+
+
 def refit(prep: Prepared, cols: dict[str, AxisColumns], start: Model, free: list[Parameter],
           max_iterations: int = MAX_ITERATIONS) -> RefitResult:
     """Levenberg-Marquardt refit of ``free`` parameters of ``start`` (see module docstring)."""
     proj = projectors(cols, tuple(p.axis for p in free if p.effect == "command_shift"))
     shifted = prep.shifted_commands()
     theta = np.array([start.get(p.axis, {}).get(p.effect, {}).get(p.name, 0.0) for p in free], dtype=float)
-    bounds = np.array([STEPS[(p.effect, p.name)][1:] for p in free]).reshape(-1, 2)
+    bounds = np.array([_bounds(prep, p) for p in free]).reshape(-1, 2)
     steps = np.array([STEPS[(p.effect, p.name)][0] for p in free])
+    theta = np.clip(theta, bounds[:, 0], bounds[:, 1])  # a selection estimate can lie outside (e.g. a mass < 0)
     log: list[str] = []
 
     def models(th: np.ndarray, with_jacobian: bool) -> list[Model]:

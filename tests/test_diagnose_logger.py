@@ -1,0 +1,100 @@
+"""Diagnosis of a servo logger's file: no ``line``, no commanded positions, no forces, a clock of its own.
+
+A FANUC Servo Guide style log has the actual positions and the current commands only, starts when the
+logger starts, and is quantised to the encoder's resolution. The twin's own run of a cutting program,
+shifted by a known 2.5 s and reduced to such a log, must be aligned to the known shift, and the replayed
+drives must carry the cutting load that the machine's drives carried (the twin's predicted forces).
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from orchestrator.case import load_case
+from orchestrator.diagnose.align import recorded_quantum
+from orchestrator.diagnose.prepare import prepare
+from orchestrator.diagnose.refit import MIN_MASS_FRACTION, Parameter, _bounds
+from orchestrator.machine import load_machine
+from orchestrator.recording import Recording
+from orchestrator.simulate import simulate
+
+SHIFT_S = 2.5
+PROGRAM = """G21 G17 G90 G94 G54
+S6000 M3
+G0 X-5. Y6. Z1.
+G1 Z-1.5 F200
+X14. F400
+G0 Z5.
+M30
+"""
+CASE = """program = "program.nc"
+recording = "recording.csv"
+[stock]
+min = [0.0, 0.0, -10.0]
+max = [30.0, 20.0, 0.0]
+[tool]
+diameter_mm = 6.0
+flutes = 2
+[machine]
+parameters = "default"
+"""
+
+
+@pytest.fixture(scope="module")
+def logger_case(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("servo_log")
+    (folder / "program.nc").write_text(PROGRAM)
+    (folder / "case.toml").write_text(CASE)
+    twin = simulate(case=folder, plot=False).recording
+    rng = np.random.default_rng(11)
+    idx = np.arange(0, len(twin), 2)                       # a 2 ms logger
+    channels = {"t_s": twin.t[idx] + SHIFT_S}
+    for a in "xyz":
+        channels[f"{a}_mm"] = np.round(twin[f"{a}_mm"][idx] * 1e3) / 1e3    # 1 µm encoder
+        channels[f"{a}_tcmd_A"] = twin[f"{a}_tcmd_A"][idx] + rng.normal(0.0, 0.01, idx.size)
+    Recording.from_channels(channels).write_csv(folder / "recording.csv")
+    return folder, twin
+
+
+def test_logger_clock_is_found_from_actual_positions(logger_case):
+    # the actual positions lag the commands by the following error (about 1/Kp, ~17 ms here); correlating
+    # them with the twin's commands gave that lag as a clock offset, so they are compared with the twin's
+    # actual positions and refined: the known shift comes back to within a quarter of a servo tick
+    folder, _ = logger_case
+    case = load_case(folder)
+    prep = prepare(case, Recording.read_csv(case.recording), case.machine)
+    assert "with the twin's position" in prep.offset_method
+    assert prep.offset == pytest.approx(SHIFT_S, abs=0.25e-3)
+
+
+def test_drives_carry_the_predicted_cutting_load_when_no_force_is_recorded(logger_case):
+    folder, twin = logger_case
+    case = load_case(folder)
+    prep = prepare(case, Recording.read_csv(case.recording), case.machine)
+    assert prep.forces_source == "predicted"
+    # on the logger clock, the load is the twin's force at program time t - offset
+    t_prog = twin.t[(twin.t > 1.0) & (twin.t < twin.t[-1] - 1.0)][::7]
+    for a in "xy":
+        expected = np.interp(t_prog, twin.t, twin[f"f{a}_N"])
+        np.testing.assert_allclose(prep.disturbance[a](t_prog + prep.offset), expected, atol=1e-9)
+    assert np.max(np.abs(twin["fx_N"])) > 10.0             # the slot is cut: there is a load to carry
+
+
+def test_recorded_quantum_is_the_encoder_step_and_zero_for_smooth_channels():
+    rng = np.random.default_rng(3)
+    x = np.cumsum(rng.normal(0.0, 0.01, 500))
+    np.testing.assert_allclose(recorded_quantum(np.round(x * 1e3) / 1e3), 1e-3, rtol=1e-9)
+    np.testing.assert_allclose(recorded_quantum(np.round(x / 0.5e-3) * 0.5e-3), 0.5e-3, rtol=1e-9)
+    assert recorded_quantum(x) == 0.0
+    assert recorded_quantum(np.array([0.0, 1.0, 50.0])) == 0.0     # a few positions say nothing about a grid
+
+
+def test_refit_keeps_the_moving_mass_positive():
+    # a mass difference below -(1 - 0.1) x the parameter set's mass would make the replay's mass <= 0
+    class _Prep:
+        machine = load_machine("default")
+
+    lo, hi = _bounds(_Prep(), Parameter("x", "inertia_mismatch", "mass_kg"))
+    mass = float(_Prep.machine.values["axis"]["x"]["mass_kg"])
+    assert lo == pytest.approx(-(1.0 - MIN_MASS_FRACTION) * mass) and mass + lo > 0.0
+    assert hi > 0.0
