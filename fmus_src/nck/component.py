@@ -28,6 +28,8 @@ from .source import read_program
 
 #: Number of tool length offset parameters ``tool_length_1 .. tool_length_N`` (H1..HN).
 N_TOOL_LENGTHS = 20
+#: Number of tool radius offset parameters ``tool_radius_1 .. tool_radius_N`` (D1..DN), as many as H.
+N_TOOL_RADII = N_TOOL_LENGTHS
 WORK_OFFSETS = (54, 55, 56, 57, 58, 59)
 
 _D = NCParams()
@@ -69,6 +71,9 @@ def _variables() -> tuple[Variable, ...]:
             v.append(Variable(f"g{g}_{a}", p, "m", 0.0, f"G{g} work offset, {a.upper()}"))
     for h in range(1, N_TOOL_LENGTHS + 1):
         v.append(Variable(f"tool_length_{h}", p, "m", 0.0, f"tool length offset H{h} (added to Z with G43)"))
+    for d in range(1, N_TOOL_RADII + 1):
+        v.append(Variable(f"tool_radius_{d}", p, "m", 0.0,
+                          f"tool radius offset D{d} (G41/G42 are accepted only while it is 0)"))
     v.append(Variable("tool_change_time", p, "s", _D.tool_change_time, "M6 tool change time (assumption: 3 s)"))
     for i, a in enumerate("xyz"):
         v.append(Variable(f"reference_{a}", p, "m", DEFAULT_REFERENCE[i],
@@ -184,6 +189,7 @@ class NCKernel(Component):
             initial=tuple(self._uniform(f"{a}_initial") for a in "xyz"),  # type: ignore[arg-type]
             work_offsets={g: tuple(self._uniform(f"g{g}_{a}") for a in "xyz") for g in WORK_OFFSETS},  # type: ignore[misc]
             tool_lengths=[self._uniform(f"tool_length_{h}") for h in range(1, N_TOOL_LENGTHS + 1)],
+            tool_radii=[self._uniform(f"tool_radius_{d}") for d in range(1, N_TOOL_RADII + 1)],
             block_delete=bool(self.values["block_delete"][0]),  # type: ignore[index]
             reference=tuple(self._uniform(f"reference_{a}") for a in "xyz"),  # type: ignore[arg-type]
             cycles=CycleMachine(self._uniform("g73_retract"), self._uniform("g83_clearance")),

@@ -2,11 +2,12 @@
 
 Supported: G0 G1 G2 G3 (arcs by R, negative R for > 180 deg, or by I/J/K incl.
 full circles), G4 (dwell), G9 (exact stop, one block), G17/G18/G19, G20/G21,
-G28 (reference position return), G40, G43/G44/G49 with H, G53 (machine
-coordinates), G54-G59, G61/G64 (exact stop mode / cutting mode), canned
+G28 (reference position return), G40/G41/G42 with D (cutter radius
+compensation with a zero radius only, see below), G43/G44/G49 with H, G53
+(machine coordinates), G54-G59, G61/G64 (exact stop mode / cutting mode), canned
 drilling cycles G73 G81 G82 G83 G85 G86 G89 with G98/G99 and G80 (see
 :mod:`.cycles`), G90/G91, G94; M0 M1 M2 M3 M4 M5 M6 M7 M8 M9 M30; subprograms
-M98/M99 in the same file (see :mod:`.subprograms`); F S T H P Q N O L words
+M98/M99 in the same file (see :mod:`.subprograms`); F S T H D P Q N O L words
 (K: arc centre, or repeat count in a canned cycle; L: repeat count of M98);
 ``( )`` and ``;`` comments, ``%`` lines, block delete ``/``.
 Accepted as no-ops, because they cancel features that are never switched on
@@ -15,14 +16,14 @@ G50 (scaling cancel; a mill: G50 with X/Y/Z/S, the lathe meaning, is an
 error), G50.1 (programmable mirror image cancel), G69 (coordinate rotation
 cancel), G67 (macro modal call cancel), G13.1 (polar interpolation cancel).
 Rejected with a :class:`GCodeError`: the codes switching those features on
-(G16, G51, G51.1, G68, G66, G65, G12.1), cutter compensation G41/G42, feed
-per revolution G95, tapping cycles G74/G84, G76/G87/G88, G29/G30, and every
-other G/M code or address.
+(G16, G51, G51.1, G68, G66, G65, G12.1), cutter compensation G41/G42 with a
+nonzero radius, feed per revolution G95, tapping cycles G74/G84, G76/G87/G88,
+G29/G30, and every other G/M code or address.
 
 Conventions
 -----------
 * Calculator-type decimal input (FANUC No. 3401#0 DPI = 1): ``X10`` is 10 mm.
-* Power-on modes: G0, G17, G21, G40, G49, G54, G64, G80, G90, G94, G98.
+* Power-on modes: G0, G17, G21, G40, G49, G54, G64, G80, G90, G94, G98; H0, D0.
 * Decimal G codes (``G50.1``, ``G13.1``) are single codes; the lexer reads
   them as one number.
 * G28 (FANUC 0i-MF/31i-B, "reference position return"): non-modal, rapid
@@ -61,6 +62,23 @@ Conventions
   programmed coordinates of the current position (as FANUC's absolute
   position display); a tool-length change is applied by the next Z move, also
   in G91 (as FANUC).
+* Cutter radius compensation G41/G42 (FANUC 0i-MF/31i-B, cutter compensation
+  C), as CAM posts write it in "wear" mode (Fusion 360, Mastercam): the
+  posted path is already the tool-centre path and ``G41 D1`` ... ``G40`` only
+  lets the operator add a wear value. D selects the tool radius offset
+  :attr:`InterpreterSettings.tool_radii` (D0 = 0); D is modal and G41/G42
+  without D uses the previous one (D0 at power-on), as FANUC. While the
+  active radius is zero within :data:`RADIUS_ZERO`, the path is the
+  programmed one, start-up and cancel blocks included, which is FANUC's
+  result with a zero offset; G41/G42 are accepted in G17, G18 and G19 alike
+  and canned cycles, G28 and G53 under G41/G42 are executed as programmed
+  (with a zero radius an offset could not move them; no alarm is mirrored).
+  A nonzero radius (in the G41/G42 block, or a D change while G41/G42 is
+  on) is a :class:`GCodeError` naming the D word (or G41/G42): the offset
+  path is not simulated. Also errors, as FANUC alarms: the start-up block
+  (first move after G41/G42 from G40) or the cancel block (first move after
+  G40) in G2/G3 (PS0034), and G17/G18/G19 changing the plane while G41/G42
+  is on (PS0037).
 * Block delete ``/``: honoured when ``block_delete=True`` (the block is not
   executed), otherwise the block is executed (switch off, the default).
 * Input ranges (FANUC IS-B, 8 digits): X Y Z I J K R within +-99999.999 mm
@@ -113,6 +131,8 @@ MAX_COORDINATE = {"mm": 99999.999, "in": 9999.9999}
 MAX_DWELL = 99999.999
 #: Largest tool number (FANUC: 8 digits).
 MAX_TOOL = 99999999
+#: A tool radius offset with an absolute value up to this is zero (cutter compensation accepted), m.
+RADIUS_ZERO = 1e-9
 #: Largest repeat count K of a canned cycle (FANUC: 4 digits).
 MAX_REPEAT = 9999
 #: Reference position (G28) of the default machine, machine coordinates (m): ``reference_*_mm`` of
@@ -126,7 +146,7 @@ _G_GROUP: dict[int | float, str] = {
     9: "exact stop",
     17: "plane", 18: "plane", 19: "plane",
     20: "units", 21: "units",
-    40: "cutter compensation",
+    40: "cutter compensation", 41: "cutter compensation", 42: "cutter compensation",
     43: "tool length", 44: "tool length", 49: "tool length",
     54: "work offset", 55: "work offset", 56: "work offset", 57: "work offset", 58: "work offset",
     59: "work offset",
@@ -140,8 +160,6 @@ _G_GROUP: dict[int | float, str] = {
     67: "macro modal call", 13.1: "polar interpolation",
 }
 _G_REJECT: dict[int | float, str] = {
-    41: "cutter radius compensation G41 is not supported (program the tool-centre path and use G40)",
-    42: "cutter radius compensation G42 is not supported (program the tool-centre path and use G40)",
     95: "feed per revolution G95 is not supported",
     74: "tapping cycle G74 is not supported (needs rigid tapping with the feed per revolution)",
     84: "tapping cycle G84 is not supported (needs rigid tapping with the feed per revolution)",
@@ -162,10 +180,10 @@ _M_GROUP: dict[int, str] = {
     0: "stop", 1: "stop", 2: "end", 30: "end", 3: "spindle", 4: "spindle", 5: "spindle", 6: "tool change",
     7: "coolant", 8: "coolant", 9: "coolant", 98: "subprogram", 99: "subprogram",
 }
-_SUPPORTED_G = ("G0 G1 G2 G3 G4 G9 G13.1 G15 G17 G18 G19 G20 G21 G28 G40 G43 G44 G49 G50 G50.1 G53 G54-G59 "
+_SUPPORTED_G = ("G0 G1 G2 G3 G4 G9 G13.1 G15 G17 G18 G19 G20 G21 G28 G40 G41 G42 G43 G44 G49 G50 G50.1 G53 G54-G59 "
                 "G61 G64 G67 G69 G73 G80 G81 G82 G83 G85 G86 G89 G90 G91 G94 G98 G99")
 _SUPPORTED_M = "M0 M1 M2 M3 M4 M5 M6 M7 M8 M9 M30 M98 M99"
-_LETTERS = set("GMXYZIJKRFSTHPQNOL")
+_LETTERS = set("GMXYZIJKRFSTHDPQNOL")
 _AXIS = {"X": 0, "Y": 1, "Z": 2}
 _CENTRE = {"I": 0, "J": 1, "K": 2}
 _PLANE_OF_G = {17: "XY", 18: "ZX", 19: "YZ"}
@@ -183,6 +201,9 @@ class InterpreterSettings:
         G54..G59 → (x, y, z) offset (m). Missing numbers are zero.
     tool_lengths : Sequence[float]
         Tool length offsets (m) for H1..Hn (index 0 is H1). H0 is always zero.
+    tool_radii : Sequence[float]
+        Tool radius offsets (m) for D1..Dn (index 0 is D1; FANUC's radius, geometry + wear). D0 is always zero.
+        G41/G42 are accepted only while the active one is zero (see the module docstring).
     block_delete : bool
         Block delete switch: True skips blocks starting with ``/``.
     reference : Vec3
@@ -194,6 +215,7 @@ class InterpreterSettings:
     initial: Vec3 = (0.0, 0.0, 0.0)
     work_offsets: Mapping[int, Vec3] = field(default_factory=dict)
     tool_lengths: Sequence[float] = ()
+    tool_radii: Sequence[float] = ()
     block_delete: bool = False
     reference: Vec3 = DEFAULT_REFERENCE
     cycles: CycleMachine = field(default_factory=CycleMachine)
@@ -229,6 +251,9 @@ class _State:
         self.cycle_bottom: float | None = None  # hole bottom (work Z, m)
         self.cycle_q: float | None = None  # peck depth (m)
         self.cycle_dwell = 0.0  # s
+        self.comp = 40  # cutter compensation G40/G41/G42
+        self.d = 0  # tool radius offset number (modal)
+        self.comp_pending: str | None = None  # "start-up"/"cancel" until the next move block
 
     def sync_prog(self, axes: Sequence[int]) -> None:
         """Programmed position of ``axes`` from the machine position (after a machine-coordinate move)."""
@@ -243,6 +268,10 @@ class _State:
         if self.tool_sign == 0 or self.h == 0:
             return 0.0
         return self.tool_sign * self.settings.tool_lengths[self.h - 1]
+
+    def tool_radius(self) -> float:
+        """Radius of the active tool radius offset D (m; D0 = 0)."""
+        return 0.0 if self.d == 0 else float(self.settings.tool_radii[self.d - 1])
 
 
 def interpret(text: str, file: str = "<text>", settings: InterpreterSettings | None = None) -> Program:
@@ -483,7 +512,11 @@ def _block(st: _State, words: tuple[Word, ...], line: int, text: str, file: str,
         out.append(Coolant(line, ms["coolant"][0] != 9))
     # 7. modes
     if "plane" in gs:
-        st.plane = _PLANE_OF_G[gs["plane"][0]]
+        plane = _PLANE_OF_G[gs["plane"][0]]
+        if plane != st.plane and st.comp != 40:
+            raise err("G" + gs["plane"][1].text, f"G{gs['plane'][0]} changes the plane while cutter compensation "
+                      f"G{st.comp} is on (FANUC alarm PS0037)", "G40 and its cancel move before changing the plane")
+        st.plane = plane
     if "distance" in gs:
         st.absolute = gs["distance"][0] == 90
     if "work offset" in gs:
@@ -505,6 +538,7 @@ def _block(st: _State, words: tuple[Word, ...], line: int, text: str, file: str,
         st.tool_sign = {43: 1, 44: -1, 49: 0}[code]
         if code != 49 and "H" not in vals and st.h == 0:
             raise err(f"G{code}", f"G{code} without an H word", f"G{code} H<n> with n in 1..{len(st.settings.tool_lengths)}")
+    _cutter_compensation(st, gs, vals, err, unit_name)
     if "path mode" in gs:
         st.exact_stop = gs["path mode"][0] == 61
     if "return level" in gs:
@@ -540,14 +574,18 @@ def _block(st: _State, words: tuple[Word, ...], line: int, text: str, file: str,
             if st.cycle is not None:
                 raise err(f"G{non_modal}", f"G{non_modal} in canned-cycle mode G{st.cycle}",
                           f"G80 (or G0) before G{non_modal}")
+            st.comp_pending = None  # a rapid move: start-up/cancel done
             _machine_move(st, non_modal, vals, line, err, out)
         elif st.cycle is not None or cycle not in (None, 80):
+            if any(a in vals for a in "XYZR"):
+                st.comp_pending = None  # positioning at rapid: start-up/cancel done
             _canned_cycle(st, vals, cycle, line, err, out)
         else:
             for a in "PQ":
                 if a in vals:
                     raise err(a + vals[a].text, f"word {a} outside a G4 dwell or canned-cycle block",
                               "P only with G4 or a canned cycle, Q only with a canned cycle")
+            _check_compensation_move(st, vals, gs, err)
             _motion(st, vals, "exact stop" in gs, line, err, unit_name, out)
     # 9. program stop (after the motion of the block, as FANUC); no operator wait, but the path stops
     if "stop" in ms:
@@ -562,6 +600,52 @@ def _block(st: _State, words: tuple[Word, ...], line: int, text: str, file: str,
     if "subprogram" in ms:
         return _RETURN
     return None
+
+
+def _cutter_compensation(st: _State, gs: dict[str, tuple[int, Word]], vals: dict[str, Word], err,
+                         unit_name: str) -> None:
+    """D word and G40/G41/G42 of a block (FANUC cutter compensation C, zero radius only; see the module docstring).
+
+    Raises the GCodeError of ``err`` for a D number outside 0..n and for G41/G42 with a nonzero radius.
+    """
+    if "D" in vals:
+        d = vals["D"]
+        n_radii = len(st.settings.tool_radii)
+        if d.has_point or d.value < 0 or d.value > n_radii:
+            raise err("D" + d.text, f"tool radius offset number D{d.text} does not exist", f"D0..D{n_radii} (integers)")
+        st.d = int(d.value)
+    if "cutter compensation" in gs:
+        code = gs["cutter compensation"][0]
+        if code == 40 and st.comp != 40:
+            st.comp_pending = None if st.comp_pending == "start-up" else "cancel"
+        elif code != 40 and st.comp == 40:
+            st.comp_pending = None if st.comp_pending == "cancel" else "start-up"
+        st.comp = code
+    if st.comp == 40 or ("cutter compensation" not in gs and "D" not in vals):
+        return
+    radius = st.tool_radius()
+    if not abs(radius) <= RADIUS_ZERO:  # also NaN
+        word = "D" + vals["D"].text if "D" in vals else "G" + gs["cutter compensation"][1].text
+        u = 1.0 / (INCH if st.scale == INCH else MM)
+        raise err(word, f"cutter radius compensation with a nonzero radius (D{st.d} = {_fmt(radius * u)} {unit_name}) "
+                  f"is not simulated",
+                  "the tool-centre path posted by the CAM system ('wear' or 'computer' compensation) with D = 0, "
+                  f"i.e. a tool radius offset of at most {_fmt(RADIUS_ZERO * 1e3)} mm")
+
+
+def _check_compensation_move(st: _State, vals: dict[str, Word], gs: dict[str, tuple[int, Word]], err) -> None:
+    """The first move after G41/G42 (start-up) or G40 (cancel) must be G0/G1 (FANUC alarm PS0034)."""
+    if st.comp_pending is None:
+        return
+    arc = st.motion in (2, 3)
+    if not (any(a in vals for a in "XYZ") or (arc and any(c in vals for c in "IJK"))):
+        return  # no move: start-up/cancel waits for the next move block
+    if arc:
+        word = "G" + gs["motion"][1].text if "motion" in gs else f"G{st.motion}"
+        which = "start-up after G41/G42" if st.comp_pending == "start-up" else "cancel after G40"
+        raise err(word, f"cutter compensation {which} in circular interpolation G{st.motion} (FANUC alarm PS0034)",
+                  "the first move after G41/G42 or G40 in G0 or G1")
+    st.comp_pending = None
 
 
 def _g_code(w: Word) -> int | float | None:
