@@ -98,3 +98,21 @@ def test_refit_keeps_the_moving_mass_positive():
     mass = float(_Prep.machine.values["axis"]["x"]["mass_kg"])
     assert lo == pytest.approx(-(1.0 - MIN_MASS_FRACTION) * mass) and mass + lo > 0.0
     assert hi > 0.0
+
+
+def test_block_transitions_bracket_the_logger_offset():
+    # the twin's NC changes line at 1 ms ticks; a 2.3 ms logger with jitter sees each change between two of
+    # its samples. Every matched change brackets the offset, and 40 changes at varied phases pin it to far
+    # below the logger's period (the midpoints' median is only good to about half a period).
+    from orchestrator.diagnose.align import time_offset_from_lines
+
+    rng = np.random.default_rng(5)
+    t_nc = np.arange(0.0, 20.0, 1e-3)
+    changes = np.sort(rng.choice(np.arange(100, t_nc.size - 100), 40, replace=False))
+    line_nc = np.searchsorted(changes, np.arange(t_nc.size), side="right").astype(float) + 1.0
+    offset = 1.2345
+    t_rec = 0.5 + np.arange(0.0, 19.0, 2.3e-3) + rng.uniform(0.0, 0.2e-3, int(np.ceil(19.0 / 2.3e-3)))
+    line_rec = line_nc[np.clip(np.searchsorted(t_nc, t_rec - offset, side="right") - 1, 0, t_nc.size - 1)]
+    found, matched = time_offset_from_lines(t_rec, line_rec, t_nc, line_nc)
+    assert matched >= 35
+    assert found == pytest.approx(offset, abs=0.1e-3)

@@ -23,20 +23,50 @@ def fill_gaps(t: np.ndarray, y: np.ndarray) -> np.ndarray:
     return np.interp(t, t[ok], y[ok])
 
 
-def _transitions(t: np.ndarray, line: np.ndarray) -> list[tuple[float, float, float]]:
-    """(time, from, to) of every change of ``line`` (time = midpoint of the two samples)."""
+def _transitions(t: np.ndarray, line: np.ndarray) -> list[tuple[float, float, float, float]]:
+    """(before, after, from, to) of every change of ``line``: the change lies in ``(before, after]``, s."""
     ok = np.isfinite(line)
     t, line = t[ok], line[ok]
     k = np.flatnonzero(np.diff(line) != 0)
-    return [(0.5 * (t[i] + t[i + 1]), float(line[i]), float(line[i + 1])) for i in k]
+    return [(float(t[i]), float(t[i + 1]), float(line[i]), float(line[i + 1])) for i in k]
+
+
+def offset_bracket_from_lines(t_rec: np.ndarray, line_rec: np.ndarray, t_nc: np.ndarray,
+                              line_nc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Bounds of the logger offset from each matched block transition, s.
+
+    Transitions are matched in order by their (from, to) line pair. The twin's NC changes line at an
+    interpolation tick: its first sample of the new line, ``nc_after``. The logger saw the change between
+    two of its samples, so each transition brackets the offset:
+    ``rec_before - nc_after < offset <= rec_after - nc_after``.
+
+    Returns
+    -------
+    lows, highs : ndarray, shape (matched,)
+    """
+    rec = _transitions(np.asarray(t_rec, float), np.asarray(line_rec, float))
+    nc = _transitions(np.asarray(t_nc, float), np.asarray(line_nc, float))
+    lows, highs = [], []
+    j = 0
+    for r0, r1, a, b in rec:
+        k = j
+        while k < len(nc) and (nc[k][2], nc[k][3]) != (a, b):
+            k += 1
+        if k < len(nc):
+            lows.append(r0 - nc[k][1])
+            highs.append(r1 - nc[k][1])
+            j = k + 1
+    return np.asarray(lows, float), np.asarray(highs, float)
 
 
 def time_offset_from_lines(t_rec: np.ndarray, line_rec: np.ndarray, t_nc: np.ndarray,
                            line_nc: np.ndarray) -> tuple[float, int]:
     """Logger clock minus program clock from matched block transitions.
 
-    Transitions are matched in order by their (from, to) line pair; the
-    offset is the median of the time differences.
+    When the brackets of all matched transitions (:func:`offset_bracket_from_lines`) overlap, the offset
+    is the middle of their intersection (a logger whose samples fall at varied phases of the program's
+    ticks pins it to a fraction of its sample period); when they do not (a controller whose block changes
+    differ from the twin's), it is the median of the bracket midpoints.
 
     Returns
     -------
@@ -45,20 +75,13 @@ def time_offset_from_lines(t_rec: np.ndarray, line_rec: np.ndarray, t_nc: np.nda
     matched : int
         Number of matched transitions.
     """
-    rec = _transitions(np.asarray(t_rec, float), np.asarray(line_rec, float))
-    nc = _transitions(np.asarray(t_nc, float), np.asarray(line_nc, float))
-    diffs = []
-    j = 0
-    for t, a, b in rec:
-        k = j
-        while k < len(nc) and (nc[k][1], nc[k][2]) != (a, b):
-            k += 1
-        if k < len(nc):
-            diffs.append(t - nc[k][0])
-            j = k + 1
-    if not diffs:
+    lows, highs = offset_bracket_from_lines(t_rec, line_rec, t_nc, line_nc)
+    if not lows.size:
         return float("nan"), 0
-    return float(np.median(diffs)), len(diffs)
+    lo, hi = float(lows.max()), float(highs.min())
+    if lo <= hi:
+        return 0.5 * (lo + hi), int(lows.size)
+    return float(np.median(0.5 * (lows + highs))), int(lows.size)
 
 
 def time_offset_from_signal(t_rec: np.ndarray, y_rec: np.ndarray, t_nc: np.ndarray, y_nc: np.ndarray,

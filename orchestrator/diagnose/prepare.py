@@ -12,7 +12,9 @@ from ..recording import Recording, RecordingError
 from ..simulate import simulate as simulate_twin
 from ..twin import TwinOptions, nck_parameters
 from ..validation import validate_recording
-from .align import fill_gaps, refine_offset, time_offset_from_lines, time_offset_from_signal
+from .align import (
+    fill_gaps, offset_bracket_from_lines, refine_offset, time_offset_from_lines, time_offset_from_signal,
+)
 from .errors import DiagnosisError
 
 #: Samples closer than this to the start of the recording are not compared (replay start-up), s.
@@ -102,6 +104,17 @@ def _finite_fraction(rec: Recording, name: str) -> float:
     return float(np.mean(np.isfinite(rec[name]))) if name in rec else 0.0
 
 
+def _moving_axes(recording: Recording, nc: Recording, suffix: str) -> list[str]:
+    """Axes whose ``{a}{suffix}`` column is mostly measured and whose commanded stroke is not negligible."""
+    return [a for a in "xyz" if _finite_fraction(recording, f"{a}{suffix}") > 0.5
+            and np.ptp(nc[f"{a}_ref_mm"]) > MIN_STROKE_M * 1e3]
+
+
+def _has_commands(recording: Recording, nc: Recording) -> bool:
+    """True when the recording carries the commanded position of an axis that moves."""
+    return bool(_moving_axes(recording, nc, "_ref_mm"))
+
+
 def twin_commands(case: Case, machine: Machine) -> Recording:
     """The twin's run of the case's program without cutting (its NC commands, lines, servo response)."""
     result = simulate_twin(case=replace(case, machine=machine), plot=False, options=TwinOptions(cutting=False))
@@ -169,10 +182,23 @@ def prepare(case: Case, recording: Recording, machine: Machine, axes: list[str] 
         method = f"{matched} matched block transitions"
         if matched < 2:
             offset = float("nan")
+        elif not _has_commands(recording, nc):
+            # without commands the transitions bound the clock only to about the logger's sample period; within
+            # that bracket the positions choose (a feed-forward or a delay shifts them, but only by what the
+            # bracket allows, so a fine logger keeps its clock from the transitions alone)
+            lows, highs = offset_bracket_from_lines(t, recording["line"], nc.t, nc["line"])
+            lo, hi = float(lows.max()), float(highs.min())
+            moving = _moving_axes(recording, nc, "_mm")
+            if moving and lo <= hi and hi - lo > 1e-6:
+                offset = refine_offset(t, {c: np.asarray(recording[f"{c}_mm"], float) for c in moving},
+                                       np.asarray(nc.t, float), {c: np.asarray(nc[f"{c}_mm"], float) for c in moving},
+                                       0.5 * (lo + hi), span_s=0.5 * (hi - lo), step_s=(hi - lo) / 40.0)
+                offset = float(np.clip(offset, lo, hi))
+                method += f"; refined on the positions within their {1e3 * (hi - lo):.3g} ms bracket"
+                refined_on_positions = True
     if not np.isfinite(offset):
         for suffix in ("_ref_mm", "_mm"):
-            cands = [a for a in "xyz" if _finite_fraction(recording, f"{a}{suffix}") > 0.5
-                     and np.ptp(nc[f"{a}_ref_mm"]) > MIN_STROKE_M * 1e3]
+            cands = _moving_axes(recording, nc, suffix)
             if cands:
                 a = max(cands, key=lambda c: np.ptp(nc[f"{c}_ref_mm"]))
                 # like with like: recorded commands with the twin's commands, recorded (actual) positions
@@ -192,11 +218,10 @@ def prepare(case: Case, recording: Recording, machine: Machine, axes: list[str] 
     if not np.isfinite(offset):
         raise DiagnosisError(f"{src}: cannot align the recording with the program: no 'line' transitions and no "
                              "position channel that moves")
-    with_ref = {a: np.asarray(recording[f"{a}_ref_mm"], float) for a in "xyz"
-                if _finite_fraction(recording, f"{a}_ref_mm") > 0.5 and np.ptp(nc[f"{a}_ref_mm"]) > MIN_STROKE_M * 1e3}
+    with_ref = {a: np.asarray(recording[f"{a}_ref_mm"], float) for a in _moving_axes(recording, nc, "_ref_mm")}
     if with_ref:
         offset = refine_offset(t, with_ref, np.asarray(nc.t, float),
-                                           {a: np.asarray(nc[f"{a}_ref_mm"], float) for a in with_ref}, offset)
+                               {a: np.asarray(nc[f"{a}_ref_mm"], float) for a in with_ref}, offset)
         method += "; refined on the recorded commands"
     t_prog = t - offset
     wanted = axes or [a for a in "xyz" if _finite_fraction(recording, f"{a}_mm") > 0.5]
@@ -244,9 +269,10 @@ def prepare(case: Case, recording: Recording, machine: Machine, axes: list[str] 
     same_commands = bool(nc_diff) and all(
         float(np.sqrt(np.nanmean(d ** 2))) < SAME_COMMANDS_MM for d in nc_diff.values())
     if refined_on_positions:
-        # the positions fixed the clock to microseconds already; a logger sampling at the servo period sees
-        # the 1 ms current ripple aliased, so its phase search could only move the clock off (by 0.06 ms on a
-        # clean twin run). A servo delay is then one with the logger offset (both shift the positions).
+        # the positions fixed the clock (to microseconds on a clean twin run); a logger sampling at the
+        # servo period sees the 1 ms current ripple aliased, so its phase search could only move the clock
+        # off (by 0.06 ms on a clean twin run). A servo delay is then one with the logger offset (both shift
+        # the positions), within the transitions' bracket when there is a `line`.
         prep.offset_method += "; servo phase from that offset"
     elif not (with_ref and same_commands):
         # recorded commands equal to the twin's fix the program clock, and with it the servo phase, to a
