@@ -7,6 +7,8 @@ drives must carry the cutting load that the machine's drives carried (the twin's
 """
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -27,24 +29,15 @@ X14. F400
 G0 Z5.
 M30
 """
-CASE = """program = "program.nc"
-recording = "recording.csv"
-[stock]
-min = [0.0, 0.0, -10.0]
-max = [30.0, 20.0, 0.0]
-[tool]
-diameter_mm = 6.0
-flutes = 2
-[machine]
-parameters = "default"
-"""
+PAPER_PART = Path(__file__).resolve().parents[1] / "models" / "examples" / "paper_part"
 
 
 @pytest.fixture(scope="module")
 def logger_case(tmp_path_factory):
     folder = tmp_path_factory.mktemp("servo_log")
     (folder / "program.nc").write_text(PROGRAM)
-    (folder / "case.toml").write_text(CASE)
+    # the paper part's stock, tool and machine, with this program and a recording
+    (folder / "case.toml").write_text('recording = "recording.csv"\n' + (PAPER_PART / "case.toml").read_text())
     twin = simulate(case=folder, plot=False).recording
     rng = np.random.default_rng(11)
     idx = np.arange(0, len(twin), 2)                       # a 2 ms logger
