@@ -160,7 +160,11 @@ def valid_programs(draw):
 
 JUNK_WORDS = ["G1", "G2", "G3", "G0", "G4", "G91", "G20", "G41", "G43", "G95", "G81", "M6", "M99", "X", "I", "R",
               "F0", "F-1", "S-5", "T1.5", "H99", "P5", "E3", "%", "(", ")", ";", "/", "\x00", "é", "٣", "\u2028",
-              "\x0c", "\ufeff", "\t", "G1 X10 R1", "G2 X0 Y0 R5", "G4 X-1"]
+              "\x0c", "\ufeff", "\t", "G1 X10 R1", "G2 X0 Y0 R5", "G4 X-1",
+              # codes CAM posts write: reference return, exact stop, cycles, subprograms, cutter compensation
+              "G28", "G28 G91 Z0", "G53 Z0", "G61", "G9", "G64", "M0", "M1", "G98", "G99", "G80", "K0", "L3",
+              "G81 Z-1 R1", "G83 Z-2 R1 Q0.5", "G73 Z-2 R1 Q0.5", "G82 Z-1 R1 P100", "M98 P1", "M98 P1001 L2",
+              "O1001", "M99", "D1", "G41 D1", "G42 D0", "G40", "G15", "G69", "G50.1", "G50 X1", "G13.1"]
 HUGE = ["1" + "0" * 300, "0." + "0" * 299 + "1", "99999999999", "-99999999999", "9" * 400, "1e300", "1e-300",
         "99999.999", "-99999.999", "100000", "0.000001", "."]
 NUMBER = st.one_of(st.sampled_from(HUGE), st.integers(-1000, 1000).map(str),
