@@ -47,6 +47,19 @@ def test_stuck_artefacts_absorb_an_offset_and_ramp_of_the_held_current():
     assert add_stuck_artefacts(t, cols, sim, {"x": lambda q: np.ones_like(q)}) == {}
 
 
+def test_a_hold_is_split_into_its_rests_and_the_creep_between_them():
+    # 1 ms samples: moves at 10 mm/s, rests, creeps by 20 nm slips every 5 ms (stick-slip under a load: 1.2
+    # mm/min within a slip step, below the 3 mm/min creep limit), rests again, moves on. The creep's 4 ms
+    # pauses are not rests of their own (< 20 ms).
+    k = np.arange(1001)
+    t = k * 1e-3
+    creep = np.clip((k - 500) // 5, 0, 20) * 20e-9
+    motor = np.where(k < 200, (k - 200) * 1e-5, np.where(k <= 700, creep, creep[700] + (k - 700) * 1e-5))
+    assert stuck_stretches(t, motor) == [(200, 504), (505, 599), (600, 700)]
+    # a real move, however slow the programmed feed (100 mm/min = 1.7 mm/s), is no hold
+    assert stuck_stretches(t, k * 1.7e-6) == []
+
+
 def test_truth_and_twin_hold_the_same_current_under_the_same_cutting_load(tmp_path):
     """The independent truth (Karnopp, Euler substeps) and the twin's exact stick agree when loaded alike.
 

@@ -13,8 +13,11 @@ a few times per tooth) cannot follow those slips: a 1 N load noise changes
 default axes). Both the truth and the twin stick exactly (the same static
 friction); they only disagree about a state no recording resolves.
 
-So for every stretch in which the baseline replay of a loaded axis sticks
-(motor position constant), an offset and a ramp of the current are fitted
+So for every stretch in which the baseline replay of a loaded axis holds
+its position (:func:`stuck_stretches`: at rest, or creeping by stick-slip
+slower than 3 mm/min, split where it changes between the two, since the
+machine's slips need not be the replay's), an offset and a ramp of the
+current are fitted
 as artefacts with the channel offsets (:func:`add_stuck_artefacts`), and
 neither the selection nor the unexplained-residual search sees them. Axes
 without a measured load are untouched: there the replay reproduces the
@@ -33,10 +36,20 @@ from .model import Simulated
 MIN_STUCK_S = 0.02
 #: Motor motion between two samples below this counts as stuck, m (the twin's stick is exact).
 STUCK_MOTION_M = 1e-10
+#: A motor slower than this between two samples creeps (stick-slip under a load), m/s: 3 mm/min, far
+#: below any programmed feed, far above the nanometre slips of a loaded axis holding a position.
+CREEP_SPEED_M_S = 5e-5
 
 
 def stuck_stretches(t: np.ndarray, motor: np.ndarray, min_s: float = MIN_STUCK_S) -> list[tuple[int, int]]:
-    """Index ranges ``[i0, i1]`` (inclusive) over which the motor position does not change.
+    """Index ranges ``[i0, i1]`` (inclusive, disjoint) over which the motor holds its current.
+
+    A *hold* is a span of at least ``min_s`` in which the motor moves slower than
+    :data:`CREEP_SPEED_M_S` between samples: at rest, or creeping by stick-slip under a load (slips of
+    tens to hundreds of nanometres, each resetting the integrator the loop then winds up again). It is
+    split into its stretches of exact rest (:data:`STUCK_MOTION_M`, at least ``min_s`` long) and the
+    creep between them, because a slip that the replay makes and the machine does not (or the other way
+    round) changes the held current there: each piece is returned.
 
     Parameters
     ----------
@@ -45,28 +58,38 @@ def stuck_stretches(t: np.ndarray, motor: np.ndarray, min_s: float = MIN_STUCK_S
     motor : ndarray, shape (n,)
         Replayed motor position, m.
     min_s : float
-        Shortest stretch returned, s.
+        Shortest hold, s.
 
     Returns
     -------
     list of (int, int)
     """
-    still = np.abs(np.diff(motor)) < STUCK_MOTION_M
+    step = np.abs(np.diff(motor))
+    still = step < STUCK_MOTION_M
+    slow = still | (step < CREEP_SPEED_M_S * np.diff(t))
     out: list[tuple[int, int]] = []
-    i = 0
-    n = still.size
-    while i < n:
-        if not still[i]:
-            i += 1
+    for i, j in _runs(slow):
+        # samples i .. j hold
+        if t[j] - t[i] < min_s:
             continue
-        j = i
-        while j < n and still[j]:
-            j += 1
-        # samples i .. j are at the same position
-        if t[j] - t[i] >= min_s:
-            out.append((i, j))
-        i = j
+        first = i
+        for a, b in _runs(still[i:j]):
+            a, b = a + i, b + i
+            if t[b] - t[a] < min_s:
+                continue          # a pause within the creep, not a rest of its own
+            if a > first:
+                out.append((first, a - 1))
+            out.append((a, b))
+            first = b + 1
+        if j > first:
+            out.append((first, j))
     return out
+
+
+def _runs(flags: np.ndarray) -> list[tuple[int, int]]:
+    """Sample ranges ``[i, j]`` spanned by the maximal runs of true ``flags`` over steps ``i .. j-1``."""
+    edges = np.diff(np.concatenate(([0], flags.astype(np.int8), [0])))
+    return list(zip(np.flatnonzero(edges == 1).tolist(), np.flatnonzero(edges == -1).tolist()))
 
 
 def add_stuck_artefacts(t: np.ndarray, cols: Mapping[str, AxisColumns], sim: Simulated,
