@@ -62,6 +62,7 @@ SCHEMA: dict[str, set[str]] = {
         "cutting_time_constant_ms", "cutting_filter", "rapid_time_constant_ms", "rapid_filter",
         "in_position_width_mm", "tool_change_time_s",
         "reference_x_mm", "reference_y_mm", "reference_z_mm", "g73_retract_mm", "g83_clearance_mm",
+        *(f"reference{n}_{a}_mm" for n in (2, 3, 4) for a in AXES),
     },
     "spindle": {"max_speed_rpm", "ramp_rpm_per_s", "speed_arrival_tolerance_percent", "power_kW"},
     "servo": {"position_loop_period_ms", "velocity_loop_period_ms"},
@@ -81,7 +82,8 @@ OPTIONAL_SECTIONS: set[str] = {"machine", "material.*", *(f"axis.{a}.effects" fo
 #: Keys of required sections that may be left out (the component default, equal to default.toml's value, is
 #: used): keys added after machine files were written, so that a user's older file still loads.
 OPTIONAL_KEYS: dict[str, set[str]] = {
-    "nck": {"reference_x_mm", "reference_y_mm", "reference_z_mm", "g73_retract_mm", "g83_clearance_mm"},
+    "nck": {"reference_x_mm", "reference_y_mm", "reference_z_mm", "g73_retract_mm", "g83_clearance_mm",
+            *(f"reference{n}_{a}_mm" for n in (2, 3, 4) for a in AXES)},
 }
 
 

@@ -79,8 +79,15 @@ def _declared(component_cls: type, mapping: Mapping[str, object]) -> dict[str, o
 
 
 def nck_parameters(machine: Machine) -> dict[str, object]:
-    """NC kernel parameters (SI) from a machine file."""
+    """NC kernel parameters (SI) from a machine file.
+
+    A 2nd/3rd/4th reference position (G30) the file leaves out is its 1st one (``reference_*_mm``).
+    """
     params: dict[str, object] = dict(machine.si("nck"))
+    for n in (2, 3, 4):
+        for a in AXES:
+            if f"reference_{a}" in params:
+                params.setdefault(f"reference{n}_{a}", params[f"reference_{a}"])
     params.update({f"spindle_{k}": v for k, v in machine.si("spindle").items()})
     for a in AXES:
         params[f"{a}_rapid_feed"] = machine.si(f"axis.{a}")["rapid_feed"]

@@ -122,6 +122,56 @@ def test_g91_r_from_initial_z_from_r_and_k_repeats():
     assert tr[-1][3] == (30, 0, 10)
 
 
+def test_g91_r_and_z_stay_modal_as_increments_and_a_new_r_moves_the_bottom():
+    # FANUC G91: R from the initial level (10), Z from the R point. Line 2: R 10-3 = 7, bottom 7-5 = 2, K3 holes
+    # at X 10, 20, 30 (G98: back to 10). Line 3 gives R-2 only: R 8 and the modal Z-5 counts from it: bottom 3.
+    tr = trace(START + "G91 G81 X10. R-3. Z-5. K3 F100\nX10. R-2.\n")
+    hole = [("G0", (10, 0, 10)), ("G0", (10, 0, 7)), ("G1", (10, 0, 2)), ("G0", (10, 0, 10))]
+    expected = [(k, (x, 0, z)) for x in (10, 20, 30) for k, (_, _, z) in hole]
+    expected += [("G0", (40, 0, 10)), ("G0", (40, 0, 8)), ("G1", (40, 0, 3)), ("G0", (40, 0, 10))]
+    assert ends(tr[1:]) == expected
+    assert [t[1] for t in tr[1:]] == [2] * 12 + [3] * 4
+
+
+def test_g91_g99_repeats_stay_at_r_and_measure_from_the_initial_level():
+    # R 7, bottom 2 for both holes (the levels count from the initial level 10, not from the tool at R);
+    # hole 2 starts at R so its rapid to R is left out; G98 on line 3 returns to the initial level 10.
+    tr = trace(START + "G91 G99 G81 X10. R-3. Z-5. K2 F100\nG98 X10.\n")
+    assert ends(tr[1:]) == [
+        ("G0", (10, 0, 10)), ("G0", (10, 0, 7)), ("G1", (10, 0, 2)), ("G0", (10, 0, 7)),
+        ("G0", (20, 0, 7)), ("G1", (20, 0, 2)), ("G0", (20, 0, 7)),
+        ("G0", (30, 0, 7)), ("G1", (30, 0, 2)), ("G0", (30, 0, 10)),
+    ]
+
+
+def test_g90_g91_switching_while_the_cycle_is_modal_keeps_each_word_in_its_mode():
+    # line 2 (G90): R 2, bottom -5. Line 3 (G91 X10.): both kept as levels -> X10, R 2, bottom -5.
+    # Line 4 (G91 Z-3.): bottom 3 below R -> -1. Line 5 (G91 R-4.): R 10-4 = 6, bottom 6-3 = 3.
+    # Line 6 (G90 X50. R1.): R 1, Z still the G91 -3 -> bottom -2.
+    tr = trace(START + "G99 G81 X0 Y0 R2. Z-5. F100\nG91 X10.\nX10. Z-3.\nR-4.\nG90 X50. R1.\n")
+    bottoms = [(t[1], t[3]) for t in tr if t[0] == "G1"]
+    assert bottoms == [(2, (0, 0, -5)), (3, (10, 0, -5)), (4, (20, 0, -1)), (5, (20, 0, 3)), (6, (50, 0, -2))]
+    retracts = [tr[k + 1][3][2] for k, t in enumerate(tr) if t[0] == "G1"]
+    assert retracts == [2, 2, 2, 6, 1]  # G99: each retract ends at that hole's R point
+
+
+def test_initial_level_is_the_z_where_the_cycle_mode_starts_also_under_g91():
+    # G91 Z5. lifts to 15 before the cycle: R 15-5 = 10, bottom 5, G98 back to 15. After G80 and G91 Z-10.
+    # (Z 5) a new cycle mode starts at 5: R 4, bottom 2, back to 5.
+    tr = trace(START + "G91 G0 Z5.\nG81 X1. R-5. Z-5. F100\nG80\nG0 Z-10.\nG81 X1. R-1. Z-2.\n")
+    assert [(t[1], t[3]) for t in tr if t[1] in (3, 6)] == [
+        (3, (1, 0, 15)), (3, (1, 0, 10)), (3, (1, 0, 5)), (3, (1, 0, 15)),
+        (6, (2, 0, 5)), (6, (2, 0, 4)), (6, (2, 0, 2)), (6, (2, 0, 5)),
+    ]
+
+
+def test_g91_levels_include_work_offset_and_tool_length():
+    # G54 Z = -100 mm, H1 = 50 mm; initial work Z 10 -> R 10-8 = 2, bottom 2-5 = -3 (work) -> machine -50 offset
+    tr = trace("G54 G43 H1 G0 X0 Y0 Z10\nG91 G81 R-8. Z-5. X0 F100\n", work_offsets={54: (0.0, 0.0, -0.1)},
+               tool_lengths=[0.05])
+    assert ends(tr[1:]) == [("G0", (0, 0, -48)), ("G1", (0, 0, -53)), ("G0", (0, 0, -40))]
+
+
 def test_g90_k_repeats_the_same_hole_and_k0_stores_only():
     tr = trace(START + "G81 X5 Z-1 R1 K2 F100\n")
     assert [t[3] for t in tr if t[0] == "G1"] == [(5, 0, -1), (5, 0, -1)]
@@ -191,6 +241,8 @@ def test_g81_pattern_time_is_at_least_the_feed_time():
     ("G81 X0 Z2 R1 F100\n", "Z2", "not below the R point"),
     ("G81 X0 Z-2 F100\n", "G81", "without an R point"),
     ("G81 X0 R1 F100\n", "G81", "without a hole bottom Z"),
+    ("G91 G81 X0 Z-2 F100\n", "G81", "without an R point"),
+    ("G91 G81 X0 R-1 Z1 F100\n", "Z1", "under G91 R counts from the initial level"),
     ("G81 X0 Z-2 R1\n", "G81", "no feed rate"),
     ("G81 X0 Z-2 R1 F100 K1.5\n", "K1.5", "repeat count"),
     ("G83 X0 Z-2 R1 Q0 F100\n", "Q0", "not positive"),

@@ -118,7 +118,7 @@ def test_block_delete():
     [
         ("G0 X0\nG1 X10 F100\nG2 X20 Y0 R0.5\n", 3, "R0.5", "smaller than half the chord"),
         ("G0 X0\nG1 X10\n", 2, "G1", "no feed rate"),
-        ("G0 X0\n\nG95 G1 X1 F1\n", 3, "G95", "feed per revolution"),
+        ("G0 X0\n\nG95 G1 X1 F1\n", 3, "G1", "feed per revolution G95 G1 feed move while the spindle is stopped"),
         ("G41 D1 X1\n", 1, "D1", "tool radius offset number D1 does not exist"),
         ("G0 X0\nG7 X1\n", 2, "G7", "not supported"),
         ("M99\n", 1, "M99", "M99 in the main program"),

@@ -102,6 +102,60 @@ def test_g28_is_non_modal_and_keeps_the_motion_mode():
     assert isinstance(ms[2], Linear) and ms[2].end == pytest.approx((0.005, 0.0, REF[2]))
 
 
+REF2, REF3, REF4 = (0.45, 0.35, 0.25), (0.1, 0.2, 0.35), (-0.05, 0.15, 0.32)  # m, distinct from REF and each other
+
+
+def test_g30_without_p_is_the_2nd_reference_and_only_named_axes_move():
+    ms = moves("G0 X10 Y20 Z5\nG30 G91 Z0.\n", reference2=REF2, reference3=REF3, reference4=REF4)
+    assert len(ms) == 2 and isinstance(ms[1], Rapid) and ms[1].line == 2
+    assert ms[1].end == pytest.approx((0.010, 0.020, REF2[2]))
+
+
+@pytest.mark.parametrize("p, ref", [(2, REF2), (3, REF3), (4, REF4)])
+def test_g30_p_goes_via_the_work_intermediate_point_to_its_reference(p, ref):
+    # as G28: G54 = (100, 50, -200) mm, G90 X0 Y0 -> machine (0.1, 0.05) first, then reference p X, Y; Z stays
+    ms = moves(f"G54 G0 X10 Y20 Z5\nG30 P{p} G90 X0 Y0\n", work_offsets={54: (0.1, 0.05, -0.2)},
+               reference2=REF2, reference3=REF3, reference4=REF4)
+    mid, end = ms[1], ms[2]
+    assert isinstance(mid, Rapid) and isinstance(end, Rapid)
+    assert mid.end == pytest.approx((0.100, 0.050, -0.195))
+    assert end.start == mid.end and end.end == pytest.approx((ref[0], ref[1], -0.195))
+
+
+def test_g30_keeps_the_tool_length_out_and_the_programmed_position_consistent():
+    # as after G28 Z: machine Z = REF3 Z (no tool length in it); work Z offset -200 mm, H1 = 80 mm:
+    # G91 Z-10 -> programmed REF3 + 200 - 10 mm, machine = programmed - 200 + 80 mm
+    ms = moves("G43 H1 G0 Z15\nG30 P3 G91 Z0\nG91 G0 Z-10\n", tool_lengths=[0.08], reference3=REF3,
+               work_offsets={54: (0.0, 0.0, -0.2)})
+    assert ms[1].end[2] == pytest.approx(REF3[2])
+    assert ms[2].end[2] == pytest.approx(REF3[2] - 0.010 + 0.08)
+
+
+def test_g30_with_unset_2nd_to_4th_references_goes_to_the_1st():
+    for p in (2, 3, 4):
+        assert moves(f"G0 Z5\nG30 P{p} G91 Z0\n")[-1].end[2] == pytest.approx(REF[2])
+
+
+def test_kernel_parameters_and_machine_file_mapping_of_the_2nd_reference(tmp_path: Path):
+    from orchestrator.twin import nck_parameters
+
+    k = NCKernel(program_text="G0 X10 Y10 Z5\nG30 G91 Z0\nG30 P4 G91 X0 Y0\nM30\n",
+                 reference2_x=0.2, reference2_y=0.1, reference2_z=0.15, reference4_x=0.05, reference4_y=0.06)
+    k.setup(0.0)
+    # Z to the 2nd reference Z (0.15), then X, Y to the 4th reference X, Y (4th Z is left at its default)
+    np.testing.assert_allclose(k.plan_.position[0, -1], (0.05, 0.06, 0.15), atol=1e-12)
+    # an older machine file without reference2..4 keys but with its own 1st reference: G30 goes there
+    machine = load_machine("default")
+    text = "\n".join(l for l in machine.path.read_text().splitlines() if not l.startswith(("reference2", "reference3",
+                                                                                          "reference4")))
+    text = text.replace("reference_z_mm = { value = 300.0", "reference_z_mm = { value = 280.0")
+    path = tmp_path / "older.toml"
+    path.write_text(text)
+    params = nck_parameters(load_machine(path))
+    assert [params[f"reference{n}_z"] for n in (2, 3, 4)] == pytest.approx([0.28] * 3)
+    assert params["reference2_x"] == pytest.approx(0.38)
+
+
 def test_g53_moves_in_machine_coordinates_at_rapid():
     # G55 = (10, 20, 30) mm and H1 = 50 mm must not enter a G53 position; G1 stays modal afterwards
     ms = moves("G55 G43 H1 G1 X1 Y1 Z1 F100\nG90 G53 X-100 Z-20\nY2\n",
@@ -122,7 +176,12 @@ def test_g53_then_absolute_move_is_consistent():
     ("G91 G53 Z0\n", "G53", "incremental"),
     ("G28\n", "G28", "without an axis word"),
     ("G28 G91 Z0 R5\n", "R5", "word R"),
-    ("G30 G91 Z0\n", "G30", "G30 is not supported"),
+    ("G30 P1 G91 Z0\n", "P1", "not a reference position number"),
+    ("G30 P5 G91 Z0\n", "P5", "not a reference position number"),
+    ("G30 P2.5 G91 Z0\n", "P2.5", "not a reference position number"),
+    ("G30 P2\n", "G30", "without an axis word"),
+    ("G30 G91 Z0 R5\n", "R5", "word R"),
+    ("G0 Z10\nG81 X0 Z-1 R1 F100\nG30 G91 Z0\n", "G30", "canned-cycle mode"),
     ("G29 X0\n", "G29", "G29 is not supported"),
     ("G0 Z10\nG81 X0 Z-1 R1 F100\nG28 G91 Z0\n", "G28", "canned-cycle mode"),
 ])

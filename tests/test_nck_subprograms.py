@@ -128,6 +128,49 @@ def test_overrides_of_subprogram_lines_equal_rewriting_the_file():
                 assert speeds[0, i] == pytest.approx(b.speed, rel=1e-12), (spindle_lines, b)
 
 
+ONE_LINE_SUB = "G90 G0 X0 Y0 Z0\nS1000 M3\nG1 F100\nM98 P2\nM98 P2 L2\nM30\nO2\nG91 X1. M99\n"
+
+
+@pytest.mark.parametrize("feed_lines, spindle_lines", [({}, {8: 2000.0}), ({}, {8: 2000.0, 5: 700.0}),
+                                                       ({8: 50.0}, {8: 2500.0})])
+def test_every_run_of_a_one_line_subprogram_gets_its_override(feed_lines, spindle_lines):
+    # the runs of line 8 follow each other with no block in between (the M98 lines make none); the reference is
+    # the file with the S (F) words written into line 8 (and line 5): a spindle command before each of the 3 runs
+    from fmus_src.nck.overrides import apply_overrides
+
+    program = interpret(ONE_LINE_SUB)
+    rewritten = interpret(rewrite_program(ONE_LINE_SUB, feed_lines, spindle_lines))
+    blocks, feeds, speeds = apply_overrides(program, 1, {k: v * MPM for k, v in feed_lines.items()},
+                                            {k: v * RPM for k, v in spindle_lines.items()})
+    assert [(type(b), b.line) for b in blocks] == [(type(b), b.line) for b in rewritten.blocks]
+    assert sum(isinstance(b, SpindleSpeed) and b.line == 8 for b in blocks) == 3
+    for i, b in enumerate(rewritten.blocks):
+        if isinstance(b, Linear):
+            assert feeds[0, i] == pytest.approx(b.feed, rel=1e-12)
+        elif isinstance(b, SpindleSpeed):
+            assert speeds[0, i] == pytest.approx(b.speed, rel=1e-12)
+
+
+def test_kernel_batch_member_override_of_a_one_line_subprogram_reaches_every_run():
+    from fmus_src.nck import NCKernel
+
+    over = np.array([2000.0, 3000.0]) * RPM  # member 0, member 1
+    k = NCKernel(program_text=ONE_LINE_SUB, batch=2)
+    k.set_overrides(spindle={8: over, 5: np.array([500.0, 600.0]) * RPM})
+    k.setup(0.0)
+    kinds = [(type(b).__name__, b.line) for b in k.blocks_]
+    run = [("SpindleSpeed", 8), ("Linear", 8)]
+    # S1000 (line 2); run 1 of line 8; line 5's command; runs 2 and 3 of line 8, each with its own command
+    assert kinds == ([("Rapid", 1), ("SpindleSpeed", 2)] + run + [("SpindleSpeed", 5)] + run + run
+                     + [("ProgramEnd", 6)])
+    # each member's commanded speed while a line-8 feed runs is its override of line 8 (G91 X1. three times)
+    for m in range(2):
+        moving = (k.plan_.line[m] == 8) & (k.plan_.position[m, :, 0] > 1e-6)
+        x_end = k.plan_.position[m, -1, 0]
+        assert x_end == pytest.approx(3e-3, abs=1e-9)
+        assert moving.any() and np.allclose(k.plan_.spindle_ref[m, moving], over[m])
+
+
 def test_a_spindle_override_on_a_line_that_never_runs_is_an_error():
     program = interpret(POST)
     with pytest.raises(NCParameterError, match="line 18: the line is never executed"):
@@ -139,7 +182,12 @@ def test_a_spindle_override_on_a_line_that_never_runs_is_an_error():
     ("M98 P2\nM30\n", 1, "M98 P2", "none"),
     ("G0 X1\nM99\nM30\n", 2, "M99", "M99 in the main program"),
     ("M98 P1\nM30\nO1\nG0 X1\nM98 P1\nM99\n", 5, "M98 P1", "recursion"),
-    ("M98 P1\nM30\nO1\nM99 P20\n", 4, "P20", "return to sequence number"),
+    ("M98 P1\nM30\nO1\nM99 P20\n", 4, "P20", "the main program has no block N20"),
+    ("M98 P1\nM30\nN20 G0 X1\nO1\nM99 P20\n", 5, "P20", "the main program has no block N20"),  # after M30
+    ("M98 P1\nN20 M30\nO1\nM99 P2.5\n", 4, "P2.5", "not a sequence number"),
+    ("G0 X1\nM99 P10\nN10 M30\n", 2, "M99", "M99 in the main program"),
+    ("O2000\nG0 X1.\nM99\nO1000\nM98 P2000\nM30\n%\n", 3, "M99", "M99 before program O1000 (line 4): "
+     "subprograms written before the main program are not supported"),
     ("G0 X1 L2\nM30\n", 1, "L2", "outside an M98"),
     ("M98 P21001 L3\nM30\nO1001\nM99\n", 1, "P21001", "packs a repeat count"),
     ("M98 P1 L0\nM30\nO1\nM99\n", 1, "L0", "1..9999"),
@@ -228,3 +276,33 @@ def test_g80_in_the_m98_block_and_a_drilling_code_rejected():
     assert _moves(interpret("G80 M98 P1\nM30\nO1\nG0 X3.\nM99\n")) == [(4, [3, 0, 0])]
     with pytest.raises(GCodeError, match="G81 and M98 in one block"):
         interpret("G81 Z-1. R1. F100 M98 P1\nM30\nO1\nM99\n")
+
+
+# ------------------------------------------------------------------ M99 P<seq> (FANUC: return to N<seq>)
+def test_m99_p_returns_to_the_sequence_number_in_the_main_program():
+    text = "G90 G0 X0 Y0 Z0\nM98 P100\nN10 G0 X1.\nN20 G0 X2.\nM30\nO100\nG0 Y5.\nM99 P20\n"
+    program = interpret(text)
+    # line 3 (N10, the block after the M98) is skipped: the sub returns to N20 at line 4
+    assert _moves(program) == [(1, [0, 0, 0]), (7, [0, 5, 0]), (4, [2, 5, 0])]
+    assert program.segments == ((1, 2), (6, 8), (4, 5))
+
+
+def test_m99_p_searches_the_calling_subprogram_not_the_main_program():
+    # O2 is called by O1: M99 P6 goes to O1's N6 (line 7), not to the main program's N6 (line 2)
+    text = "M98 P1\nN6 G0 X9.\nM30\nO1\nM98 P2\nN5 G0 X1.\nN6 G0 X2.\nM99\nO2\nG0 Y1.\nM99 P6\n"
+    assert _moves(interpret(text)) == [(10, [0, 1, 0]), (7, [2, 1, 0]), (2, [9, 1, 0])]
+
+
+def test_m99_p_repeats_the_subprogram_first_and_jumps_at_the_last_return():
+    text = "M98 P100 L3\nG0 Z1.\nN20 G0 Y2.\nM30\nO100\nG91 G0 X1.\nG90\nM99 P20\n"
+    assert _moves(interpret(text)) == [(6, [1, 0, 0]), (6, [2, 0, 0]), (6, [3, 0, 0]), (3, [3, 2, 0])]
+
+
+def test_a_backward_jump_that_reaches_the_end_is_fine_and_an_endless_one_is_an_error():
+    # N1 calls O2 (back to N3: M30) the second time round: O1 jumps back to N1 once, which then ends
+    ok = "N1 M98 P2\nM98 P1\nN3 M30\nO1\nG0 X1.\nM99 P1\nO2\nG0 Y1.\nM99 P3\n"
+    assert _moves(interpret(ok)) == [(8, [0, 1, 0])]
+    ok2 = "N1 G0 Z1.\nM98 P1\nM30\nO1\nG91 G0 X1.\nG90\nM99 P1\n"
+    with pytest.raises(GCodeError, match="repeats the program endlessly") as info:
+        interpret(ok2)
+    assert info.value.line == 7 and info.value.word == "P1"

@@ -164,7 +164,11 @@ JUNK_WORDS = ["G1", "G2", "G3", "G0", "G4", "G91", "G20", "G41", "G43", "G95", "
               # codes CAM posts write: reference return, exact stop, cycles, subprograms, cutter compensation
               "G28", "G28 G91 Z0", "G53 Z0", "G61", "G9", "G64", "M0", "M1", "G98", "G99", "G80", "K0", "L3",
               "G81 Z-1 R1", "G83 Z-2 R1 Q0.5", "G73 Z-2 R1 Q0.5", "G82 Z-1 R1 P100", "M98 P1", "M98 P1001 L2",
-              "O1001", "M99", "D1", "G41 D1", "G42 D0", "G40", "G15", "G69", "G50.1", "G50 X1", "G13.1"]
+              "O1001", "M99", "D1", "G41 D1", "G42 D0", "G40", "G15", "G69", "G50.1", "G50 X1", "G13.1",
+              # work offsets, data input, look-ahead modes, feed per revolution
+              "G54.1 P2", "G54 P48", "G54.1 P49", "G10 L2 P1 X5", "G10 L20 P3 Z-1", "G10 L2 P0 Y1", "G10 L10 P1 R5",
+              "G10 L12 P1 R1", "G10 L13 P1 R-1", "G10 L3 P1", "G5.1 Q1", "G5.1 Q0", "G5.1 Q1 R5", "G08 P1",
+              "G5 P10000", "G5.1 Q3", "G94", "G95 F0.1", "S0", "M5", "M3 S1000"]
 HUGE = ["1" + "0" * 300, "0." + "0" * 299 + "1", "99999999999", "-99999999999", "9" * 400, "1e300", "1e-300",
         "99999.999", "-99999.999", "100000", "0.000001", "."]
 NUMBER = st.one_of(st.sampled_from(HUGE), st.integers(-1000, 1000).map(str),

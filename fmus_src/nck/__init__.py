@@ -4,6 +4,8 @@ Public API
 ----------
 interpret, InterpreterSettings, Program and the typed blocks
     G-code text → typed blocks (SI, machine coordinates).
+additional_offset_key, EXTERNAL_OFFSET
+    Keys of G54.1 Pn and of the external offset in ``InterpreterSettings.work_offsets``.
 read_program
     Read a program file (UTF-8, BOM dropped) or raise GCodeError naming the file.
 rewrite_program
@@ -21,14 +23,14 @@ from .blocks import (
 )
 from .component import NCKernel
 from .errors import GCodeError, NCParameterError
-from .interpreter import InterpreterSettings, interpret
+from .interpreter import EXTERNAL_OFFSET, InterpreterSettings, additional_offset_key, interpret
 from .params import NCParams
 from .planner import BatchPlan, MemberPlan, build_schedule, plan_batch, plan_member
 from .source import read_program
 from .writer import rewrite_program
 
 __all__ = [
-    "Arc", "BatchPlan", "Block", "Coolant", "Dwell", "GCodeError", "InterpreterSettings", "Linear", "MemberPlan",
+    "EXTERNAL_OFFSET", "additional_offset_key", "Arc", "BatchPlan", "Block", "Coolant", "Dwell", "GCodeError", "InterpreterSettings", "Linear", "MemberPlan",
     "NCKernel", "NCParameterError", "NCParams", "Program", "ProgramEnd", "ProgramStop", "Rapid", "SpindleSpeed",
     "SpindleStop", "ToolChange", "build_schedule", "interpret", "plan_batch", "plan_member", "read_program",
     "rewrite_program",

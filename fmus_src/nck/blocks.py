@@ -38,6 +38,9 @@ class Linear:
     exact_stop : bool
         The path decelerates to rest at the end of this block and the next block waits for the
         in-position check (G61 mode, one-shot G9, or a canned-cycle feed).
+    feed_per_rev : float
+        G95: the programmed feed per revolution (m/rev), and ``feed`` is it x the commanded spindle speed in
+        effect (rev/s); 0.0 under G94.
     """
 
     line: int
@@ -46,6 +49,7 @@ class Linear:
     feed: float
     feed_line: int
     exact_stop: bool = False
+    feed_per_rev: float = 0.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -66,7 +70,7 @@ class Arc:
     turns : int
         1 for an ordinary arc (at most one revolution). A full circle
         (IJK, end == start) has ``turns = 1`` and a sweep of 2 pi.
-    exact_stop : bool
+    exact_stop, feed_per_rev
         As for :class:`Linear`.
     """
 
@@ -80,6 +84,7 @@ class Arc:
     feed_line: int
     turns: int = 1
     exact_stop: bool = False
+    feed_per_rev: float = 0.0
 
     @property
     def axes(self) -> tuple[int, int, int]:
@@ -220,9 +225,14 @@ class Program:
         (or repeat) starts a new run, so a subprogram's lines appear once per call. Empty: not known (read as
         one run from line 1 to the last block's line). Per-line overrides follow it
         (:mod:`fmus_src.nck.overrides`).
+    segment_blocks : tuple of int
+        Number of blocks of each run of ``segments`` (same length; they add up to ``len(blocks)``). It tells
+        apart runs that line numbers cannot: a one-line subprogram ``X1. M99`` called twice in a row gives two
+        runs of the same line with no block in between. Empty: not known (runs told apart by line numbers).
     """
 
     file: str
     blocks: tuple[Block, ...]
     initial: Vec3
     segments: tuple[tuple[int, int], ...] = ()
+    segment_blocks: tuple[int, ...] = ()

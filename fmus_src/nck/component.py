@@ -20,7 +20,7 @@ from .blocks import Block, Program
 from .cycles import CycleMachine
 from .errors import NCParameterError
 from .interpreter import DEFAULT_REFERENCE, InterpreterSettings, interpret
-from .overrides import insert_spindle_commands, resolve_values
+from .overrides import apply_overrides
 from .params import NCParams
 from .planner import BatchPlan, build_schedule, plan_batch
 from .sampling import sample_position
@@ -78,6 +78,12 @@ def _variables() -> tuple[Variable, ...]:
     for i, a in enumerate("xyz"):
         v.append(Variable(f"reference_{a}", p, "m", DEFAULT_REFERENCE[i],
                           f"{a.upper()} of the G28 reference position, machine coordinates (FANUC No. 1240)"))
+    for n in (2, 3, 4):
+        for i, a in enumerate("xyz"):
+            v.append(Variable(f"reference{n}_{a}", p, "m", DEFAULT_REFERENCE[i],
+                              f"{a.upper()} of the {n}{'nd' if n == 2 else 'rd' if n == 3 else 'th'} reference "
+                              f"position (G30 P{n}), machine coordinates (FANUC No. {1239 + n}; "
+                              "default: the default 1st one)"))
     v.append(Variable("g73_retract", p, "m", CycleMachine().g73_retract,
                       "return amount d of the G73 high-speed peck cycle (FANUC No. 5114)"))
     v.append(Variable("g83_clearance", p, "m", CycleMachine().g83_clearance,
@@ -192,15 +198,20 @@ class NCKernel(Component):
             tool_radii=[self._uniform(f"tool_radius_{d}") for d in range(1, N_TOOL_RADII + 1)],
             block_delete=bool(self.values["block_delete"][0]),  # type: ignore[index]
             reference=tuple(self._uniform(f"reference_{a}") for a in "xyz"),  # type: ignore[arg-type]
+            reference2=tuple(self._uniform(f"reference2_{a}") for a in "xyz"),  # type: ignore[arg-type]
+            reference3=tuple(self._uniform(f"reference3_{a}") for a in "xyz"),  # type: ignore[arg-type]
+            reference4=tuple(self._uniform(f"reference4_{a}") for a in "xyz"),  # type: ignore[arg-type]
             cycles=CycleMachine(self._uniform("g73_retract"), self._uniform("g83_clearance")),
         )
-        if not all(np.isfinite(settings.reference)):
-            raise NCParameterError(f"{self.name}: reference_x/y/z must be finite, got {settings.reference}")
+        for n in (1, 2, 3, 4):
+            if not all(np.isfinite(settings.reference_position(n))):
+                name = "reference" if n == 1 else f"reference{n}"
+                raise NCParameterError(f"{self.name}: {name}_x/y/z must be finite, "
+                                       f"got {settings.reference_position(n)}")
         self.program_: Program = interpret(text, file, settings)
-        segments = self.program_.segments
-        blocks: tuple[Block, ...] = insert_spindle_commands(self.program_.blocks, list(self._spindle_over), segments)
+        blocks: tuple[Block, ...]
+        blocks, feeds, speeds = apply_overrides(self.program_, self.batch, self._feed_over, self._spindle_over)
         self.blocks_ = blocks
-        feeds, speeds = resolve_values(blocks, self.batch, self._feed_over, self._spindle_over, segments)
         self._uniform("interpolation_period")
         params = [self._member_params(b) for b in range(self.batch)]
         schedule = build_schedule(blocks, settings.initial, file)

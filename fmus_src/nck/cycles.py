@@ -29,6 +29,21 @@ G86       feed to Z, spindle stop, rapid retract, spindle restarted in its
           previous direction and speed.
 ========  ================================================================
 
+Levels (FANUC 0i-MF / 31i-B, "Absolute command and incremental command"):
+under G90, R and Z are the work-coordinate Z of the R point and of the hole
+bottom; under G91, R is the distance from the initial level to the R point
+and Z the distance from the R point to the bottom. The initial level is the
+programmed Z when the canned-cycle mode starts (a G73-G89 code after G80 or
+a group 01 code) and stays until the mode ends. R and Z are modal *as
+programmed* (:class:`LevelWord`: value and distance mode) and the levels are
+recomputed from them for every hole (:func:`cycle_levels`): after ``G91 G81
+X10. R-3. Z-5.`` from an initial level of 10, a block ``X10. R-2.`` drills
+from R 8 to 3 (the bottom stays 5 below the new R point). A value keeps the
+mode it was given in when G90/G91 switches while the cycle is modal (``G90
+... R2.`` then ``G91 X10. Z-3.``: R stays at 2, the bottom is -1). Under
+G91, X and Y move by their value for each of the K repeats; the levels are
+the same for all of them (measured from the initial level, also under G99).
+
 The pecks of G73/G83 reach R - Q, R - 2Q, ... and the last one ends at Z
 exactly. Every cutting feed of a cycle is an exact stop (the axes come to
 rest and are in position before the next move, as FANUC executes the
@@ -82,6 +97,43 @@ class CycleMachine:
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0.0):
                 raise NCParameterError(f"NC parameter {name} must be a finite number >= 0 m, got {value!r}")
+
+
+@dataclass(frozen=True)
+class LevelWord:
+    """The R or Z word of a canned cycle as programmed, modal until the cycle mode ends.
+
+    Attributes
+    ----------
+    value : float
+        m: a work-coordinate Z (G90) or a distance (G91: R from the initial level, Z from the R point).
+    incremental : bool
+        True when given under G91.
+    """
+
+    value: float
+    incremental: bool
+
+
+def cycle_levels(initial: float, r: LevelWord, z: LevelWord) -> tuple[float, float]:
+    """Work-coordinate Z of the R point and of the hole bottom (m) from the modal R and Z words.
+
+    Parameters
+    ----------
+    initial : float
+        Initial level (m, work Z at the start of the cycle mode).
+    r, z : LevelWord
+        The modal R and Z words.
+
+    Returns
+    -------
+    r_level, bottom : float
+        ``r_level = r.value`` (G90) or ``initial + r.value`` (G91); ``bottom = z.value`` (G90) or
+        ``r_level + z.value`` (G91).
+    """
+    r_level = initial + r.value if r.incremental else r.value
+    bottom = r_level + z.value if z.incremental else z.value
+    return r_level, bottom
 
 
 @dataclass(frozen=True)

@@ -2,11 +2,13 @@
 
 Supported: G0 G1 G2 G3 (arcs by R, negative R for > 180 deg, or by I/J/K incl.
 full circles), G4 (dwell), G9 (exact stop, one block), G17/G18/G19, G20/G21,
-G28 (reference position return), G40/G41/G42 with D (cutter radius
+G28/G30 (1st/2nd-4th reference position return), G40/G41/G42 with D (cutter radius
 compensation with a zero radius only, see below), G43/G44/G49 with H, G53
-(machine coordinates), G54-G59, G61/G64 (exact stop mode / cutting mode), canned
-drilling cycles G73 G81 G82 G83 G85 G86 G89 with G98/G99 and G80 (see
-:mod:`.cycles`), G90/G91, G94; M0 M1 M2 M3 M4 M5 M6 M7 M8 M9 M30; subprograms
+(machine coordinates), G54-G59, G54.1 P1-P48 (also written G54 Pn), G10
+L2/L20/L10-L13 (programmable data input), G5.1 Q0/Q1, G8 P0/P1, G5
+P0/P10000 (look-ahead modes, accepted), G61/G64 (exact stop mode / cutting
+mode), canned drilling cycles G73 G81 G82 G83 G85 G86 G89 with G98/G99 and G80 (see
+:mod:`.cycles`), G90/G91, G94/G95; M0 M1 M2 M3 M4 M5 M6 M7 M8 M9 M30; subprograms
 M98/M99 in the same file (see :mod:`.subprograms`); F S T H D P Q N O L words
 (K: arc centre, or repeat count in a canned cycle; L: repeat count of M98);
 ``( )`` and ``;`` comments, ``%`` lines, block delete ``/``.
@@ -17,8 +19,8 @@ error), G50.1 (programmable mirror image cancel), G69 (coordinate rotation
 cancel), G67 (macro modal call cancel), G13.1 (polar interpolation cancel).
 Rejected with a :class:`GCodeError`: the codes switching those features on
 (G16, G51, G51.1, G68, G66, G65, G12.1), cutter compensation G41/G42 with a
-nonzero radius, feed per revolution G95, tapping cycles G74/G84, G76/G87/G88,
-G29/G30, and every other G/M code or address.
+nonzero radius, tapping cycles G74/G84, G76/G87/G88,
+G29, and every other G/M code or address.
 
 Conventions
 -----------
@@ -38,8 +40,11 @@ Conventions
   move applies the offset again. The programmed position of a returned axis
   is reference - work offset (Z: - the tool length still contained, i.e.
   none), so following G90/G91 moves are consistent. G28 without an axis word,
-  and G28/G53 in canned-cycle mode are errors. G30 (2nd reference position)
-  and G29 are rejected.
+  and G28/G30/G53 in canned-cycle mode are errors. G29 is rejected.
+* G30 P2/P3/P4 (2nd/3rd/4th reference position return; P omitted = P2): as
+  G28 (intermediate point, only the named axes, rapid), to
+  :attr:`InterpreterSettings.reference2`/``3``/``4`` (FANUC No. 1241-1243;
+  not set: the 1st reference position). Other P values are errors.
 * G53 (machine coordinate positioning): non-modal, rapid traverse whatever
   the G0/G1 mode (FANUC moves G53 at rapid), machine coordinates without work
   offset or tool length (the tool-length vector is left out as after G28).
@@ -79,6 +84,57 @@ Conventions
   (first move after G41/G42 from G40) or the cancel block (first move after
   G40) in G2/G3 (PS0034), and G17/G18/G19 changing the plane while G41/G42
   is on (PS0037).
+* Additional work coordinate systems (FANUC 0i-MF/31i-B option):
+  ``G54.1 P<n>`` and its alternate form ``G54 P<n>``, n = 1..48, select a
+  work offset like G54-G59 (modal, group 14); its value is
+  ``work_offsets[additional_offset_key(n)]`` (key 1000 + n, zero when
+  missing). G54.1 without P, P outside 1..48 or with a decimal point, and
+  G54.1 in a block where P means something else (G4, G10, M98, a canned
+  cycle) are errors (FANUC takes G54.1 without P as P1; the twin asks for
+  it). ``G54 P<n>`` in such a block is plain G54 (P keeps its meaning there).
+* External workpiece zero point offset (``work_offsets[EXTERNAL_OFFSET]``,
+  key 0, set by ``G10 L2 P0``): added to every work coordinate system
+  (G54-G59 and G54.1 Pn), never to G53/G28 machine positions.
+* G10 programmable data input (non-modal, no motion; tool offset memory C):
+  ``G10 L2 P<p> X Y Z`` sets the work offset G54..G59 (p = 1..6) or the
+  external offset (p = 0); ``G10 L20 P<n> X Y Z`` sets G54.1 Pn;
+  ``G10 L10/L11 P<n> R`` the geometry/wear of tool length offset Hn and
+  ``G10 L12/L13 P<n> R`` the geometry/wear of tool radius offset Dn (the
+  offset used is geometry + wear; :attr:`InterpreterSettings.tool_lengths`
+  and ``tool_radii`` are the geometry, the wear starts at 0). Under G90 the
+  given values are set, under G91 added; axes not given keep their value;
+  values in the unit in effect (G20/G21). The change takes effect like the
+  other offset changes: a changed active work offset shifts the programmed
+  coordinates of the current position, a changed tool length is applied by
+  the next Z move, and a D radius made nonzero is an error when G41/G42 uses
+  it (also in the G10 block itself if G41/G42 is on with that D). Other L,
+  a missing P or data word, P out of range, words of the other form, a
+  motion G code in the block and G10 in canned-cycle mode are errors.
+* Look-ahead / contour-control modes: ``G5.1 Q1`` / ``G5.1 Q0`` (AI contour
+  control, also ``G5.1 Q1 R<level>`` with level 1..10 as Fusion 360 posts
+  write it), ``G8 P1`` / ``G8 P0`` (advanced preview control), ``G5 P10000``
+  / ``G5 P0`` (high-precision contour control) are accepted alone in their
+  block (an N number allowed), as the FANUC manuals ask. They change
+  nothing in the simulation: the twin always plans with its own look-ahead
+  (``lookahead_blocks``) and the machine file's acc/dec before and after
+  interpolation, i.e. as if the mode were on all the time; the separate
+  parameter sets a control switches to in AICC/HPCC (the AICC variants of
+  No. 1660/1772 etc.) and the machining quality levels R are not modelled.
+  Other Q/P values (e.g. nano smoothing ``G5.1 Q3``) and other words in the
+  block are errors.
+* G95 feed per revolution (G94 returns to feed per minute): F is in mm/rev
+  (in/rev under G20) and the path feed of a G95 block is F x the commanded
+  spindle speed in effect (S in rev/min / 60). FANUC measures the speed with
+  the position coder; the twin's cutting feed already waits for the spindle
+  speed arrival, so the commanded S is the steady speed. S above the
+  machine's ``spindle_max_speed`` is clamped on the spindle but not in this
+  feed. A G95 feed move (or canned cycle) with the spindle stopped (M5, no
+  M3/M4 yet) or at S0 is an error naming the line, and so is a feed move
+  whose modal F was given in the other feed mode (switching G94/G95 needs a
+  new F). Per-line overrides: a spindle override rescales G95 feeds; a feed
+  override (m/s) cannot govern a G95 block (:mod:`.overrides`), the writer
+  does not rewrite a G95 F word and ``optimize`` refuses G95 cutting lines
+  naming the file and line.
 * Block delete ``/``: honoured when ``block_delete=True`` (the block is not
   executed), otherwise the block is executed (switch off, the default).
 * Input ranges (FANUC IS-B, 8 digits): X Y Z I J K R within +-99999.999 mm
@@ -94,29 +150,34 @@ Conventions
 * Subprograms (FANUC 0i-MF/31i-B): ``M98 P1001``, ``M98 P1001 L2`` and
   ``M98 P21001`` (twice) call O1001; other words of the M98 block (a move)
   run first, then the call. M99 returns to the block after the M98 (or runs
-  the subprogram again while repeats remain). The modal state is one: a
+  the subprogram again while repeats remain); ``M99 P<seq>`` returns to the
+  caller's block N<seq> instead. The modal state is one: a
   subprogram that switches to G91 must switch back itself, and its F, S,
   offsets and canned cycle carry over to the caller. Calls nest at most 10
   levels (31i-B); deeper (e.g. a subprogram calling itself), a missing
-  program, M99 in the main program, M99 P<seq> and M98 with G4/G28/G53 or a
-  canned-cycle code are errors. Blocks from a subprogram carry the
+  program, M99 in the main program (FANUC: an endless restart), M99 P<seq>
+  without that N in the caller or making the program endless, and M98 with
+  G4/G28/G30/G53 or a canned-cycle code are errors. Blocks from a subprogram carry the
   subprogram's own source lines; :attr:`Program.segments` gives the order in
   which lines ran.
 """
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Mapping, Sequence
 
 from .blocks import (
     PLANE_AXES, Arc, Block, Coolant, Dwell, Linear, Program, ProgramEnd, ProgramStop, Rapid, SpindleSpeed,
     SpindleStop, ToolChange, Vec3,
 )
-from .cycles import CYCLES, MAX_CYCLE_MOVES, CycleError, CycleMachine, Hole, expand_hole
+from .cycles import CYCLES, MAX_CYCLE_MOVES, CycleError, CycleMachine, Hole, LevelWord, cycle_levels, expand_hole
 from .errors import GCodeError
 from .lexer import LexError, Word, lex_line, split_lines
-from .subprograms import MAX_CALLED_LINES, MAX_NESTING, Call, Subprogram, index_subprograms, read_call
+from .subprograms import (
+    MAX_CALLED_LINES, MAX_NESTING, Call, Return, Subprogram, find_sequence, index_subprograms, next_program_start,
+    main_program_end, read_call, read_return,
+)
 
 MM = 1e-3
 INCH = 25.4e-3
@@ -142,25 +203,27 @@ DEFAULT_REFERENCE: Vec3 = (0.380, 0.225, 0.300)
 # G code -> modal group
 _G_GROUP: dict[int | float, str] = {
     0: "motion", 1: "motion", 2: "motion", 3: "motion",
-    4: "non-modal", 28: "non-modal", 53: "non-modal",
+    4: "non-modal", 28: "non-modal", 30: "non-modal", 53: "non-modal",
+    10: "non-modal",
     9: "exact stop",
     17: "plane", 18: "plane", 19: "plane",
     20: "units", 21: "units",
     40: "cutter compensation", 41: "cutter compensation", 42: "cutter compensation",
     43: "tool length", 44: "tool length", 49: "tool length",
     54: "work offset", 55: "work offset", 56: "work offset", 57: "work offset", 58: "work offset",
-    59: "work offset",
+    59: "work offset", 54.1: "work offset",
     61: "path mode", 64: "path mode",
     80: "canned cycle", **{c: "canned cycle" for c in CYCLES},
     90: "distance", 91: "distance",
-    94: "feed mode",
+    94: "feed mode", 95: "feed mode",
+    # look-ahead / contour-control modes (accepted, see the module docstring)
+    5.1: "look-ahead", 8: "look-ahead", 5: "look-ahead",
     98: "return level", 99: "return level",
     # cancel codes of features never switched on: accepted as no-ops
     15: "polar coordinates", 50: "scaling", 50.1: "mirror image", 69: "coordinate rotation",
     67: "macro modal call", 13.1: "polar interpolation",
 }
 _G_REJECT: dict[int | float, str] = {
-    95: "feed per revolution G95 is not supported",
     74: "tapping cycle G74 is not supported (needs rigid tapping with the feed per revolution)",
     84: "tapping cycle G84 is not supported (needs rigid tapping with the feed per revolution)",
     76: "fine boring cycle G76 is not supported (needs spindle orientation and a tool shift)",
@@ -174,19 +237,49 @@ _G_REJECT: dict[int | float, str] = {
     66: "macro modal call G66 is not supported (only its cancel G67)",
     12.1: "polar coordinate interpolation G12.1 is not supported (only its cancel G13.1)",
     29: "return from the reference position G29 is not supported (program the move back with G0)",
-    30: "2nd/3rd/4th reference position return G30 is not supported (use G28 or a G53 move)",
 }
 _M_GROUP: dict[int, str] = {
     0: "stop", 1: "stop", 2: "end", 30: "end", 3: "spindle", 4: "spindle", 5: "spindle", 6: "tool change",
     7: "coolant", 8: "coolant", 9: "coolant", 98: "subprogram", 99: "subprogram",
 }
-_SUPPORTED_G = ("G0 G1 G2 G3 G4 G9 G13.1 G15 G17 G18 G19 G20 G21 G28 G40 G41 G42 G43 G44 G49 G50 G50.1 G53 G54-G59 "
-                "G61 G64 G67 G69 G73 G80 G81 G82 G83 G85 G86 G89 G90 G91 G94 G98 G99")
+_SUPPORTED_G = ("G0 G1 G2 G3 G4 G5 G5.1 G8 G9 G10 G13.1 G15 G17 G18 G19 G20 G21 G28 G30 G40 G41 G42 G43 G44 G49 G50 "
+                "G50.1 G53 G54-G59 G54.1 G61 G64 G67 G69 G73 G80 G81 G82 G83 G85 G86 G89 G90 G91 G94 G95 G98 G99")
 _SUPPORTED_M = "M0 M1 M2 M3 M4 M5 M6 M7 M8 M9 M30 M98 M99"
 _LETTERS = set("GMXYZIJKRFSTHDPQNOL")
 _AXIS = {"X": 0, "Y": 1, "Z": 2}
 _CENTRE = {"I": 0, "J": 1, "K": 2}
 _PLANE_OF_G = {17: "XY", 18: "ZX", 19: "YZ"}
+#: Key of the external workpiece zero point offset in :attr:`InterpreterSettings.work_offsets` (FANUC "EXT",
+#: ``G10 L2 P0``): added to every work coordinate system.
+EXTERNAL_OFFSET = 0
+#: Number of additional work coordinate systems G54.1 P1..P48 (FANUC 0i-MF/31i-B option).
+N_ADDITIONAL_OFFSETS = 48
+#: Allowed modes of the look-ahead / contour-control codes: G code -> (address, values).
+_LOOK_AHEAD = {5.1: ("Q", (0, 1)), 8: ("P", (0, 1)), 5: ("P", (0, 10000))}
+#: G10 L numbers: L -> what it sets.
+_G10_L = {2: "work offset G54-G59 (P1-P6) or the external offset (P0)", 20: "additional work offset G54.1 Pn",
+          10: "tool length geometry H", 11: "tool length wear H", 12: "tool radius geometry D",
+          13: "tool radius wear D"}
+
+
+def additional_offset_key(n: int) -> int:
+    """Key of G54.1 P``n`` in :attr:`InterpreterSettings.work_offsets`: ``1000 + n`` (1001..1048).
+
+    Parameters
+    ----------
+    n : int
+        Number of the additional work coordinate system, 1..48.
+    """
+    if not 1 <= n <= N_ADDITIONAL_OFFSETS:
+        raise ValueError(f"G54.1 P{n}: expected P1..P{N_ADDITIONAL_OFFSETS}")
+    return 1000 + n
+
+
+def _work_name(key: int) -> str:
+    """``G54``, ``G54.1 P7`` or ``EXT`` for a work-offset key."""
+    if key == EXTERNAL_OFFSET:
+        return "EXT"
+    return f"G54.1 P{key - 1000}" if key > 1000 else f"G{key}"
 
 
 @dataclass(frozen=True)
@@ -198,16 +291,24 @@ class InterpreterSettings:
     initial : Vec3
         Machine position before the program (m).
     work_offsets : Mapping[int, Vec3]
-        G54..G59 → (x, y, z) offset (m). Missing numbers are zero.
+        Work offset → (x, y, z) (m). Keys: 54..59 for G54..G59, :func:`additional_offset_key` ``(n)`` = 1000 + n
+        for G54.1 Pn (n = 1..48), :data:`EXTERNAL_OFFSET` = 0 for the external workpiece zero point offset,
+        which is added to every work coordinate system. Missing keys are zero. ``G10 L2``/``G10 L20`` in the
+        program change a copy (these stay untouched).
     tool_lengths : Sequence[float]
-        Tool length offsets (m) for H1..Hn (index 0 is H1). H0 is always zero.
+        Tool length offsets (m) for H1..Hn (index 0 is H1). H0 is always zero. They are the geometry values
+        of ``G10 L10``; the wear values (``G10 L11``) start at zero.
     tool_radii : Sequence[float]
         Tool radius offsets (m) for D1..Dn (index 0 is D1; FANUC's radius, geometry + wear). D0 is always zero.
+        Geometry of ``G10 L12``; the wear (``G10 L13``) starts at zero.
         G41/G42 are accepted only while the active one is zero (see the module docstring).
     block_delete : bool
         Block delete switch: True skips blocks starting with ``/``.
     reference : Vec3
         G28 reference position (m, machine coordinates; FANUC No. 1240). Default: the default machine's.
+    reference2, reference3, reference4 : Vec3 or None
+        2nd/3rd/4th reference position of G30 P2/P3/P4 (m, machine coordinates; FANUC No. 1241-1243).
+        None: the 1st reference position ``reference``.
     cycles : CycleMachine
         Return amount of G73 (No. 5114) and clearance of G83 (No. 5115).
     """
@@ -218,7 +319,15 @@ class InterpreterSettings:
     tool_radii: Sequence[float] = ()
     block_delete: bool = False
     reference: Vec3 = DEFAULT_REFERENCE
+    reference2: Vec3 | None = None
+    reference3: Vec3 | None = None
+    reference4: Vec3 | None = None
     cycles: CycleMachine = field(default_factory=CycleMachine)
+
+    def reference_position(self, n: int) -> Vec3:
+        """The n-th reference position (n = 1..4, m, machine coordinates); an unset 2nd-4th is the 1st."""
+        other = {2: self.reference2, 3: self.reference3, 4: self.reference4}.get(n)
+        return self.reference if other is None else other
 
 
 class _State:
@@ -241,14 +350,21 @@ class _State:
         self.machine = list(settings.initial)
         self.applied_tool = 0.0  # tool length contained in machine[2]
         self.settings = settings
+        # G10 changes these copies: work offsets by key, tool offsets as (geometry, wear) per number
+        self.offsets: dict[int, Vec3] = {int(k): tuple(v)  # type: ignore[misc]
+                                         for k, v in settings.work_offsets.items()}
+        self.lengths = [[float(v), 0.0] for v in settings.tool_lengths]
+        self.radii = [[float(v), 0.0] for v in settings.tool_radii]
+        self.per_rev = False  # G95 (True) / G94
+        self.feed_per_rev = False  # the modal F was given under G95 (m/rev) rather than G94 (m/s)
         off = self.work_offset()
         self.prog = [self.machine[a] - off[a] for a in range(3)]
         self.exact_stop = False  # G61 (True) / G64
         self.return_initial = True  # G98 (True) / G99
         self.cycle: int | None = None  # active canned cycle, None under G80
         self.cycle_initial = 0.0  # initial level (work Z, m)
-        self.cycle_r: float | None = None  # R point (work Z, m)
-        self.cycle_bottom: float | None = None  # hole bottom (work Z, m)
+        self.cycle_r: LevelWord | None = None  # R word as programmed (G90 level / G91 from the initial level)
+        self.cycle_bottom: LevelWord | None = None  # Z word as programmed (G90 level / G91 from the R point)
         self.cycle_q: float | None = None  # peck depth (m)
         self.cycle_dwell = 0.0  # s
         self.comp = 40  # cutter compensation G40/G41/G42
@@ -262,16 +378,25 @@ class _State:
             self.prog[i] = self.machine[i] - off[i] - (self.applied_tool if i == 2 else 0.0)
 
     def work_offset(self) -> Vec3:
-        return tuple(self.settings.work_offsets.get(self.work, (0.0, 0.0, 0.0)))  # type: ignore[return-value]
+        """Active work offset + external offset (m)."""
+        zero = (0.0, 0.0, 0.0)
+        own, ext = self.offsets.get(self.work, zero), self.offsets.get(EXTERNAL_OFFSET, zero)
+        return (own[0] + ext[0], own[1] + ext[1], own[2] + ext[2])
+
+    def shift_work(self) -> None:
+        """Programmed coordinates of the current position after a work-offset change (as FANUC's display)."""
+        off = self.work_offset()
+        self.prog = [self.machine[a] - off[a] for a in range(3)]
+        self.prog[2] -= self.applied_tool
 
     def tool_length(self) -> float:
         if self.tool_sign == 0 or self.h == 0:
             return 0.0
-        return self.tool_sign * self.settings.tool_lengths[self.h - 1]
+        return self.tool_sign * sum(self.lengths[self.h - 1])
 
     def tool_radius(self) -> float:
-        """Radius of the active tool radius offset D (m; D0 = 0)."""
-        return 0.0 if self.d == 0 else float(self.settings.tool_radii[self.d - 1])
+        """Radius of the active tool radius offset D (m, geometry + wear; D0 = 0)."""
+        return 0.0 if self.d == 0 else sum(self.radii[self.d - 1])
 
 
 def interpret(text: str, file: str = "<text>", settings: InterpreterSettings | None = None) -> Program:
@@ -304,14 +429,24 @@ def interpret(text: str, file: str = "<text>", settings: InterpreterSettings | N
     subs: dict[int, Subprogram] | None = None  # indexed at the first M98
     stack: list[_Frame] = []
     segments: list[tuple[int, int]] = []
+    seg_blocks: list[int] = []  # blocks of each run of segments
     seg_start = 1
     called_lines = 0
+    jumps: set[tuple] = set()  # control states at M99 P<seq> returns (a repeat is an endless loop)
     pc = 0  # 0-based index of the next line
 
     def done(number: int, end: ProgramEnd) -> Program:
         out.append(end)
+        return finished(number)
+
+    def close_run(number: int) -> None:
         segments.append((seg_start, number))
-        return Program(file, tuple(out), tuple(settings.initial), tuple(segments))  # type: ignore[arg-type]
+        seg_blocks.append(len(out) - sum(seg_blocks))
+
+    def finished(number: int) -> Program:
+        close_run(number)
+        return Program(file, tuple(out), tuple(settings.initial), tuple(segments),  # type: ignore[arg-type]
+                       tuple(seg_blocks))
 
     while pc < len(lines):
         number = pc + 1
@@ -340,9 +475,8 @@ def interpret(text: str, file: str = "<text>", settings: InterpreterSettings | N
         if action is None:
             continue
         if action == _END:
-            segments.append((seg_start, number))
-            return Program(file, tuple(out), tuple(settings.initial), tuple(segments))  # type: ignore[arg-type]
-        segments.append((seg_start, number))
+            return finished(number)
+        close_run(number)
         if isinstance(action, Call):
             if subs is None:
                 subs = index_subprograms(lines, number - 1, file, settings.block_delete)
@@ -351,6 +485,13 @@ def interpret(text: str, file: str = "<text>", settings: InterpreterSettings | N
             pc = sub.start
         else:  # M99
             if not stack:
+                later = next_program_start(lines, number)
+                if later is not None:
+                    raise GCodeError(file, number, "M99", "the main program first, ending with M30/M2, then its "
+                                     "subprograms O<n> ... M99 (as Fusion 360 and Mastercam post them)",
+                                     f"M99 before program {lines[later].split()[0]} (line {later + 1}): subprograms "
+                                     "written before the main program are not supported (the file runs from its "
+                                     "first line)", lexed.text)
                 raise GCodeError(file, number, "M99", "M99 only at the end of a subprogram O<n> called by M98, "
                                  "M30 at the end of the main program",
                                  "M99 in the main program (FANUC restarts the program: an endless loop)", lexed.text)
@@ -361,6 +502,9 @@ def interpret(text: str, file: str = "<text>", settings: InterpreterSettings | N
             else:
                 stack.pop()
                 pc = frame.return_pc
+                if isinstance(action, Return) and action.sequence is not None:
+                    pc = _return_target(action.sequence, lines, stack, subs, frame, number, lexed.text, file,
+                                        settings.block_delete, jumps)
         seg_start = pc + 1
     return done(len(lines), ProgramEnd(len(lines), "end of file"))
 
@@ -373,6 +517,35 @@ class _Frame:
     call_line: int  # 1-based line of the M98 block
     return_pc: int  # 0-based index of the line after the M98 block
     remaining: int
+
+
+def _return_target(sequence: int, lines: Sequence[str], stack: list[_Frame], subs: dict[int, Subprogram] | None,
+                   frame: _Frame, line: int, text: str, file: str, block_delete: bool, jumps: set[tuple]) -> int:
+    """0-based line index M99 P<sequence> returns to: the block N<sequence> of the caller (after ``stack.pop()``).
+
+    Raises a :class:`GCodeError` when the caller has no such block, or when the same return with the same calls
+    active happened before (the program has no conditions: it would repeat endlessly).
+    """
+    word = f"P{sequence}"
+    if stack:
+        caller = stack[-1].sub
+        first, last, name = caller.start, caller.end, f"subprogram O{caller.number}"
+    else:
+        subs_start = min((s.start for s in (subs or {}).values()), default=len(lines))
+        end = main_program_end(lines, frame.call_line - 1, file, block_delete)
+        first, last, name = 0, min(subs_start - 1, len(lines) - 1 if end is None else end), "the main program"
+    target = find_sequence(lines, first, last, sequence)
+    if target is None:
+        raise GCodeError(file, line, word, f"a block N{sequence} in {name} (lines {first + 1}-{last + 1}), "
+                         "which called this subprogram", f"{name} has no block N{sequence} to return to", text)
+    state = (target, tuple((f.sub.number, f.return_pc, f.remaining) for f in stack))
+    if state in jumps:
+        raise GCodeError(file, line, word, "a return that does not lead back to the same M98 call (an M30 or M2 "
+                         "after N{0}, or M99 without P)".format(sequence),
+                         f"returning to N{sequence} (line {target + 1}) repeats the program endlessly: the same "
+                         f"calls run again from there (FANUC would loop forever)", text)
+    jumps.add(state)
+    return target
 
 
 def _called(call: Call, subs: dict[int, Subprogram], stack: list[_Frame], line: int, text: str,
@@ -395,14 +568,13 @@ def _fmt(value: float) -> str:
     return f"{value:.6g}"
 
 
-#: What :func:`_block` returns at a program end (M30/M2) and at M99.
+#: What :func:`_block` returns at a program end (M30/M2).
 _END = "end"
-_RETURN = "return"
 
 
 def _block(st: _State, words: tuple[Word, ...], line: int, text: str, file: str,
-           out: list[Block]) -> str | Call | None:
-    """Execute one block; return :data:`_END` at M30/M2, a :class:`Call` at M98, :data:`_RETURN` at M99."""
+           out: list[Block]) -> str | Call | Return | None:
+    """Execute one block; return :data:`_END` at M30/M2, a :class:`Call` at M98, a :class:`Return` at M99."""
 
     def err(word: str, problem: str, expected: str) -> GCodeError:
         return GCodeError(file, line, word, expected, problem, text)
@@ -438,7 +610,11 @@ def _block(st: _State, words: tuple[Word, ...], line: int, text: str, file: str,
             if w.letter in vals:
                 raise err(w.letter + w.text, f"word {w.letter} appears twice", f"at most one {w.letter} word per block")
             vals[w.letter] = w
+    if "look-ahead" in gs:
+        _look_ahead(gs["look-ahead"], words, err)
+        return None
     call: Call | None = None
+    ret = Return()
     if "subprogram" in ms:
         code = ms["subprogram"][0]
         if "end" in ms:
@@ -451,10 +627,9 @@ def _block(st: _State, words: tuple[Word, ...], line: int, text: str, file: str,
                 raise err("G" + other.text, f"G{other.text} and M98 in one block",
                           "M98 P<n> alone or with a G0-G3 move (the move runs first, then the call)")
             call = read_call(vals.pop("P", None), vals.pop("L", None), err)
-        elif "P" in vals and gs.get("non-modal", (None,))[0] != 4:
-            raise err("P" + vals["P"].text, f"M99 P{vals['P'].text} (return to sequence number "
-                      f"N{vals['P'].text}) is not supported", "M99 alone: return to the block after the M98 call")
-    if "L" in vals:
+        elif gs.get("non-modal", (None,))[0] not in (4, 10, 30):  # there P is the dwell, offset or reference no.
+            ret = read_return(vals.pop("P", None), err)
+    if "L" in vals and gs.get("non-modal", (None,))[0] != 10:
         raise err("L" + vals["L"].text, "word L outside an M98 block", "L only as the repeat count of M98 P<n> L<k>")
     if "scaling" in gs:
         for a in "XYZIJKPS":
@@ -466,12 +641,15 @@ def _block(st: _State, words: tuple[Word, ...], line: int, text: str, file: str,
     if "units" in gs:
         st.scale = INCH if gs["units"][0] == 20 else MM
     unit_name = "in" if st.scale == INCH else "mm"
-    # 2. feed
+    # 2. feed (G94/G95 first: the F word of the block is read in the block's feed mode)
+    if "feed mode" in gs:
+        st.per_rev = gs["feed mode"][0] == 95
     if "F" in vals:
         f = vals["F"].value
         if f <= 0.0:
             raise err("F" + vals["F"].text, f"feed rate F{vals['F'].text} is not positive", "F > 0")
-        st.feed = f * st.scale / 60.0
+        st.feed = f * st.scale if st.per_rev else f * st.scale / 60.0  # m/rev (G95) or m/s (G94)
+        st.feed_per_rev = st.per_rev
         st.feed_line = line
     # 3. spindle speed, tool select
     if "S" in vals:
@@ -520,12 +698,10 @@ def _block(st: _State, words: tuple[Word, ...], line: int, text: str, file: str,
     if "distance" in gs:
         st.absolute = gs["distance"][0] == 90
     if "work offset" in gs:
-        new = gs["work offset"][0]
+        new = _work_key(st, gs, vals, call is not None, err)
         if new != st.work:
             st.work = new
-            off = st.work_offset()
-            st.prog = [st.machine[a] - off[a] for a in range(3)]
-            st.prog[2] -= st.applied_tool
+            st.shift_work()
     if "H" in vals:
         h = vals["H"]
         n_tools = len(st.settings.tool_lengths)
@@ -549,7 +725,7 @@ def _block(st: _State, words: tuple[Word, ...], line: int, text: str, file: str,
     if cycle not in (None, 80) and ("motion" in gs or non_modal is not None):
         other = gs["motion"][1] if "motion" in gs else gs["non-modal"][1]
         raise err("G" + other.text, f"G{other.text} and the canned cycle G{cycle} in one block",
-                  "a canned cycle block without G0-G3, G4, G28 or G53 (G80 or G0-G3 cancel the cycle)")
+                  "a canned cycle block without G0-G3, G4, G28, G30 or G53 (G80 or G0-G3 cancel the cycle)")
     if non_modal == 4:
         if "motion" in gs:
             raise err(f"G{gs['motion'][0]}", "G4 and a motion G code in one block", "G4 alone in its block")
@@ -570,7 +746,11 @@ def _block(st: _State, words: tuple[Word, ...], line: int, text: str, file: str,
             st.cycle = None  # a group 01 code cancels the canned cycle
         if cycle == 80:
             st.cycle = None
-        if non_modal is not None:
+        if non_modal == 10:
+            if st.cycle is not None:
+                raise err("G10", f"G10 in canned-cycle mode G{st.cycle}", "G80 (or G0) before G10")
+            _program_data(st, gs, vals, err)
+        elif non_modal is not None:
             if st.cycle is not None:
                 raise err(f"G{non_modal}", f"G{non_modal} in canned-cycle mode G{st.cycle}",
                           f"G80 (or G0) before G{non_modal}")
@@ -598,7 +778,7 @@ def _block(st: _State, words: tuple[Word, ...], line: int, text: str, file: str,
     if call is not None:
         return call
     if "subprogram" in ms:
-        return _RETURN
+        return ret
     return None
 
 
@@ -646,6 +826,145 @@ def _check_compensation_move(st: _State, vals: dict[str, Word], gs: dict[str, tu
         raise err(word, f"cutter compensation {which} in circular interpolation G{st.motion} (FANUC alarm PS0034)",
                   "the first move after G41/G42 or G40 in G0 or G1")
     st.comp_pending = None
+
+
+def _look_ahead(entry: tuple[int | float, Word], words: tuple[Word, ...], err) -> None:
+    """Check a look-ahead / contour-control block: G5.1 Q0/Q1 (AI contour control, optional R level 1..10 with
+    Q1), G8 P0/P1 (advanced preview control), G5 P0/P10000 (high-precision contour control), alone in the
+    block (N allowed). They change nothing in the twin's plan (see the module docstring)."""
+    code, gw = entry
+    letter, allowed = _LOOK_AHEAD[code]
+    gname = "G" + gw.text
+    forms = ", ".join(f"G{code} {letter}{v}" for v in allowed)
+    mode = None
+    for w in words:
+        if w is gw or w.letter == "N":
+            continue
+        if w.letter == letter and mode is None:
+            if w.value not in allowed:
+                raise err(letter + w.text, f"{gname} {letter}{w.text} is not a supported mode", forms)
+            mode = int(w.value)
+            continue
+        if code == 5.1 and w.letter == "R" and mode == 1:
+            if w.has_point or not 1 <= w.value <= 10:
+                raise err("R" + w.text, f"{gname} Q1 R{w.text}: the level is not an integer in 1..10",
+                          "G5.1 Q1 R1 .. R10 (machining quality level) or G5.1 Q1")
+            continue
+        word = (w.letter + w.text) if w.letter != "G" else "G" + w.text
+        raise err(word, f"{word} in the {gname} block (FANUC: {gname} is specified alone in its block)",
+                  f"{forms} alone in a block (an N number allowed)")
+    if mode is None:
+        raise err(gname, f"{gname} without {letter}", forms)
+
+
+def _work_key(st: _State, gs: dict[str, tuple[int, Word]], vals: dict[str, Word], m98: bool, err) -> int:
+    """Work-offset key selected by the block's G54-G59 / G54.1 Pn / G54 Pn (pops the P word it uses).
+
+    ``G54 P<n>`` is the alternate form of ``G54.1 P<n>`` unless P belongs to G4, G10, M98 or a canned cycle in
+    the block; G54.1 needs its P and may not share the block with them.
+    """
+    code, gw = gs["work offset"]
+    other = None
+    drill = "canned cycle" in gs and gs["canned cycle"][0] != 80
+    cancel = "motion" in gs or gs.get("canned cycle", (None,))[0] == 80
+    if "non-modal" in gs:
+        other = "G" + gs["non-modal"][1].text
+    elif m98:
+        other = "M98"
+    elif drill:
+        other = "G" + gs["canned cycle"][1].text
+    elif st.cycle is not None and not cancel:
+        other = f"canned-cycle mode G{st.cycle}"
+    if code == 54.1:
+        if other is not None:
+            raise err("G" + gw.text, f"G54.1 and {other} in one block (the P word would have two meanings)",
+                      "G54.1 P<n> in a block without G4, G10, M98 or a canned cycle")
+        if "P" not in vals:
+            raise err("G" + gw.text, "G54.1 without P (the number of the additional work coordinate system)",
+                      f"G54.1 P1 .. G54.1 P{N_ADDITIONAL_OFFSETS}")
+    elif code != 54 or "P" not in vals or other is not None:
+        return int(code)
+    p = vals.pop("P")
+    if p.has_point or not 1 <= p.value <= N_ADDITIONAL_OFFSETS:
+        raise err("P" + p.text, f"additional work coordinate system P{p.text} does not exist",
+                  f"P1..P{N_ADDITIONAL_OFFSETS} (integers) with G{gw.text}")
+    return additional_offset_key(int(p.value))
+
+
+def _program_data(st: _State, gs: dict[str, tuple[int, Word]], vals: dict[str, Word], err) -> None:
+    """G10 programmable data input: L2/L20 work offsets, L10-L13 tool offsets (memory C); see the module
+    docstring. G90 sets the values, G91 adds them."""
+    if "motion" in gs:
+        raise err("G" + gs["motion"][1].text, "G10 and a motion G code in one block",
+                  "G10 with L, P and its data words only")
+    forms = "G10 L2 P0-P6 X Y Z, G10 L20 P1-P48 X Y Z, G10 L10/L11/L12/L13 P<n> R"
+    if "L" not in vals:
+        raise err("G10", "G10 without L (which data to set)", forms)
+    lw = vals["L"]
+    if lw.has_point or lw.value not in _G10_L:
+        raise err("L" + lw.text, f"G10 L{lw.text} is not supported", forms)
+    ell = int(lw.value)
+    if "P" not in vals:
+        raise err(f"L{lw.text}", f"G10 L{ell} without P (the number of the {_G10_L[ell]})", forms)
+    pw = vals["P"]
+    work = ell in (2, 20)
+    data = "XYZ" if work else "R"
+    for a in "XYZIJKRQ":
+        if a in vals and a not in data:
+            raise err(a + vals[a].text, f"word {a} in a G10 L{ell} block", f"G10 L{ell} P<n> with {' '.join(data)}")
+    given = [a for a in data if a in vals]
+    if not given:
+        raise err(f"L{lw.text}", f"G10 L{ell} without data", f"G10 L{ell} P<n> with {' or '.join(data)}")
+    if ell == 2:
+        top, first = 6, 0
+    elif ell == 20:
+        top, first = N_ADDITIONAL_OFFSETS, 1
+    else:
+        top, first = len(st.lengths if ell in (10, 11) else st.radii), 1
+    if pw.has_point or not first <= pw.value <= top:
+        raise err("P" + pw.text, f"G10 L{ell} P{pw.text}: {_G10_L[ell]} number P{pw.text} does not exist",
+                  f"P{first}..P{top} (integers)")
+    p = int(pw.value)
+    if work:
+        key = additional_offset_key(p) if ell == 20 else (EXTERNAL_OFFSET if p == 0 else 53 + p)
+        xyz = list(st.offsets.get(key, (0.0, 0.0, 0.0)))
+        for a in given:
+            v = vals[a].value * st.scale
+            xyz[_AXIS[a]] = v if st.absolute else xyz[_AXIS[a]] + v
+        st.offsets[key] = tuple(xyz)  # type: ignore[assignment]
+        if key in (st.work, EXTERNAL_OFFSET):
+            st.shift_work()
+        return
+    table = st.lengths if ell in (10, 11) else st.radii
+    part = 0 if ell in (10, 12) else 1  # geometry, wear
+    v = vals["R"].value * st.scale
+    table[p - 1][part] = v if st.absolute else table[p - 1][part] + v
+    if ell in (12, 13) and st.comp != 40 and st.d == p and not abs(st.tool_radius()) <= RADIUS_ZERO:
+        raise err("R" + vals["R"].text, f"G10 L{ell} gives the active D{p} a nonzero radius while cutter "
+                  f"compensation G{st.comp} is on (the offset path is not simulated)",
+                  "tool radius offsets that stay 0 while G41/G42 is on")
+
+
+def _block_feed(st: _State, err, word: str, what: str) -> tuple[float, float]:
+    """Path feed (m/s) of a feed block and its feed per revolution (m/rev; 0.0 under G94).
+
+    G95: the feed is F (m/rev) x the commanded spindle speed in effect (rev/s); the cutting feed already waits
+    for the spindle speed arrival, so the commanded S is the steady speed FANUC's position coder measures.
+    """
+    if st.feed is None:
+        raise err(word, f"{what} with no feed rate (F was never set)", "an F word on this or an earlier block")
+    mode = "G95" if st.per_rev else "G94"
+    if st.feed_per_rev != st.per_rev:
+        given = "per revolution (G95)" if st.feed_per_rev else "per minute (G94)"
+        raise err(word, f"{what} in {mode} but the modal F (line {st.feed_line}) is {given}",
+                  f"an F word after switching to {mode} (F in {'mm/rev' if st.per_rev else 'mm/min'})")
+    if not st.per_rev:
+        return st.feed, 0.0
+    if st.direction == 0 or not st.speed > 0.0:
+        why = "the spindle is stopped (M5, or no M3/M4 yet)" if st.direction == 0 else "the spindle speed is S0"
+        raise err(word, f"feed per revolution G95 {what} while {why}: the axes would not move",
+                  "S > 0 and M3/M4 before a G95 feed move")
+    return st.feed * st.speed / (2.0 * math.pi), st.feed
 
 
 def _g_code(w: Word) -> int | float | None:
@@ -708,11 +1027,9 @@ def _motion(st: _State, vals: dict[str, Word], g9: bool, line: int, err, unit_na
     if st.motion == 0:
         out.append(Rapid(line, start, end))
         return
-    if st.feed is None:
-        raise err(f"G{st.motion}", f"G{st.motion} feed move with no feed rate (F was never set)",
-                  "an F word on this or an earlier block")
+    feed, per_rev = _block_feed(st, err, f"G{st.motion}", f"G{st.motion} feed move")
     if st.motion == 1:
-        out.append(Linear(line, start, end, st.feed, st.feed_line, exact))
+        out.append(Linear(line, start, end, feed, st.feed_line, exact, per_rev))
         return
     i1, i2, i3 = PLANE_AXES[st.plane]
     plane_letters = {"XY": "IJ", "ZX": "KI", "YZ": "JK"}[st.plane]
@@ -737,8 +1054,8 @@ def _motion(st: _State, vals: dict[str, Word], g9: bool, line: int, err, unit_na
         c[i1] = start[i1] + 0.5 * d1 - side * h * d2 / chord
         c[i2] = start[i2] + 0.5 * d2 + side * h * d1 / chord
         c[i3] = start[i3]
-        out.append(Arc(line, start, end, tuple(c), st.plane, clockwise, st.feed, st.feed_line,  # type: ignore[arg-type]
-                       exact_stop=exact))
+        out.append(Arc(line, start, end, tuple(c), st.plane, clockwise, feed, st.feed_line,  # type: ignore[arg-type]
+                       exact_stop=exact, feed_per_rev=per_rev))
         return
     if not centre:
         raise err(gname, f"{gname} without R or I/J/K", f"R or {plane_letters[0]}/{plane_letters[1]} for the centre")
@@ -762,17 +1079,19 @@ def _motion(st: _State, vals: dict[str, Word], g9: bool, line: int, err, unit_na
         raise err(gname, f"end point is {_fmt(r2 * u)} {unit_name} from the centre but the start is "
                   f"{_fmt(r1 * u)} {unit_name} (difference {_fmt(abs(r2 - r1) * u)} {unit_name})",
                   f"start and end radii equal within {_fmt(ARC_RADIUS_TOLERANCE * u)} {unit_name}")
-    out.append(Arc(line, start, end, tuple(c), st.plane, clockwise, st.feed, st.feed_line,  # type: ignore[arg-type]
-                   exact_stop=exact))
+    out.append(Arc(line, start, end, tuple(c), st.plane, clockwise, feed, st.feed_line,  # type: ignore[arg-type]
+                   exact_stop=exact, feed_per_rev=per_rev))
 
 
 def _machine_move(st: _State, code: int, vals: dict[str, Word], line: int, err, out: list[Block]) -> None:
-    """G28 (reference position return via the intermediate point) or G53 (machine coordinates); see the module
-    docstring for the FANUC behaviour followed."""
+    """G28/G30 (reference position return via the intermediate point) or G53 (machine coordinates); see the
+    module docstring for the FANUC behaviour followed."""
     gname = f"G{code}"
-    for a in "IJKRPQ":
+    for a in ("IJKRQ" if code == 30 else "IJKRPQ"):
         if a in vals:
-            raise err(a + vals[a].text, f"word {a} in a {gname} block", f"{gname} with X, Y, Z words only")
+            raise err(a + vals[a].text, f"word {a} in a {gname} block",
+                      "G30 with P2/P3/P4 and X, Y, Z words only" if code == 30 else f"{gname} with X, Y, Z words only")
+    number = _reference_number(vals.get("P"), err) if code == 30 else 1
     axes = [_AXIS[a] for a in "XYZ" if a in vals]
     if not axes:
         raise err(gname, f"{gname} without an axis word",
@@ -800,7 +1119,7 @@ def _machine_move(st: _State, code: int, vals: dict[str, Word], line: int, err, 
     mid: Vec3 = tuple(st.machine)  # type: ignore[assignment]
     if max(abs(mid[i] - start[i]) for i in range(3)) > SAME_POINT:
         out.append(Rapid(line, start, mid))
-    ref = st.settings.reference
+    ref = st.settings.reference_position(number)
     for i in axes:
         st.machine[i] = ref[i]
     if 2 in axes:
@@ -809,13 +1128,24 @@ def _machine_move(st: _State, code: int, vals: dict[str, Word], line: int, err, 
     out.append(Rapid(line, mid, tuple(st.machine)))  # type: ignore[arg-type]
 
 
+def _reference_number(p: Word | None, err) -> int:
+    """Which reference position G30 returns to: P2, P3 or P4 (omitted: 2)."""
+    if p is None:
+        return 2
+    if p.has_point or p.value not in (2.0, 3.0, 4.0):
+        raise err("P" + p.text, f"G30 P{p.text} is not a reference position number",
+                  "G30 P2, P3 or P4 (2nd/3rd/4th reference position; P omitted = P2)")
+    return int(p.value)
+
+
 def _canned_cycle(st: _State, vals: dict[str, Word], code: int | None, line: int, err, out: list[Block]) -> None:
     """A block in canned-cycle mode: store the drilling data and drill the hole(s) (see :mod:`.cycles`).
 
     FANUC semantics: the initial level is the Z position when the cycle mode starts; R (G91: from the initial
-    level) and Z (G91: from the R point) are stored as absolute levels; Q, P are modal; K (repeat count, not
-    modal) repeats the hole, moving by the X/Y increments each time under G91; a hole is drilled when the block
-    holds X, Y, Z or R; K0 stores the data only.
+    level) and Z (G91: from the R point) stay modal as programmed and the levels are derived per hole
+    (:func:`.cycles.cycle_levels`); Q, P are modal; K (repeat count, not modal) repeats the hole, moving by the
+    X/Y increments each time under G91; a hole is drilled when the block holds X, Y, Z or R; K0 stores the
+    data only.
     """
     if code is not None:
         if st.cycle is None:
@@ -827,14 +1157,9 @@ def _canned_cycle(st: _State, vals: dict[str, Word], code: int | None, line: int
             raise err(a + vals[a].text, f"word {a} in canned cycle {gname}", "X Y Z R Q P K F words in a cycle block")
     scale = st.scale
     if "R" in vals:
-        r = vals["R"].value * scale
-        st.cycle_r = r if st.absolute else st.cycle_initial + r
+        st.cycle_r = LevelWord(vals["R"].value * scale, not st.absolute)
     if "Z" in vals:
-        if not st.absolute and st.cycle_r is None:
-            raise err("Z" + vals["Z"].text, f"incremental Z in {gname} before any R point",
-                      "an R word on this or an earlier cycle block (G91 Z counts from the R point)")
-        z = vals["Z"].value * scale
-        st.cycle_bottom = z if st.absolute else st.cycle_r + z  # type: ignore[operator]
+        st.cycle_bottom = LevelWord(vals["Z"].value * scale, not st.absolute)
     if "Q" in vals:
         q = vals["Q"]
         if q.value <= 0.0:
@@ -857,17 +1182,17 @@ def _canned_cycle(st: _State, vals: dict[str, Word], code: int | None, line: int
         raise err(gname, f"canned cycle {gname} without a hole bottom Z", "a Z word on this or an earlier cycle block")
     u = 1.0 / scale
     unit_name = "in" if scale == INCH else "mm"
-    if st.cycle_bottom >= st.cycle_r - SAME_POINT:
+    r_level, bottom = cycle_levels(st.cycle_initial, st.cycle_r, st.cycle_bottom)
+    if bottom >= r_level - SAME_POINT:
         word = "Z" + vals["Z"].text if "Z" in vals else ("R" + vals["R"].text if "R" in vals else gname)
-        raise err(word, f"hole bottom Z {_fmt(st.cycle_bottom * u)} {unit_name} is not below the R point "
-                  f"{_fmt(st.cycle_r * u)} {unit_name}", "Z below R (the cycles drill towards -Z)")
+        raise err(word, f"hole bottom Z {_fmt(bottom * u)} {unit_name} is not below the R point "
+                  f"{_fmt(r_level * u)} {unit_name}", "Z below R (the cycles drill towards -Z; under G91 "
+                  "R counts from the initial level and Z from the R point)")
     assert st.cycle is not None
     if st.cycle in (73, 83) and st.cycle_q is None:
         raise err(gname, f"{gname} without a peck depth Q", "Q > 0 on this or an earlier cycle block")
-    if st.feed is None:
-        raise err(gname, f"canned cycle {gname} with no feed rate (F was never set)",
-                  "an F word on this or an earlier block")
-    pecks = 1 if st.cycle not in (73, 83) else math.ceil((st.cycle_r - st.cycle_bottom) / st.cycle_q - 1e-9)
+    feed, per_rev = _block_feed(st, err, gname, f"canned cycle {gname}")
+    pecks = 1 if st.cycle not in (73, 83) else math.ceil((r_level - bottom) / st.cycle_q - 1e-9)
     moves = repeat * (3 * pecks + 4)
     if moves > MAX_CYCLE_MOVES:
         raise err("Q" + vals["Q"].text if "Q" in vals else gname,
@@ -876,7 +1201,7 @@ def _canned_cycle(st: _State, vals: dict[str, Word], code: int | None, line: int
     off = st.work_offset()
     tool = st.tool_length()
     z_off = off[2] + tool
-    levels = (st.cycle_initial + z_off, st.cycle_r + z_off, st.cycle_bottom + z_off)
+    levels = (st.cycle_initial + z_off, r_level + z_off, bottom + z_off)
     for _ in range(repeat):
         for a in "XY":
             if a in vals:
@@ -884,14 +1209,16 @@ def _canned_cycle(st: _State, vals: dict[str, Word], code: int | None, line: int
                 v = vals[a].value * scale
                 st.prog[i] = v if st.absolute else st.prog[i] + v
         hole = Hole(code=st.cycle, line=line, x=st.prog[0] + off[0], y=st.prog[1] + off[1], initial=levels[0],
-                    r_level=levels[1], bottom=levels[2], return_to_initial=st.return_initial, feed=st.feed,
+                    r_level=levels[1], bottom=levels[2], return_to_initial=st.return_initial, feed=feed,
                     feed_line=st.feed_line, peck=st.cycle_q, dwell=st.cycle_dwell,
                     spindle=(st.speed, st.direction, st.speed_line))
         try:
             blocks, end = expand_hole(hole, tuple(st.machine), st.settings.cycles)  # type: ignore[arg-type]
         except CycleError as exc:
             raise err(exc.word, exc.problem, exc.expected) from None
+        if per_rev:  # G95: the feed blocks keep their feed per revolution (spindle overrides rescale them)
+            blocks = [replace(b, feed_per_rev=per_rev) if isinstance(b, Linear) else b for b in blocks]
         out.extend(blocks)
         st.machine = list(end)
         st.applied_tool = tool
-        st.prog[2] = st.cycle_initial if st.return_initial else st.cycle_r
+        st.prog[2] = st.cycle_initial if st.return_initial else r_level

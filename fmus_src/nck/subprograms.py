@@ -14,6 +14,16 @@ M30, and then the subprograms, each ``O<n>`` ... ``M99``, before the closing ``%
 * ``M98 P<n>`` calls O<n> once, ``M98 P<n> L<k>`` k times (1..9999), and the FANUC packed form ``M98
   P<kkkk><nnnn>`` (more than 4 digits: the last 4 are the program number, the leading ones the repeat count;
   ``P21001`` calls O1001 twice). L together with a packed P is an error.
+* ``M99`` returns to the block after the M98; ``M99 P<seq>`` (FANUC) to the block with the sequence number
+  ``N<seq>`` in the calling program (the main program up to its end, or the calling subprogram): the first
+  such block from the top of that program. While repeats of an ``M98 ... L<k>`` remain, M99 (with or
+  without P) runs the subprogram again; P takes effect at the last return. A missing N<seq> is an error, and
+  so is a jump that makes the program endless (the same return with the same calls active again: the program
+  has no conditions, so it would repeat forever).
+* Subprograms written *before* the main program (``O2000 ... M99`` then ``O1000 ... M30``) are not
+  supported: the CAM posts the twin reads (Fusion 360's FANUC post, Mastercam) write the main program first
+  and its subprograms after M30, and a file is executed from its first line, so such a file stops at the
+  first subprogram's M99 with an error saying where the subprograms must go.
 """
 from __future__ import annotations
 
@@ -31,6 +41,8 @@ MAX_PROGRAM_NUMBER = 9999
 MAX_CALL_REPEAT = 9999
 #: Most source lines executed inside subprograms per program (guards against L9999 nested 10 deep).
 MAX_CALLED_LINES = 2_000_000
+#: Largest sequence number N of an M99 P<seq> jump (FANUC: 5 digits).
+MAX_SEQUENCE = 99999
 
 
 @dataclass(frozen=True)
@@ -58,6 +70,13 @@ class Call:
 
     number: int
     repeats: int
+
+
+@dataclass(frozen=True)
+class Return:
+    """An M99 block: back to the block after the M98, or (``sequence`` set) to the caller's block N<sequence>."""
+
+    sequence: int | None = None
 
 
 def _has_m(words: Sequence[Word], codes: tuple[float, ...]) -> bool:
@@ -90,17 +109,11 @@ def index_subprograms(lines: Sequence[str], first: int, file: str, block_delete:
         A malformed main-program line before its end, a malformed line inside a subprogram, an ``O`` line, a
         ``%`` or the end of the file before a subprogram's M99, an invalid or repeated program number.
     """
-    i = first
     n = len(lines)
-    while i < n:  # the main program's end
-        lexed = _lex(lines[i], i, file)
-        i += 1
-        if lexed.percent:
-            break
-        if _has_m(lexed.words, (2.0, 30.0)) and not (lexed.block_delete and block_delete):
-            break
-    else:
+    end = main_program_end(lines, first, file, block_delete)
+    if end is None:
         return {}
+    i = end + 1
     found: dict[int, Subprogram] = {}
     while i < n:
         try:
@@ -133,6 +146,86 @@ def index_subprograms(lines: Sequence[str], first: int, file: str, block_delete:
                 break
         found[number] = Subprogram(number, start, i - 1)
     return found
+
+
+def main_program_end(lines: Sequence[str], first: int, file: str, block_delete: bool) -> int | None:
+    """0-based index of the main program's end: its first M30/M2 block or ``%`` at or after line ``first``.
+
+    Parameters
+    ----------
+    lines : sequence of str
+        The program's source lines.
+    first : int
+        0-based index of a main-program line to start from.
+    file : str
+        Name used in error messages.
+    block_delete : bool
+        Block delete switch (a ``/M30`` block is skipped when True).
+
+    Returns
+    -------
+    int or None
+        None when the file ends without M30/M2 or ``%``.
+
+    Raises
+    ------
+    GCodeError
+        A malformed line before the end.
+    """
+    for i in range(first, len(lines)):
+        lexed = _lex(lines[i], i, file)
+        if lexed.percent:
+            return i
+        if _has_m(lexed.words, (2.0, 30.0)) and not (lexed.block_delete and block_delete):
+            return i
+    return None
+
+
+def next_program_start(lines: Sequence[str], first: int) -> int | None:
+    """0-based index of the first ``O<n>`` line at or after line ``first``, if it comes before any M30/M2 or
+    ``%`` (lines that do not lex are passed over): after an M99 of the main program, it means that subprograms
+    were written before the main program."""
+    for i in range(max(first, 0), len(lines)):
+        try:
+            lexed = lex_line(lines[i])
+        except LexError:
+            continue
+        if lexed.percent or _has_m(lexed.words, (2.0, 30.0)):
+            return None
+        if lexed.words and lexed.words[0].letter == "O":
+            return i
+    return None
+
+
+def find_sequence(lines: Sequence[str], first: int, last: int, sequence: int) -> int | None:
+    """0-based index of the first line in ``lines[first:last + 1]`` whose block has the word N<sequence>.
+
+    Lines that do not lex are passed over (they raise their own error if they are executed).
+    """
+    for i in range(max(first, 0), min(last, len(lines) - 1) + 1):
+        try:
+            lexed = lex_line(lines[i])
+        except LexError:
+            continue
+        if any(w.letter == "N" and not w.has_point and w.value == sequence for w in lexed.words):
+            return i
+    return None
+
+
+def read_return(p: Word | None, err: Callable[[str, str, str], GCodeError]) -> Return:
+    """The return of an M99 block: plain, or ``M99 P<seq>`` to the caller's block N<seq>.
+
+    Raises
+    ------
+    GCodeError
+        A P that is not a sequence number 0..99999 (an integer).
+    """
+    if p is None:
+        return Return()
+    if p.has_point or p.value < 0 or p.value > MAX_SEQUENCE:
+        raise err("P" + p.text, f"M99 P{p.text}: P is not a sequence number",
+                  f"M99 P<n> with an integer n in 0..{MAX_SEQUENCE} (return to the caller's block N<n>) or M99 alone")
+    return Return(int(p.value))
 
 
 def _lex(raw: str, i: int, file: str) -> LexedLine:

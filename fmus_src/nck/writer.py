@@ -15,6 +15,10 @@ Rules
   an empty change set returns the input byte for byte.
 * A line that is not a block (empty, comment only, ``%``) cannot take a word:
   :class:`GCodeError`.
+* An F word under G95 (feed per revolution, mm/rev or in/rev) is not
+  rewritten from a feed in mm/min: :class:`GCodeError` naming the line
+  (the optimiser refuses G95 cutting lines for the same reason). S words on
+  such lines are rewritten as usual (the feed then follows the new S).
 """
 from __future__ import annotations
 
@@ -103,6 +107,7 @@ def rewrite_program(text: str, feed_by_line: Mapping[int, float] | None = None,
     lines = split_lines(text, keepends=True)
     targets = sorted(set(feed_by_line) | set(spindle_by_line))
     inch_at = _inch_mode(lines, targets, file) if feed_by_line else {}
+    per_rev = _per_rev_lines(lines, sorted(feed_by_line), file) if feed_by_line else set()
     for number in targets:
         if number < 1 or number > len(lines):
             raise GCodeError(file, number, "", f"a line number in 1..{len(lines)}", f"line {number} does not exist")
@@ -117,6 +122,10 @@ def rewrite_program(text: str, feed_by_line: Mapping[int, float] | None = None,
         if number in feed_by_line:
             value = float(feed_by_line[number])
             _check(value, number, "F", file, body)
+            if number in per_rev:
+                raise GCodeError(file, number, "F", "an F word of a G94 line (feed per minute)",
+                                 "the F word of this line is a feed per revolution (G95): a feed in mm/min "
+                                 "cannot be written there", body.strip())
             inch = inch_at.get(number, False)
             edits.append(("F", value / MM_PER_INCH if inch else value,
                           FEED_DECIMALS_INCH if inch else FEED_DECIMALS_MM, True))
@@ -176,3 +185,33 @@ def _inch_mode(lines: list[str], targets: list[int], file: str) -> dict[int, boo
         if number in wanted:
             state[number] = inch
     return state
+
+
+def per_revolution_lines(text: str, lines: list[int] | tuple[int, ...], file: str = "<text>") -> set[int]:
+    """The given 1-based lines on which G95 (feed per revolution) is in effect (a G94/G95 on the line counts).
+
+    Raises
+    ------
+    GCodeError
+        A line up to the last one asked for is malformed.
+    """
+    targets = sorted(set(int(n) for n in lines))
+    return _per_rev_lines(split_lines(text, keepends=True), targets, file) if targets else set()
+
+
+def _per_rev_lines(lines: list[str], targets: list[int], file: str) -> set[int]:
+    """Target lines under G95, in file order (as :func:`_inch_mode`; a subprogram inherits nothing here)."""
+    if not targets or not any("95" in ln for ln in lines):
+        return set()
+    out: set[int] = set()
+    per_rev = False
+    wanted = set(targets)
+    for number, full in enumerate(lines, start=1):
+        if number > targets[-1]:
+            break
+        for w in _lex(full.rstrip("\r\n"), number, file).words:
+            if w.letter == "G" and w.value in (94.0, 95.0):
+                per_rev = w.value == 95.0
+        if number in wanted and per_rev:
+            out.add(number)
+    return out

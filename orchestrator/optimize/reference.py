@@ -107,6 +107,10 @@ def build_reference(case: Case, program_text: str | None = None, ranges: Ranges 
     blocks = twin.nck.blocks_
     removed = removed_volume_by_line(run.recording)
     lines, s_lines, pins, f0, s0 = classify_lines(blocks, removed, min_removed_mm3)
+    per_rev = sorted({b.line for b in blocks if getattr(b, "feed_per_rev", 0.0) > 0.0} & (set(lines) | set(pins)))
+    if per_rev:  # the feed genes are mm/min; an F word in mm/rev is not rewritten (fmus_src.nck.writer)
+        raise OptimizeError(f"{case.program}:{per_rev[0]}: feed per revolution (G95) on a line whose feed the "
+                            "optimiser would change; expected G94 feeds (F in mm/min) on the cutting lines")
     inch = frozenset(inch_lines(text, list(lines) + list(pins), file=str(case.program)))  # F words in in/min
     ctx = ProblemContext(case, text, np.asarray(lines, int), np.asarray(s_lines, int), pins, np.asarray(f0, float),
                          np.asarray(s0, float), ranges, float(load_limit_N), removed, step, time_limit_s,
