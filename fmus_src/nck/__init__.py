@@ -23,9 +23,10 @@ from .blocks import (
 )
 from .component import NCKernel
 from .errors import GCodeError, NCParameterError
-from .interpreter import EXTERNAL_OFFSET, InterpreterSettings, additional_offset_key, interpret
+from .interpreter import interpret
 from .params import NCParams
 from .planner import BatchPlan, MemberPlan, build_schedule, plan_batch, plan_member
+from .settings import EXTERNAL_OFFSET, InterpreterSettings, additional_offset_key
 from .source import read_program
 from .writer import rewrite_program
 

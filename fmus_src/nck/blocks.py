@@ -14,6 +14,8 @@ Vec3 = tuple[float, float, float]
 
 #: Axis indices (first in-plane axis, second in-plane axis, normal axis) of each plane.
 PLANE_AXES: dict[str, tuple[int, int, int]] = {"XY": (0, 1, 2), "ZX": (2, 0, 1), "YZ": (1, 2, 0)}
+#: Index of an axis letter in a :data:`Vec3`.
+AXIS_INDEX: dict[str, int] = {"X": 0, "Y": 1, "Z": 2}
 
 
 @dataclass(frozen=True, slots=True)

@@ -19,11 +19,12 @@ from ..component import Component, ComponentError, Variable
 from .blocks import Block, Program
 from .cycles import CycleMachine
 from .errors import NCParameterError
-from .interpreter import DEFAULT_REFERENCE, InterpreterSettings, interpret
+from .interpreter import interpret
 from .overrides import apply_overrides
 from .params import NCParams
 from .planner import BatchPlan, build_schedule, plan_batch
 from .sampling import sample_position
+from .settings import DEFAULT_REFERENCE, InterpreterSettings
 from .source import read_program
 
 #: Number of tool length offset parameters ``tool_length_1 .. tool_length_N`` (H1..HN).

@@ -1,6 +1,8 @@
 """Errors of the NC kernel (dependency-free, shipped inside FMUs)."""
 from __future__ import annotations
 
+from typing import Callable
+
 from ..errors import CncTwinError
 
 
@@ -48,6 +50,16 @@ class GCodeError(CncTwinError):
             block = f"{block[:_QUOTE_LIMIT]}... ({len(block)} characters)"
         quoted = f" '{block}':" if block else ""
         super().__init__(f"{where}:{quoted} {problem}; expected {expected}")
+
+
+#: Builds the :class:`GCodeError` of one block from ``(word, problem, expected)``; the interpreter makes one per
+#: block (file, line and block text bound) and passes it to the modules that check the block's words.
+ErrorFactory = Callable[[str, str, str], GCodeError]
+
+
+def fmt_number(value: float) -> str:
+    """A number as quoted in messages: 6 significant digits (``0.5``, ``99999.9``, ``1e-06``)."""
+    return f"{value:.6g}"
 
 
 class NCParameterError(CncTwinError):

@@ -9,6 +9,8 @@ Rules (FANUC milling dialect):
 * A word is a letter (either case) followed by a number; blanks between the
   letter and the number are allowed. Numbers: optional sign, digits with an
   optional decimal point (``10``, ``10.``, ``-.5``).
+* Lines end at LF, CRLF or CR only (form feed, U+2028 etc. stay in the line
+  and are rejected as unexpected characters), so line numbers match editors.
 """
 from __future__ import annotations
 

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from fmus_src.cutting.table import EngagementTable
-from fmus_src.nck.interpreter import MM, RPM
+from fmus_src.nck.settings import MM, RPM
 
 from ..case import Case
 from ..compiled import compiled_support

@@ -40,7 +40,7 @@ import numpy as np
 from fmus_src.cutting.table import EngagementTable
 
 from fmus_src.nck.blocks import Arc, Block, Linear, SpindleSpeed, SpindleStop, ToolChange
-from fmus_src.nck.interpreter import INCH, MM, RPM
+from fmus_src.nck.settings import INCH, MM, RPM
 from fmus_src.nck.writer import MM_PER_INCH, feed_word_value, rewrite_program
 
 from ..case import Case

@@ -1,0 +1,62 @@
+"""Spindle, tool and coolant words of a block: S, T, M3/M4/M5, M6, M7/M8/M9 → typed blocks.
+
+Conventions
+-----------
+* S is the commanded spindle speed in rev/min (modal, kept through M5); M3/M4 start the spindle clockwise /
+  counter-clockwise at it, M5 stops it; an S without M3/M4/M5 changes the speed in the current direction.
+* T selects a tool (0..:data:`.input_ranges.MAX_TOOL`), M6 changes to the selected one.
+* M7/M8 switch the coolant on, M9 off.
+* Order within a block: tool change, spindle, coolant (then the modes and the motion of the block).
+"""
+from __future__ import annotations
+
+from .blocks import Block, Coolant, SpindleSpeed, SpindleStop, ToolChange
+from .codes import MWords, ValueWords
+from .errors import ErrorFactory
+from .input_ranges import MAX_TOOL
+from .modal import ModalState
+from .settings import RPM
+
+
+def read_speed_and_tool(st: ModalState, vals: ValueWords, line: int, err: ErrorFactory) -> None:
+    """Set the modal spindle speed (S, rad/s) and the selected tool (T) of ``line``.
+
+    Raises the error of ``err`` for a negative S and a T that is not an integer in 0..MAX_TOOL.
+    """
+    if "S" in vals:
+        s = vals["S"].value
+        if s < 0.0:
+            raise err("S" + vals["S"].text, f"spindle speed S{vals['S'].text} is negative", "S >= 0 (rpm)")
+        st.speed = s * RPM
+        st.speed_line = line
+    if "T" in vals:
+        t = vals["T"]
+        if t.has_point or t.value < 0 or t.value > MAX_TOOL:
+            raise err("T" + t.text, f"tool number T{t.text} is not an integer in 0..{MAX_TOOL}", "T0, T1, T2, ...")
+        st.tool_selected = int(t.value)
+
+
+def auxiliary_blocks(st: ModalState, ms: MWords, vals: ValueWords, line: int, err: ErrorFactory,
+                     out: list[Block]) -> None:
+    """Append the :class:`ToolChange`, spindle and :class:`Coolant` blocks of ``line`` to ``out``.
+
+    Raises the error of ``err`` for M6 with no tool selected.
+    """
+    if "tool change" in ms:
+        if st.tool_selected is None:
+            raise err("M6", "M6 with no tool selected", "a T word on this or an earlier block")
+        out.append(ToolChange(line, st.tool_selected))
+    if "spindle" in ms:
+        code = ms["spindle"][0]
+        if code == 5:
+            st.direction = 0
+            out.append(SpindleStop(line))
+            if "S" in vals:
+                out.append(SpindleSpeed(line, st.speed, 0, st.speed_line))
+        else:
+            st.direction = 1 if code == 3 else -1
+            out.append(SpindleSpeed(line, st.speed, st.direction, st.speed_line))
+    elif "S" in vals:
+        out.append(SpindleSpeed(line, st.speed, st.direction, st.speed_line))
+    if "coolant" in ms:
+        out.append(Coolant(line, ms["coolant"][0] != 9))

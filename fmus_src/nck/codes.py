@@ -1,0 +1,162 @@
+"""The G and M codes and addresses the interpreter knows: modal groups, rejections, and the words of one block.
+
+Accepted as no-ops, because they cancel features that are never switched on
+(CAM posts emit them in safe-start lines): G15 (polar coordinates cancel),
+G50 (scaling cancel; a mill: G50 with X/Y/Z/S, the lathe meaning, is an
+error), G50.1 (programmable mirror image cancel), G69 (coordinate rotation
+cancel), G67 (macro modal call cancel), G13.1 (polar interpolation cancel).
+Rejected with a :class:`GCodeError`: the codes switching those features on
+(G16, G51, G51.1, G68, G66, G65, G12.1), cutter compensation G41/G42 with a
+nonzero radius (see :mod:`.compensation`), tapping cycles G74/G84, G76/G87/G88,
+G29, and every other G/M code or address.
+
+Conventions
+-----------
+* Decimal G codes (``G50.1``, ``G13.1``) are single codes; the lexer reads
+  them as one number.
+* At most one G code of each modal group and one M code of each kind per block; every other address at most
+  once per block.
+"""
+from __future__ import annotations
+
+from typing import Sequence
+
+from .cycles import CYCLES
+from .errors import ErrorFactory
+from .lexer import Word
+
+#: The G words of a block by modal group: group -> (code, word).
+GWords = dict[str, tuple[int, Word]]
+#: The M words of a block by kind: kind -> (code, word).
+MWords = dict[str, tuple[int, Word]]
+#: The other words of a block by address letter.
+ValueWords = dict[str, Word]
+
+# G code -> modal group
+G_GROUP: dict[int | float, str] = {
+    0: "motion", 1: "motion", 2: "motion", 3: "motion",
+    4: "non-modal", 28: "non-modal", 30: "non-modal", 53: "non-modal",
+    10: "non-modal",
+    9: "exact stop",
+    17: "plane", 18: "plane", 19: "plane",
+    20: "units", 21: "units",
+    40: "cutter compensation", 41: "cutter compensation", 42: "cutter compensation",
+    43: "tool length", 44: "tool length", 49: "tool length",
+    54: "work offset", 55: "work offset", 56: "work offset", 57: "work offset", 58: "work offset",
+    59: "work offset", 54.1: "work offset",
+    61: "path mode", 64: "path mode",
+    80: "canned cycle", **{c: "canned cycle" for c in CYCLES},
+    90: "distance", 91: "distance",
+    94: "feed mode", 95: "feed mode",
+    # look-ahead / contour-control modes (accepted, see lookahead_codes)
+    5.1: "look-ahead", 8: "look-ahead", 5: "look-ahead",
+    98: "return level", 99: "return level",
+    # cancel codes of features never switched on: accepted as no-ops
+    15: "polar coordinates", 50: "scaling", 50.1: "mirror image", 69: "coordinate rotation",
+    67: "macro modal call", 13.1: "polar interpolation",
+}
+#: Known G codes the twin does not execute -> why.
+G_REJECT: dict[int | float, str] = {
+    74: "tapping cycle G74 is not supported (needs rigid tapping with the feed per revolution)",
+    84: "tapping cycle G84 is not supported (needs rigid tapping with the feed per revolution)",
+    76: "fine boring cycle G76 is not supported (needs spindle orientation and a tool shift)",
+    87: "back boring cycle G87 is not supported (needs spindle orientation and a tool shift)",
+    88: "boring cycle G88 is not supported (needs a manual operation at the hole bottom)",
+    16: "polar coordinate command G16 is not supported (only its cancel G15)",
+    51: "scaling G51 is not supported (only its cancel G50)",
+    51.1: "programmable mirror image G51.1 is not supported (only its cancel G50.1)",
+    68: "coordinate rotation G68 is not supported (only its cancel G69)",
+    65: "macro call G65 is not supported",
+    66: "macro modal call G66 is not supported (only its cancel G67)",
+    12.1: "polar coordinate interpolation G12.1 is not supported (only its cancel G13.1)",
+    29: "return from the reference position G29 is not supported (program the move back with G0)",
+}
+# M code -> kind
+M_GROUP: dict[int, str] = {
+    0: "stop", 1: "stop", 2: "end", 30: "end", 3: "spindle", 4: "spindle", 5: "spindle", 6: "tool change",
+    7: "coolant", 8: "coolant", 9: "coolant", 98: "subprogram", 99: "subprogram",
+}
+SUPPORTED_G = ("G0 G1 G2 G3 G4 G5 G5.1 G8 G9 G10 G13.1 G15 G17 G18 G19 G20 G21 G28 G30 G40 G41 G42 G43 G44 G49 G50 "
+               "G50.1 G53 G54-G59 G54.1 G61 G64 G67 G69 G73 G80 G81 G82 G83 G85 G86 G89 G90 G91 G94 G95 G98 G99")
+SUPPORTED_M = "M0 M1 M2 M3 M4 M5 M6 M7 M8 M9 M30 M98 M99"
+#: Address letters of the dialect.
+LETTERS = set("GMXYZIJKRFSTHDPQNOL")
+
+
+def g_code(w: Word) -> int | float | None:
+    """The code of a G word: an int (``G01``, ``G1.``), a one-decimal float (``G50.1``), else None."""
+    if w.value < 0:
+        return None
+    if w.value == int(w.value):
+        return int(w.value)
+    tenths = round(w.value * 10.0)
+    if abs(w.value * 10.0 - tenths) < 1e-9:
+        return tenths / 10.0
+    return None
+
+
+def integer_code(w: Word) -> int | None:
+    """The code number of a G/M word if it is a non-negative integer (``G01``, ``G1.``), else None."""
+    if w.value < 0 or w.value != int(w.value):
+        return None
+    return int(w.value)
+
+
+def group_words(words: Sequence[Word], err: ErrorFactory) -> tuple[GWords, MWords, ValueWords]:
+    """Sort the words of a block into G codes by modal group, M codes by kind and the other words by letter.
+
+    Raises the error of ``err`` for an unknown address, an unsupported or rejected G/M code, two codes of one
+    group and an address given twice.
+    """
+    gs: GWords = {}
+    ms: MWords = {}
+    vals: ValueWords = {}
+    for w in words:
+        if w.letter not in LETTERS:
+            raise err(w.letter + w.text, f"address {w.letter} is not supported",
+                      "one of the addresses " + " ".join(sorted(LETTERS)))
+        if w.letter == "G":
+            code = g_code(w)
+            if code is None or (code not in G_GROUP and code not in G_REJECT):
+                raise err("G" + w.text, f"G code G{w.text} is not supported", f"one of {SUPPORTED_G}")
+            if code in G_REJECT:
+                raise err("G" + w.text, G_REJECT[code], f"one of {SUPPORTED_G}")
+            group = G_GROUP[code]
+            if group in gs and gs[group][0] != code:
+                raise err("G" + w.text, f"G{gs[group][0]} and G{code} are both in modal group '{group}'",
+                          "at most one G code of each modal group per block")
+            gs[group] = (code, w)  # type: ignore[assignment]
+        elif w.letter == "M":
+            mcode = integer_code(w)
+            if mcode is None or mcode not in M_GROUP:
+                raise err("M" + w.text, f"M code M{w.text} is not supported", f"one of {SUPPORTED_M}")
+            kind = M_GROUP[mcode]
+            if kind in ms and ms[kind][0] != mcode:
+                raise err("M" + w.text, f"M{ms[kind][0]} and M{mcode} conflict in one block",
+                          "at most one M code of each kind per block")
+            ms[kind] = (mcode, w)
+        else:
+            if w.letter in vals:
+                raise err(w.letter + w.text, f"word {w.letter} appears twice", f"at most one {w.letter} word per block")
+            vals[w.letter] = w
+    return gs, ms, vals
+
+
+def check_stray_words(gs: GWords, vals: ValueWords, err: ErrorFactory) -> None:
+    """L outside M98/G10 and G50 with X/Y/Z/I/J/K/P/S (the lathe's G50) are errors; call after M98 took its P/L."""
+    if "L" in vals and gs.get("non-modal", (None,))[0] != 10:
+        raise err("L" + vals["L"].text, "word L outside an M98 block", "L only as the repeat count of M98 P<n> L<k>")
+    if "scaling" in gs:
+        for a in "XYZIJKPS":
+            if a in vals:
+                raise err(a + vals[a].text, f"word {a} with G50: on a mill G50 only cancels scaling "
+                          "(G50 with X/Z/S is the lathe's coordinate setting or spindle clamp)", "G50 alone")
+
+
+def check_sequence_words(vals: ValueWords, err: ErrorFactory) -> None:
+    """N (sequence number) and O (program number) words must be non-negative integers."""
+    for letter in ("N", "O"):
+        if letter in vals and (vals[letter].has_point or vals[letter].value < 0):
+            w = vals[letter]
+            raise err(letter + w.text, f"{letter}{w.text} is not a non-negative integer",
+                      f"{letter} followed by digits")

@@ -1,0 +1,134 @@
+"""Motion G0-G3 of a block: rapid positioning, linear and circular interpolation → typed blocks.
+
+Conventions
+-----------
+* G0 rapid, G1 linear, G2/G3 arcs (clockwise/counter-clockwise in the plane of G17/G18/G19) by R, negative R
+  for > 180 deg, or by I/J/K (incremental from the start point) incl. full circles (end point = start point).
+  The radii at start and end of an I/J/K arc may differ by at most :data:`ARC_RADIUS_TOLERANCE` (FANUC alarm
+  PS0020 style).
+* G61 (modal) and G9 (one block): the feed block decelerates to rest at its
+  end and the next block starts after the in-position check; G64 cancels G61.
+  Rapids always end with an exact stop.
+"""
+from __future__ import annotations
+
+import math
+
+from .blocks import AXIS_INDEX, PLANE_AXES, Arc, Block, Linear, Rapid, Vec3
+from .codes import ValueWords
+from .errors import ErrorFactory, fmt_number
+from .feed import block_feed
+from .modal import ModalState
+from .settings import INCH, MM
+
+#: Tolerance on the radius difference of an I/J/K arc (FANUC alarm PS0020 style), m.
+ARC_RADIUS_TOLERANCE = 0.002e-3
+#: End points closer than this are the same point (full circle), m.
+SAME_POINT = 1e-9
+#: Index of an arc-centre word in a :data:`Vec3`.
+CENTRE_INDEX = {"I": 0, "J": 1, "K": 2}
+
+
+def programmed_move(st: ModalState, vals: ValueWords, g9: bool, line: int, err: ErrorFactory, unit_name: str,
+                    out: list[Block]) -> None:
+    """G0-G3 of a block (the modal motion ``st.motion``): append its :class:`Rapid`, :class:`Linear` or
+    :class:`Arc` to ``out`` (nothing when the block names no axis).
+
+    Parameters
+    ----------
+    st : ModalState
+        Modal state; its programmed and machine positions move to the end point.
+    vals : ValueWords
+        The block's X Y Z I J K R words.
+    g9 : bool
+        One-shot exact stop G9 in this block.
+    line : int
+        1-based source line of the block.
+    err : ErrorFactory
+        Builds the error for this block.
+    unit_name : str
+        ``"mm"`` or ``"in"``, for messages.
+    out : list of Block
+        The program's blocks so far.
+    """
+    exact = g9 or st.exact_stop
+    axes = [a for a in "XYZ" if a in vals]
+    centre = [c for c in "IJK" if c in vals]
+    has_r = "R" in vals
+    is_arc = st.motion in (2, 3)
+    if (centre or has_r) and not is_arc:
+        w = vals[(centre or ["R"])[0]]
+        raise err(w.letter + w.text, f"word {w.letter} without G2/G3", "I, J, K or R only in circular interpolation")
+    if not axes and not (is_arc and centre):
+        if has_r:
+            raise err("R" + vals["R"].text, "R given without an end point", "X/Y/Z end point with R")
+        return
+    scale = st.scale
+    start: Vec3 = tuple(st.machine)  # type: ignore[assignment]
+    off = st.work_offset()
+    tool = st.tool_length()
+    for a in axes:
+        i = AXIS_INDEX[a]
+        v = vals[a].value * scale
+        st.prog[i] = v if st.absolute else st.prog[i] + v
+        st.machine[i] = st.prog[i] + off[i] + (tool if i == 2 else 0.0)
+        if i == 2:
+            st.applied_tool = tool
+    end: Vec3 = tuple(st.machine)  # type: ignore[assignment]
+    if st.motion == 0:
+        out.append(Rapid(line, start, end))
+        return
+    feed, per_rev = block_feed(st, err, f"G{st.motion}", f"G{st.motion} feed move")
+    if st.motion == 1:
+        out.append(Linear(line, start, end, feed, st.feed_line, exact, per_rev))
+        return
+    i1, i2, i3 = PLANE_AXES[st.plane]
+    plane_letters = {"XY": "IJ", "ZX": "KI", "YZ": "JK"}[st.plane]
+    clockwise = st.motion == 2
+    gname = f"G{st.motion}"
+    u = 1.0 / (INCH if scale == INCH else MM)  # SI -> program units for messages
+    d1, d2 = end[i1] - start[i1], end[i2] - start[i2]
+    chord = math.hypot(d1, d2)
+    if has_r:
+        rw = vals["R"]
+        r = rw.value * scale
+        if chord <= SAME_POINT:
+            raise err("R" + rw.text, "an arc given by R cannot end at its start point",
+                      "I/J/K for a full circle, or an end point different from the start")
+        half = 0.5 * chord
+        if abs(r) < half - ARC_RADIUS_TOLERANCE:
+            raise err("R" + rw.text, f"arc radius {fmt_number(abs(r) * u)} {unit_name} is smaller than half the chord "
+                      f"({fmt_number(half * u)} {unit_name})", f"R >= {fmt_number(half * u)}")
+        h = math.sqrt(max(r * r - half * half, 0.0))
+        side = (1.0 if not clockwise else -1.0) * (1.0 if r > 0 else -1.0)
+        c = [0.0, 0.0, 0.0]
+        c[i1] = start[i1] + 0.5 * d1 - side * h * d2 / chord
+        c[i2] = start[i2] + 0.5 * d2 + side * h * d1 / chord
+        c[i3] = start[i3]
+        out.append(Arc(line, start, end, tuple(c), st.plane, clockwise, feed, st.feed_line,  # type: ignore[arg-type]
+                       exact_stop=exact, feed_per_rev=per_rev))
+        return
+    if not centre:
+        raise err(gname, f"{gname} without R or I/J/K", f"R or {plane_letters[0]}/{plane_letters[1]} for the centre")
+    for cl in centre:
+        if cl not in plane_letters:
+            raise err(cl + vals[cl].text, f"centre word {cl} is not in the {st.plane} plane",
+                      f"{plane_letters[0]} and {plane_letters[1]} in G{ {'XY': 17, 'ZX': 18, 'YZ': 19}[st.plane]}")
+    c = list(start)
+    for cl in centre:
+        c[CENTRE_INDEX[cl]] = start[CENTRE_INDEX[cl]] + vals[cl].value * scale
+    r1 = math.hypot(start[i1] - c[i1], start[i2] - c[i2])
+    if r1 <= SAME_POINT:
+        raise err(gname, "arc centre coincides with the start point", "a non-zero radius from I/J/K")
+    if chord <= SAME_POINT:
+        end_l = list(end)
+        end_l[i1], end_l[i2] = start[i1], start[i2]
+        end = tuple(end_l)  # type: ignore[assignment]
+        st.machine[i1], st.machine[i2] = start[i1], start[i2]
+    r2 = math.hypot(end[i1] - c[i1], end[i2] - c[i2])
+    if abs(r2 - r1) > ARC_RADIUS_TOLERANCE:
+        raise err(gname, f"end point is {fmt_number(r2 * u)} {unit_name} from the centre but the start is "
+                  f"{fmt_number(r1 * u)} {unit_name} (difference {fmt_number(abs(r2 - r1) * u)} {unit_name})",
+                  f"start and end radii equal within {fmt_number(ARC_RADIUS_TOLERANCE * u)} {unit_name}")
+    out.append(Arc(line, start, end, tuple(c), st.plane, clockwise, feed, st.feed_line,  # type: ignore[arg-type]
+                   exact_stop=exact, feed_per_rev=per_rev))

@@ -1,0 +1,143 @@
+"""Work offsets of a block: G54-G59, G54.1 Pn (G54 Pn) and G10 programmable data input of work and tool offsets.
+
+Conventions
+-----------
+* Additional work coordinate systems (FANUC 0i-MF/31i-B option):
+  ``G54.1 P<n>`` and its alternate form ``G54 P<n>``, n = 1..48, select a
+  work offset like G54-G59 (modal, group 14); its value is
+  ``work_offsets[additional_offset_key(n)]`` (key 1000 + n, zero when
+  missing). G54.1 without P, P outside 1..48 or with a decimal point, and
+  G54.1 in a block where P means something else (G4, G10, M98, a canned
+  cycle) are errors (FANUC takes G54.1 without P as P1; the twin asks for
+  it). ``G54 P<n>`` in such a block is plain G54 (P keeps its meaning there).
+* External workpiece zero point offset (``work_offsets[EXTERNAL_OFFSET]``,
+  key 0, set by ``G10 L2 P0``): added to every work coordinate system
+  (G54-G59 and G54.1 Pn), never to G53/G28 machine positions.
+* G10 programmable data input (non-modal, no motion; tool offset memory C):
+  ``G10 L2 P<p> X Y Z`` sets the work offset G54..G59 (p = 1..6) or the
+  external offset (p = 0); ``G10 L20 P<n> X Y Z`` sets G54.1 Pn;
+  ``G10 L10/L11 P<n> R`` the geometry/wear of tool length offset Hn and
+  ``G10 L12/L13 P<n> R`` the geometry/wear of tool radius offset Dn (the
+  offset used is geometry + wear; :attr:`InterpreterSettings.tool_lengths`
+  and ``tool_radii`` are the geometry, the wear starts at 0). Under G90 the
+  given values are set, under G91 added; axes not given keep their value;
+  values in the unit in effect (G20/G21). The change takes effect like the
+  other offset changes (:mod:`.modal`): a changed active work offset shifts the programmed
+  coordinates of the current position, a changed tool length is applied by
+  the next Z move, and a D radius made nonzero is an error when G41/G42 uses
+  it (also in the G10 block itself if G41/G42 is on with that D). Other L,
+  a missing P or data word, P out of range, words of the other form, a
+  motion G code in the block and G10 in canned-cycle mode are errors.
+"""
+from __future__ import annotations
+
+from .blocks import AXIS_INDEX
+from .codes import GWords, ValueWords
+from .compensation import RADIUS_ZERO
+from .errors import ErrorFactory
+from .modal import ModalState
+from .settings import EXTERNAL_OFFSET, N_ADDITIONAL_OFFSETS, additional_offset_key
+
+#: G10 L numbers: L -> what it sets.
+G10_L = {2: "work offset G54-G59 (P1-P6) or the external offset (P0)", 20: "additional work offset G54.1 Pn",
+         10: "tool length geometry H", 11: "tool length wear H", 12: "tool radius geometry D",
+         13: "tool radius wear D"}
+
+
+def select_work_offset(st: ModalState, gs: GWords, vals: ValueWords, m98: bool, err: ErrorFactory) -> None:
+    """Make the block's G54-G59 / G54.1 Pn / G54 Pn the active work offset (``m98``: the block calls M98).
+
+    A change shifts the programmed coordinates of the current position (:meth:`ModalState.shift_work`).
+    """
+    new = work_key(st, gs, vals, m98, err)
+    if new != st.work:
+        st.work = new
+        st.shift_work()
+
+
+def work_key(st: ModalState, gs: GWords, vals: ValueWords, m98: bool, err: ErrorFactory) -> int:
+    """Work-offset key selected by the block's G54-G59 / G54.1 Pn / G54 Pn (pops the P word it uses).
+
+    ``G54 P<n>`` is the alternate form of ``G54.1 P<n>`` unless P belongs to G4, G10, M98 or a canned cycle in
+    the block; G54.1 needs its P and may not share the block with them.
+    """
+    code, gw = gs["work offset"]
+    other = None
+    drill = "canned cycle" in gs and gs["canned cycle"][0] != 80
+    cancel = "motion" in gs or gs.get("canned cycle", (None,))[0] == 80
+    if "non-modal" in gs:
+        other = "G" + gs["non-modal"][1].text
+    elif m98:
+        other = "M98"
+    elif drill:
+        other = "G" + gs["canned cycle"][1].text
+    elif st.cycle is not None and not cancel:
+        other = f"canned-cycle mode G{st.cycle}"
+    if code == 54.1:
+        if other is not None:
+            raise err("G" + gw.text, f"G54.1 and {other} in one block (the P word would have two meanings)",
+                      "G54.1 P<n> in a block without G4, G10, M98 or a canned cycle")
+        if "P" not in vals:
+            raise err("G" + gw.text, "G54.1 without P (the number of the additional work coordinate system)",
+                      f"G54.1 P1 .. G54.1 P{N_ADDITIONAL_OFFSETS}")
+    elif code != 54 or "P" not in vals or other is not None:
+        return int(code)
+    p = vals.pop("P")
+    if p.has_point or not 1 <= p.value <= N_ADDITIONAL_OFFSETS:
+        raise err("P" + p.text, f"additional work coordinate system P{p.text} does not exist",
+                  f"P1..P{N_ADDITIONAL_OFFSETS} (integers) with G{gw.text}")
+    return additional_offset_key(int(p.value))
+
+
+def program_data(st: ModalState, gs: GWords, vals: ValueWords, err: ErrorFactory) -> None:
+    """G10 programmable data input: L2/L20 work offsets, L10-L13 tool offsets (memory C); see the module
+    docstring. G90 sets the values, G91 adds them."""
+    if "motion" in gs:
+        raise err("G" + gs["motion"][1].text, "G10 and a motion G code in one block",
+                  "G10 with L, P and its data words only")
+    forms = "G10 L2 P0-P6 X Y Z, G10 L20 P1-P48 X Y Z, G10 L10/L11/L12/L13 P<n> R"
+    if "L" not in vals:
+        raise err("G10", "G10 without L (which data to set)", forms)
+    lw = vals["L"]
+    if lw.has_point or lw.value not in G10_L:
+        raise err("L" + lw.text, f"G10 L{lw.text} is not supported", forms)
+    ell = int(lw.value)
+    if "P" not in vals:
+        raise err(f"L{lw.text}", f"G10 L{ell} without P (the number of the {G10_L[ell]})", forms)
+    pw = vals["P"]
+    work = ell in (2, 20)
+    data = "XYZ" if work else "R"
+    for a in "XYZIJKRQ":
+        if a in vals and a not in data:
+            raise err(a + vals[a].text, f"word {a} in a G10 L{ell} block", f"G10 L{ell} P<n> with {' '.join(data)}")
+    given = [a for a in data if a in vals]
+    if not given:
+        raise err(f"L{lw.text}", f"G10 L{ell} without data", f"G10 L{ell} P<n> with {' or '.join(data)}")
+    if ell == 2:
+        top, first = 6, 0
+    elif ell == 20:
+        top, first = N_ADDITIONAL_OFFSETS, 1
+    else:
+        top, first = len(st.lengths if ell in (10, 11) else st.radii), 1
+    if pw.has_point or not first <= pw.value <= top:
+        raise err("P" + pw.text, f"G10 L{ell} P{pw.text}: {G10_L[ell]} number P{pw.text} does not exist",
+                  f"P{first}..P{top} (integers)")
+    p = int(pw.value)
+    if work:
+        key = additional_offset_key(p) if ell == 20 else (EXTERNAL_OFFSET if p == 0 else 53 + p)
+        xyz = list(st.offsets.get(key, (0.0, 0.0, 0.0)))
+        for a in given:
+            v = vals[a].value * st.scale
+            xyz[AXIS_INDEX[a]] = v if st.absolute else xyz[AXIS_INDEX[a]] + v
+        st.offsets[key] = tuple(xyz)  # type: ignore[assignment]
+        if key in (st.work, EXTERNAL_OFFSET):
+            st.shift_work()
+        return
+    table = st.lengths if ell in (10, 11) else st.radii
+    part = 0 if ell in (10, 12) else 1  # geometry, wear
+    v = vals["R"].value * st.scale
+    table[p - 1][part] = v if st.absolute else table[p - 1][part] + v
+    if ell in (12, 13) and st.comp != 40 and st.d == p and not abs(st.tool_radius()) <= RADIUS_ZERO:
+        raise err("R" + vals["R"].text, f"G10 L{ell} gives the active D{p} a nonzero radius while cutter "
+                  f"compensation G{st.comp} is on (the offset path is not simulated)",
+                  "tool radius offsets that stay 0 while G41/G42 is on")

@@ -1,0 +1,96 @@
+"""Machine data the interpreter needs (:class:`InterpreterSettings`) and the units of a program's numbers.
+
+Conventions
+-----------
+* Calculator-type decimal input (FANUC No. 3401#0 DPI = 1): ``X10`` is 10 mm.
+* Program units: a length word times :data:`MM` (G21) or :data:`INCH` (G20) is metres, an S word times
+  :data:`RPM` is rad/s; the writer and the optimiser use the same factors, so their numbers match the
+  interpreter's bit for bit.
+* Work-offset keys of :attr:`InterpreterSettings.work_offsets`: 54..59 for G54..G59,
+  :func:`additional_offset_key` for G54.1 Pn, :data:`EXTERNAL_OFFSET` for the external offset (what G54.1 and
+  the external offset do: :mod:`.offsets`).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Mapping, Sequence
+
+from .blocks import Vec3
+from .cycles import CycleMachine
+
+#: One millimetre (G21 program unit), m.
+MM = 1e-3
+#: One inch (G20 program unit), m.
+INCH = 25.4e-3
+#: One revolution per minute (S word), rad/s.
+RPM = 2.0 * math.pi / 60.0
+#: Reference position (G28) of the default machine, machine coordinates (m): ``reference_*_mm`` of
+#: models/machines/default.toml (assumption, see there).
+DEFAULT_REFERENCE: Vec3 = (0.380, 0.225, 0.300)
+#: Key of the external workpiece zero point offset in :attr:`InterpreterSettings.work_offsets` (FANUC "EXT",
+#: ``G10 L2 P0``): added to every work coordinate system.
+EXTERNAL_OFFSET = 0
+#: Number of additional work coordinate systems G54.1 P1..P48 (FANUC 0i-MF/31i-B option).
+N_ADDITIONAL_OFFSETS = 48
+
+
+def additional_offset_key(n: int) -> int:
+    """Key of G54.1 P``n`` in :attr:`InterpreterSettings.work_offsets`: ``1000 + n`` (1001..1048).
+
+    Parameters
+    ----------
+    n : int
+        Number of the additional work coordinate system, 1..48.
+    """
+    if not 1 <= n <= N_ADDITIONAL_OFFSETS:
+        raise ValueError(f"G54.1 P{n}: expected P1..P{N_ADDITIONAL_OFFSETS}")
+    return 1000 + n
+
+
+@dataclass(frozen=True)
+class InterpreterSettings:
+    """Machine data the interpreter needs (SI).
+
+    Attributes
+    ----------
+    initial : Vec3
+        Machine position before the program (m).
+    work_offsets : Mapping[int, Vec3]
+        Work offset → (x, y, z) (m). Keys: 54..59 for G54..G59, :func:`additional_offset_key` ``(n)`` = 1000 + n
+        for G54.1 Pn (n = 1..48), :data:`EXTERNAL_OFFSET` = 0 for the external workpiece zero point offset,
+        which is added to every work coordinate system. Missing keys are zero. ``G10 L2``/``G10 L20`` in the
+        program change a copy (these stay untouched).
+    tool_lengths : Sequence[float]
+        Tool length offsets (m) for H1..Hn (index 0 is H1). H0 is always zero. They are the geometry values
+        of ``G10 L10``; the wear values (``G10 L11``) start at zero.
+    tool_radii : Sequence[float]
+        Tool radius offsets (m) for D1..Dn (index 0 is D1; FANUC's radius, geometry + wear). D0 is always zero.
+        Geometry of ``G10 L12``; the wear (``G10 L13``) starts at zero.
+        G41/G42 are accepted only while the active one is zero (see :mod:`.compensation`).
+    block_delete : bool
+        Block delete switch: True skips blocks starting with ``/``.
+    reference : Vec3
+        G28 reference position (m, machine coordinates; FANUC No. 1240). Default: the default machine's.
+    reference2, reference3, reference4 : Vec3 or None
+        2nd/3rd/4th reference position of G30 P2/P3/P4 (m, machine coordinates; FANUC No. 1241-1243).
+        None: the 1st reference position ``reference``.
+    cycles : CycleMachine
+        Return amount of G73 (No. 5114) and clearance of G83 (No. 5115).
+    """
+
+    initial: Vec3 = (0.0, 0.0, 0.0)
+    work_offsets: Mapping[int, Vec3] = field(default_factory=dict)
+    tool_lengths: Sequence[float] = ()
+    tool_radii: Sequence[float] = ()
+    block_delete: bool = False
+    reference: Vec3 = DEFAULT_REFERENCE
+    reference2: Vec3 | None = None
+    reference3: Vec3 | None = None
+    reference4: Vec3 | None = None
+    cycles: CycleMachine = field(default_factory=CycleMachine)
+
+    def reference_position(self, n: int) -> Vec3:
+        """The n-th reference position (n = 1..4, m, machine coordinates); an unset 2nd-4th is the 1st."""
+        other = {2: self.reference2, 3: self.reference3, 4: self.reference4}.get(n)
+        return self.reference if other is None else other
