@@ -108,7 +108,8 @@ def build(prep: Prepared, base: Model, lead_mm: dict[str, float], vertical: tupl
     variants = {a: candidate_variants(a, lead_mm[a], a in vertical) for a in prep.axes}
     dyn = {a: dynamic_columns(variants[a]) for a in prep.axes}
     # a current plateau below the model's limit: saturation candidate (needs the baseline first)
-    base_sim = simulate(prep.machine, prep.t, prep.commands, [base], prep.t_start, disturbance=prep.disturbance)
+    base_sim = simulate(prep.machine, prep.t, prep.commands, [base], prep.t_start, twin=prep.twin_commands(),
+                        disturbance=prep.disturbance)
     for a in prep.axes:
         cur = prep.current[a]
         if cur is None:
@@ -138,7 +139,8 @@ def build(prep: Prepared, base: Model, lead_mm: dict[str, float], vertical: tupl
                             merged[k] = merged.get(k, 0.0) + v if k == col.parameter else v
                         m[a][e] = merged
         members.append(m)
-    sim = simulate(prep.machine, prep.t, prep.commands, members, prep.t_start, disturbance=prep.disturbance)
+    sim = simulate(prep.machine, prep.t, prep.commands, members, prep.t_start, twin=prep.twin_commands(),
+                   disturbance=prep.disturbance)
     out: dict[str, AxisColumns] = {}
     v = prep.valid
     for a in prep.axes:

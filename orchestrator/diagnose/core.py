@@ -232,13 +232,22 @@ def _timing_effects(model: Model) -> bool:
     return any(e in TIMING_EFFECTS for m in model.values() for e in m)
 
 
+def _replay_of(prep: Prepared, base: Model) -> Callable[[dict, int], Simulated]:
+    """``replay(disturbance, batch)``: the baseline model replayed under per-member loads."""
+    def replay(disturbance: dict, batch: int) -> Simulated:
+        return simulate(prep.machine, prep.t, prep.commands, [base] * batch, prep.t_start,
+                        twin=prep.twin_commands(), disturbance=disturbance)
+    return replay
+
+
 def _name_and_refit(prep: Prepared, base: Model, lead: dict[str, float], vertical: tuple[str, ...],
                     machine: Machine, refit_scales: bool, say: Callable[[str], None], log: list[str]
                     ) -> tuple[dict[str, AxisColumns], dict[str, Selection], dict[str, list[Choice]], RefitResult]:
     """Library columns, selection per axis and the joint refit (steps 2-4 of the pipeline)."""
     say("building the effect library (batched replay)")
     cols, base_sim = build(prep, base, lead, vertical)
-    stuck = add_stuck_artefacts(prep.t, cols, base_sim, prep.disturbance)
+    stuck = add_stuck_artefacts(prep.t, cols, base_sim, prep.disturbance, machine=prep.machine,
+                                replay=_replay_of(prep, base))
     if stuck:
         log.append("held current of stuck, loaded axes fitted as artefacts: "
                    + ", ".join(f"{a}: {n} stretches" for a, n in stuck.items()))
@@ -277,12 +286,12 @@ def _timing_check(prep: Prepared, cols: dict[str, AxisColumns], final: Model, fi
     from .prepare import PHASE_STEPS
 
     proj = fit.projectors or projectors(cols)
-    shifted = prep.shifted_commands()
+    twin = prep.twin_commands()
     present = [e for e in TIMING_EFFECTS if any(e in m for m in final.values())]
     subsets = [(e,) for e in present] + ([tuple(present)] if len(present) > 1 else [])
     alternatives = [{a: {e: dict(p) for e, p in m.items() if e not in sub + ("servo_scales",)}
                      for a, m in final.items()} for sub in subsets]
-    sim = simulate(prep.machine, prep.t, prep.commands, [final], prep.t_start, shifted, disturbance=prep.disturbance)
+    sim = simulate(prep.machine, prep.t, prep.commands, [final], prep.t_start, twin=twin, disturbance=prep.disturbance)
     r = residuals(prep, cols, sim, 0, proj)
     cost_with = float(r @ r)
     n = r.size
@@ -291,7 +300,7 @@ def _timing_check(prep: Prepared, cols: dict[str, AxisColumns], final: Model, fi
     for k in range(1, PHASE_STEPS):
         phase = tp * k / PHASE_STEPS
         phase = phase - tp if phase > tp / 2 else phase
-        s = simulate(prep.machine, prep.t, prep.commands, alternatives, prep.t_start + phase, shifted,
+        s = simulate(prep.machine, prep.t, prep.commands, alternatives, prep.t_start + phase, twin=twin,
                      disturbance=prep.disturbance)
         for j in range(len(alternatives)):
             rr = residuals(prep, cols, s, j, proj)
@@ -318,8 +327,10 @@ def _evaluate_case(name: str, prep: Prepared, base: Model, final: Model, lead: d
                    cols: dict[str, AxisColumns] | None = None) -> CaseResult:
     if cols is None:
         cols, base_sim = build(prep, base, lead)
-        add_stuck_artefacts(prep.t, cols, base_sim, prep.disturbance)
-    sim = simulate(prep.machine, prep.t, prep.commands, [base, final], prep.t_start, disturbance=prep.disturbance)
+        add_stuck_artefacts(prep.t, cols, base_sim, prep.disturbance, machine=prep.machine,
+                            replay=_replay_of(prep, base))
+    sim = simulate(prep.machine, prep.t, prep.commands, [base, final], prep.t_start, twin=prep.twin_commands(),
+                   disturbance=prep.disturbance)
     return CaseResult(name, prep, cols, sim, _rms(prep, cols, sim, 0), _rms(prep, cols, sim, 1))
 
 
@@ -452,12 +463,12 @@ def _diagnose_drives(case: Case, prep: Prepared, base_machine: Machine, holdout,
 
     # final replay: baseline, final, and the final model without each effect (its contribution)
     effect_keys = [(a, e) for a in prep.axes for e in final.get(a, {}) if e not in PSEUDO_EFFECTS]
-    shifted = prep.shifted_commands()
+    twin = prep.twin_commands()
     proj = fit.projectors or projectors(cols)
     base = {a: ({"command_shift": dict(final[a]["command_shift"])} if "command_shift" in final.get(a, {}) else {})
             for a in prep.axes}
     members = [base, final] + [_without(final, a, e) for a, e in effect_keys]
-    sim = simulate(prep.machine, prep.t, prep.commands, members, prep.t_start, shifted, disturbance=prep.disturbance)
+    sim = simulate(prep.machine, prep.t, prep.commands, members, prep.t_start, twin=twin, disturbance=prep.disturbance)
     # effects the refit made negligible are dropped (their contribution is below the minimum gain)
     kept = []
     r_final = residuals(prep, cols, sim, 1, proj)
@@ -473,7 +484,7 @@ def _diagnose_drives(case: Case, prep: Prepared, base_machine: Machine, holdout,
     if len(kept) != len(effect_keys):
         effect_keys = kept
         members = [base, final] + [_without(final, a, e) for a, e in effect_keys]
-        sim = simulate(prep.machine, prep.t, prep.commands, members, prep.t_start, shifted,
+        sim = simulate(prep.machine, prep.t, prep.commands, members, prep.t_start, twin=twin,
                        disturbance=prep.disturbance)
     rms_before = _rms(prep, cols, sim, 0)
     rms_after = _rms(prep, cols, sim, 1)

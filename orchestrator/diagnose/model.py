@@ -73,7 +73,7 @@ class Simulated:
 
 def simulate(machine: Machine, t: np.ndarray, commands: Mapping[str, np.ndarray],
              members: Sequence[Model], t_start: float | None = None,
-             shifted: Mapping[str, Callable[[float], np.ndarray]] | None = None,
+             twin: Mapping[str, Callable[[np.ndarray, float], np.ndarray]] | None = None,
              disturbance: Mapping[str, Callable[[np.ndarray], np.ndarray]] | None = None) -> Simulated:
     """Replay all axes of ``commands`` for every member model at once.
 
@@ -88,11 +88,12 @@ def simulate(machine: Machine, t: np.ndarray, commands: Mapping[str, np.ndarray]
         One model per batch member.
     t_start : float, optional
         First servo tick on the replay clock (see :func:`run_replay`).
-    shifted : mapping axis -> callable, optional
-        ``shifted[a](s)``: the commands of axis ``a`` taken ``s`` seconds later on the program
-        clock (a member's ``command_shift.shift_ms``); for axes whose commands are the twin's, not
-        recorded. The following error stays relative to ``commands`` (the comparison is then on
-        positions).
+    twin : mapping axis -> callable, optional
+        ``twin[a](q, s)``: the twin's command of axis ``a`` [m] at replay-clock times ``q``, taken ``s``
+        seconds later on the program clock (:meth:`.prepare.Prepared.twin_commands`), for axes whose
+        commands are the twin's, not recorded. The replay samples it at its servo ticks, shifted by a
+        member's ``command_shift.shift_ms``. The following error stays relative to ``commands`` (the
+        comparison is then on positions).
     disturbance : mapping axis -> callable, optional
         Recorded cutting force on the axis, ``f(t)`` [N] (:func:`.replay.run_replay`).
     """
@@ -104,10 +105,14 @@ def simulate(machine: Machine, t: np.ndarray, commands: Mapping[str, np.ndarray]
     for a in commands:
         stacked = stack([m.get(a, {}) for m in members], machine, a)
         shift = stacked.pop("command_shift", {}).get("shift_ms")
-        if shift is not None and shifted is not None and a in shifted and np.any(shift != 0.0):
-            cmds[a] = np.column_stack([shifted[a](float(s) * 1e-3) for s in shift])
-        else:
+        source = twin.get(a) if twin else None
+        if source is None:
             cmds[a] = np.asarray(commands[a], float)
+        elif shift is not None and np.any(shift != 0.0):
+            cmds[a] = (lambda q, source=source, shift=shift:
+                       np.column_stack([source(q, float(s) * 1e-3) for s in shift]))
+        else:
+            cmds[a] = (lambda q, source=source: source(q, 0.0))
         scales = stacked.pop("servo_scales", {})
         for sym, arr in scales.items():
             mcu_values[f"{a}_{SCALE_KEYS[sym]}"] = arr

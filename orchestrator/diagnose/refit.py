@@ -159,7 +159,7 @@ def refit(prep: Prepared, cols: dict[str, AxisColumns], start: Model, free: list
           max_iterations: int = MAX_ITERATIONS) -> RefitResult:
     """Levenberg-Marquardt refit of ``free`` parameters of ``start`` (see module docstring)."""
     proj = projectors(cols, tuple(p.axis for p in free if p.effect == "command_shift"))
-    shifted = prep.shifted_commands()
+    twin = prep.twin_commands()
     theta = np.array([start.get(p.axis, {}).get(p.effect, {}).get(p.name, 0.0) for p in free], dtype=float)
     bounds = np.array([_bounds(prep, p) for p in free]).reshape(-1, 2)
     steps = np.array([STEPS[(p.effect, p.name)][0] for p in free])
@@ -189,7 +189,7 @@ def refit(prep: Prepared, cols: dict[str, AxisColumns], start: Model, free: list
     for it in range(1, max_iterations + 1):
         if not free:
             break
-        sim = simulate(prep.machine, prep.t, prep.commands, models(theta, True), prep.t_start, shifted,
+        sim = simulate(prep.machine, prep.t, prep.commands, models(theta, True), prep.t_start, twin=twin,
                        disturbance=prep.disturbance)
         replays += 1
         r0 = residuals(prep, cols, sim, 0, proj)

@@ -83,8 +83,9 @@ def run_replay(
         Nominal parameters.
     t_cmd : ndarray, shape (m,)
         Times of the commanded positions (program clock), s, increasing.
-    commands : mapping axis -> ndarray, shape (m,) or (m, B)
-        Commanded positions [m] (per member when 2-D).
+    commands : mapping axis -> ndarray, shape (m,) or (m, B), or callable
+        Commanded positions [m] at ``t_cmd`` (per member when 2-D), interpolated to the servo ticks; or
+        ``f(q)`` giving them at the tick times ``q`` directly (shape (len(q),) or (len(q), B)).
     t_out : ndarray, shape (n,)
         Output times within ``[t_cmd[0], t_cmd[-1]]``.
     batch : int
@@ -111,7 +112,8 @@ def run_replay(
     t0 = float(t_cmd[0]) if t_start is None else float(t_start)
     n_ticks = int(np.floor((float(t_out[-1]) - t0) / tv + 1e-9)) + 1
     tick_t = t0 + tv * np.arange(n_ticks + 1)
-    ref = {a: interpolate_command(t_cmd, np.asarray(commands[a], dtype=float), tick_t) for a in axes}
+    ref = {a: (np.asarray(commands[a](tick_t), dtype=float) if callable(commands[a])
+              else interpolate_command(t_cmd, np.asarray(commands[a], dtype=float), tick_t)) for a in axes}
 
     params = mcu_parameters(machine)
     params.update(dict(mcu_values or {}))

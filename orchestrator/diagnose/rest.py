@@ -22,15 +22,35 @@ as artefacts with the channel offsets (:func:`add_stuck_artefacts`), and
 neither the selection nor the unexplained-residual search sees them. Axes
 without a measured load are untouched: there the replay reproduces the
 held current exactly.
+
+The held-current difference does not end with the hold: it is a difference
+of the velocity loop's integrator, and when the axis breaks away into its
+next move the loop starts from it. An integrator offset ``δ`` adds ``δ`` to
+the current command, which is the same as a force ``-Kf δ`` on the table
+(``Kf = 2π kt / lead``) with the loop answering it. So the artefacts of the
+last piece of a hold carry on into the move as ``δ (1 + Δi(t) / δ)`` in the
+current and ``Δe(t)`` in the following error, scaled by their value at the
+hold's end, where ``Δi, Δe`` are the replay's answer to that force step
+(:func:`breakaway_responses`, one batched replay, a member per hold). The
+answer decays as the loop winds the integrator back (tens of ms here).
+Without it, the 0.6 A transient at the start of a loaded axis's move read
+as a Coulomb friction change.
 """
 from __future__ import annotations
 
+import math
 from typing import Callable, Mapping
 
 import numpy as np
 
+from ..machine import Machine
+from ..twin import drive_parameters
 from .columns import AxisColumns
 from .model import Simulated
+
+#: ``replay(disturbance, batch)``: the baseline model replayed under per-member disturbances
+#: (axis -> ``f(t)`` [N], shape (n,) or (n, B)).
+Replay = Callable[[Mapping[str, Callable[[np.ndarray], np.ndarray]], int], Simulated]
 
 #: A stuck stretch shorter than this gets no artefact (its held current cannot drift far), s.
 MIN_STUCK_S = 0.02
@@ -39,6 +59,8 @@ STUCK_MOTION_M = 1e-10
 #: A motor slower than this between two samples creeps (stick-slip under a load), m/s: 3 mm/min, far
 #: below any programmed feed, far above the nanometre slips of a loaded axis holding a position.
 CREEP_SPEED_M_S = 5e-5
+#: Integrator offset whose answer is replayed after a hold, A (the artefact is linear in it).
+BREAKAWAY_PROBE_A = 0.1
 
 
 def stuck_stretches(t: np.ndarray, motor: np.ndarray, min_s: float = MIN_STUCK_S) -> list[tuple[int, int]]:
@@ -92,9 +114,66 @@ def _runs(flags: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(np.flatnonzero(edges == 1).tolist(), np.flatnonzero(edges == -1).tolist()))
 
 
+def breakaway_responses(t: np.ndarray, ends: list[tuple[str, int]], machine: Machine,
+                        disturbance: Mapping[str, Callable[[np.ndarray], np.ndarray]], replay: Replay
+                        ) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The replay's answer to an integrator offset of one ampere left at the end of each hold.
+
+    Member 0 of one batched replay is the baseline; member ``k + 1`` carries, after sample ``ends[k]``
+    of its axis, the extra force ``-Kf δ`` (:data:`BREAKAWAY_PROBE_A`).
+
+    Parameters
+    ----------
+    t : ndarray, shape (n,)
+        Sample times (the replay's clock), s.
+    ends : list of (str, int)
+        Axis and last sample of each hold.
+    machine : Machine
+    disturbance : mapping axis -> callable
+        The replay's load, ``f(t)`` [N].
+    replay : callable
+
+    Returns
+    -------
+    list of (ndarray, ndarray), shape (n,) each
+        Per hold: the current ``1 + Δi / δ`` [A/A] and the following error ``Δe / δ`` [µm/A], zero up to and
+        including the hold's last sample.
+    """
+    batch = len(ends) + 1
+    kf = {}
+    for a in {a for a, _ in ends}:
+        p = drive_parameters(machine, a)
+        kf[a] = float(p["torque_constant"]) * 2.0 * math.pi / float(p["screw_lead"])
+    t_end = np.array([t[i] for _, i in ends])
+
+    def stepped(a: str) -> Callable[[np.ndarray], np.ndarray]:
+        base = disturbance.get(a)
+        on_axis = np.array([e == a for e, _ in ends])
+
+        def load(q: np.ndarray) -> np.ndarray:
+            q = np.asarray(q, dtype=float)
+            out = np.zeros((q.size, batch))
+            if base is not None:
+                out[:] = np.asarray(base(q), dtype=float)[:, None]
+            after = (q[:, None] > t_end[None, :]) & on_axis[None, :]
+            out[:, 1:] -= np.where(after, kf.get(a, 0.0) * BREAKAWAY_PROBE_A, 0.0)
+            return out
+        return load
+
+    sim = replay({a: stepped(a) for a in set(disturbance) | set(kf)}, batch)
+    out = []
+    for k, (a, i) in enumerate(ends):
+        after = t > t[i]
+        di = (sim.current[a][:, k + 1] - sim.current[a][:, 0]) / BREAKAWAY_PROBE_A
+        de = (sim.fe[a][:, k + 1] - sim.fe[a][:, 0]) / BREAKAWAY_PROBE_A
+        out.append((np.where(after, 1.0 + di, 0.0), np.where(after, de, 0.0)))
+    return out
+
+
 def add_stuck_artefacts(t: np.ndarray, cols: Mapping[str, AxisColumns], sim: Simulated,
                         disturbance: Mapping[str, Callable[[np.ndarray], np.ndarray]] | None,
-                        member: int = 0) -> dict[str, int]:
+                        member: int = 0, machine: Machine | None = None, replay: Replay | None = None
+                        ) -> dict[str, int]:
     """Add held-current offset and ramp artefacts for the stuck stretches of loaded axes, in place.
 
     Parameters
@@ -108,6 +187,11 @@ def add_stuck_artefacts(t: np.ndarray, cols: Mapping[str, AxisColumns], sim: Sim
         The replay whose member ``member`` is the baseline (its motor positions define the stretches).
     disturbance : mapping axis -> callable, or None
         The measured load of the replay (``f(t)`` [N]); only axes loaded within a stretch get artefacts.
+    machine : Machine, optional
+    replay : callable, optional
+        ``replay(disturbance, batch)``: the baseline model under per-member loads. With ``machine``, the
+        artefacts of the last piece of a hold carry on into the move that follows as the loop's answer to
+        the integrator offset they leave (:func:`breakaway_responses`); without, they end with the piece.
 
     Returns
     -------
@@ -117,24 +201,35 @@ def add_stuck_artefacts(t: np.ndarray, cols: Mapping[str, AxisColumns], sim: Sim
     counts: dict[str, int] = {}
     if not disturbance:
         return counts
+    pieces: list[tuple[str, int, int]] = []
     for a, c in cols.items():
         if a not in disturbance or c.rows_tc.size == 0:
             continue
         load = np.asarray(disturbance[a](t), dtype=float)
-        nf, count = c.rows_fe.size, 0
         for i0, i1 in stuck_stretches(t, sim.motor[a][:, member]):
-            if not np.any(load[i0:i1 + 1] != 0.0):
-                continue
-            inside = (c.rows_tc >= i0) & (c.rows_tc <= i1)
-            if inside.sum() < 3:
-                continue
-            tt = t[c.rows_tc]
-            mid = 0.5 * (t[i0] + t[i1])
-            for name, values in (("offset A", np.ones(tt.size)), ("ramp A/s", tt - mid)):
-                col = np.zeros(nf + c.rows_tc.size)
-                col[nf:] = np.where(inside, values, 0.0) / c.sigma_tc
-                c.artefacts[f"{a} stuck {count} {name}"] = col
-            count += 1
-        if count:
-            counts[a] = count
+            if np.any(load[i0:i1 + 1] != 0.0) and int(((c.rows_tc >= i0) & (c.rows_tc <= i1)).sum()) >= 3:
+                pieces.append((a, i0, i1))
+    # the pieces after which the motor moves on (the end of a hold, not of a rest inside it)
+    ends = [k for k, (a, _, i1) in enumerate(pieces) if i1 + 1 < t.size
+            and abs(sim.motor[a][i1 + 1, member] - sim.motor[a][i1, member]) >= CREEP_SPEED_M_S * (t[i1 + 1] - t[i1])]
+    after = {}
+    if ends and replay is not None and machine is not None:
+        answers = breakaway_responses(t, [(pieces[k][0], pieces[k][2]) for k in ends], machine, disturbance, replay)
+        after = dict(zip(ends, answers))
+    for k, (a, i0, i1) in enumerate(pieces):
+        c = cols[a]
+        count = counts.get(a, 0)
+        nf = c.rows_fe.size
+        inside = (c.rows_tc >= i0) & (c.rows_tc <= i1)
+        tt = t[c.rows_tc]
+        mid = 0.5 * (t[i0] + t[i1])
+        for name, values, held in (("offset A", np.ones(tt.size), 1.0), ("ramp A/s", tt - mid, t[i1] - mid)):
+            col = np.zeros(nf + c.rows_tc.size)
+            col[nf:] = np.where(inside, values, 0.0) / c.sigma_tc
+            if k in after:
+                tc_after, fe_after = after[k]
+                col[nf:] += held * tc_after[c.rows_tc] / c.sigma_tc
+                col[:nf] = held * fe_after[c.rows_fe] / c.sigma_fe
+            c.artefacts[f"{a} stuck {count} {name}"] = col
+        counts[a] = count + 1
     return counts
