@@ -63,10 +63,12 @@ def time_offset_from_lines(t_rec: np.ndarray, line_rec: np.ndarray, t_nc: np.nda
                            line_nc: np.ndarray) -> tuple[float, int]:
     """Logger clock minus program clock from matched block transitions.
 
-    When the brackets of all matched transitions (:func:`offset_bracket_from_lines`) overlap, the offset
+    When the brackets of the matched transitions (:func:`offset_bracket_from_lines`) overlap, the offset
     is the middle of their intersection (a logger whose samples fall at varied phases of the program's
-    ticks pins it to a fraction of its sample period); when they do not (a controller whose block changes
-    differ from the twin's), it is the median of the bracket midpoints.
+    ticks pins it to a fraction of its sample period); when a few do not (a controller changing some
+    blocks a tick off the twin), the middle of the stretch most of them share (:func:`consensus_bracket`);
+    else (a controller whose block changes differ from the twin's throughout) the median of the bracket
+    midpoints.
 
     Returns
     -------
@@ -78,10 +80,41 @@ def time_offset_from_lines(t_rec: np.ndarray, line_rec: np.ndarray, t_nc: np.nda
     lows, highs = offset_bracket_from_lines(t_rec, line_rec, t_nc, line_nc)
     if not lows.size:
         return float("nan"), 0
-    lo, hi = float(lows.max()), float(highs.min())
-    if lo <= hi:
-        return 0.5 * (lo + hi), int(lows.size)
+    bracket = consensus_bracket(lows, highs)
+    if bracket is not None:
+        return 0.5 * (bracket[0] + bracket[1]), int(lows.size)
     return float(np.median(0.5 * (lows + highs))), int(lows.size)
+
+
+#: Fraction of the matched transitions whose brackets must share the offset for it to be their consensus.
+CONSENSUS_FRACTION = 0.75
+
+
+def consensus_bracket(lows: np.ndarray, highs: np.ndarray) -> tuple[float, float] | None:
+    """The offsets ``[lo, hi]`` inside the most brackets, when that is at least 75 % of them, else None.
+
+    All brackets overlap for a controller that changes block at the twin's ticks: the result is their
+    intersection. A controller that changes some blocks a tick earlier or later than the twin (a different
+    look-ahead, a block that ends in position) puts a few brackets off the others: they are outvoted
+    instead of the offset falling back to the median of the midpoints (good only to half a sample).
+    Among equally covered stretches, the one nearest the median midpoint is taken.
+    """
+    lows, highs = np.asarray(lows, float), np.asarray(highs, float)
+    if not lows.size:
+        return None
+    edges = np.concatenate([lows, highs])
+    step = np.concatenate([np.ones(lows.size, int), -np.ones(highs.size, int)])
+    order = np.lexsort((-step, edges))          # at equal times, a bracket opens before one closes
+    cover = np.cumsum(step[order])
+    best = int(cover.max())
+    if best < CONSENSUS_FRACTION * lows.size:
+        return None
+    at = np.flatnonzero(cover == best)
+    spans = [(float(edges[order][i]), float(edges[order][i + 1])) for i in at if i + 1 < edges.size]
+    if not spans:
+        return None
+    centre = float(np.median(0.5 * (lows + highs)))
+    return min(spans, key=lambda sp: abs(0.5 * (sp[0] + sp[1]) - centre))
 
 
 def time_offset_from_signal(t_rec: np.ndarray, y_rec: np.ndarray, t_nc: np.ndarray, y_nc: np.ndarray,

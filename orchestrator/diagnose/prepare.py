@@ -13,7 +13,8 @@ from ..simulate import simulate as simulate_twin
 from ..twin import TwinOptions, nck_parameters
 from ..validation import validate_recording
 from .align import (
-    fill_gaps, offset_bracket_from_lines, refine_offset, time_offset_from_lines, time_offset_from_signal,
+    consensus_bracket, fill_gaps, offset_bracket_from_lines, refine_offset, time_offset_from_lines,
+    time_offset_from_signal,
 )
 from .errors import DiagnosisError
 
@@ -195,9 +196,10 @@ def prepare(case: Case, recording: Recording, machine: Machine, axes: list[str] 
             # that bracket the positions choose (a feed-forward or a delay shifts them, but only by what the
             # bracket allows, so a fine logger keeps its clock from the transitions alone)
             lows, highs = offset_bracket_from_lines(t, recording["line"], nc.t, nc["line"])
-            lo, hi = float(lows.max()), float(highs.min())
+            bracket = consensus_bracket(lows, highs)
             moving = _moving_axes(recording, nc, "_mm")
-            if moving and lo <= hi and hi - lo > 1e-6:
+            if moving and bracket is not None and bracket[1] - bracket[0] > 1e-6:
+                lo, hi = bracket
                 offset = refine_offset(t, {c: np.asarray(recording[f"{c}_mm"], float) for c in moving},
                                        np.asarray(nc.t, float), {c: np.asarray(nc[f"{c}_mm"], float) for c in moving},
                                        0.5 * (lo + hi), span_s=0.5 * (hi - lo), step_s=(hi - lo) / 40.0)
