@@ -111,7 +111,9 @@ def test_servo_and_cutting_say_what_they_need(tmp_path):
     ch = reciprocating()
     del ch["x_ref_mm"]
     folder = make_case(tmp_path, ch)
-    with pytest.raises(IdentificationError, match="'<axis>_ref_mm'"):
+    # without commands, the twin's run of the case's program stands in for them; this program does not move
+    with pytest.raises(IdentificationError, match=r"no commanded positions \('<axis>_ref_mm' missing for axis x\) "
+                                                  r"and cannot be aligned with the twin's run"):
         identify_servo([folder])
     with pytest.raises(IdentificationError, match="fx_N"):
         identify_cutting([folder])

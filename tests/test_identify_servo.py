@@ -70,3 +70,100 @@ def test_ten_times_the_noise_degrades_gracefully(servo_case):
     assert fit.scales_["x"]["Spp"] == pytest.approx(0.9, rel=0.02)
     assert fit.scales_["x"]["Svp"] == pytest.approx(1.2, rel=0.10)
     assert fit.scales_["x"]["Svi"] == pytest.approx(0.8, rel=0.15)
+
+
+# --- servo logs without commanded positions (Servo Guide style: actual position and TCMD only) -------------------
+
+LOG_TRUTH = {"position_scale": 1.2, "velocity_p_scale": 0.8, "velocity_i_scale": 1.0}
+LOG_OFFSET_S = 2.5
+CURRENT_NOISE_A = 0.02
+ENCODER_UM = 1.0
+
+
+def _without(recording, drop):
+    from orchestrator.recording import Recording
+
+    keep = [n for n in recording.channels if n not in drop]
+    return Recording.from_channels({n: np.asarray(recording[n]) for n in keep},
+                                   {n: recording.units[n] for n in keep}, True, "", f"{recording.source} (log)")
+
+
+@pytest.fixture(scope="module")
+def servo_log(tmp_path_factory):
+    """A 2 s air-cut servo run of a machine with Spp 1.2, Svp 0.8, logged with and without commands.
+
+    Logger: clock shifted by 2.5 s, 1 µm encoder, seeded 0.02 A current noise.
+    """
+    folder = tmp_path_factory.mktemp("servo_log") / "case"
+    write_experiment("servo", folder, axes=("x",), speeds_mm_min=(200.0, 500.0), plateau_s=0.3, dwell_s=0.1)
+    truth = known_machine().with_values("axis.x", **LOG_TRUTH)
+    clean, _ = synthetic_case(folder, truth, Imperfections(0, 0, 0, 0, 0, 0))
+    logged = degrade(clean, Imperfections(0.0, ENCODER_UM, CURRENT_NOISE_A, 0.0, 0.0, LOG_OFFSET_S), seed=5)
+    logged.write_csv(folder / "recording.csv")
+    with_commands = identify_servo([folder], machine=known_machine())
+    servo_guide = _without(logged, [n for n in logged.channels if n.endswith("_ref_mm") or n == "line"])
+    servo_guide.write_csv(folder / "recording.csv")
+    return folder, with_commands
+
+
+def test_servo_log_without_commands_gives_the_known_scale_factors(servo_log, tmp_path):
+    """The twin's commands, aligned with the log, replace the missing ones: same factors as with the commands."""
+    folder, with_commands = servo_log
+    fit = identify_servo([folder], machine=known_machine())
+    for key, value in LOG_TRUTH.items():
+        sym = SYMBOL[key]
+        # the log's noise limits both fits alike (with commands: within 0.9 % here); the twin's commands add
+        # little of their own: within 0.5 % of the fit with commands (0.15 % measured)
+        assert fit.scales_["x"][sym] == pytest.approx(value, rel=0.02), fit.scales_
+        assert fit.scales_["x"][sym] == pytest.approx(with_commands.scales_["x"][sym], rel=0.005), fit.scales_
+    # residuals at the logger's noise: the encoder's quantisation 1 µm / sqrt(12) = 0.29 µm, the current's 0.02 A
+    assert fit.rms_["x"]["following_error_um"] < 1.2 * ENCODER_UM / np.sqrt(12.0)
+    assert fit.rms_["x"]["current_A"] < 1.2 * CURRENT_NOISE_A
+    report = json.loads(fit.write(tmp_path / "out", plots=False)["report"].read_text())
+    assert with_commands.report()["commands"] == {"case": "recorded"}
+    text = report["commands"]["case"]
+    assert text.startswith("twin, aligned: offset "), text
+    offset = float(text.split("offset ")[1].split(" s")[0])
+    # the clock offset comes back to within 0.05 ms (alignment on positions, then the joint fit with the factors)
+    assert offset == pytest.approx(LOG_OFFSET_S, abs=5e-5), text
+
+
+def test_replay_accepts_the_reference_as_a_function_of_tick_time(servo_case):
+    """A callable giving the same linear interpolation as the sampled reference gives the same replay."""
+    _, clean, truth = servo_case
+    t, ref = np.asarray(clean.t), np.asarray(clean["x_ref_mm"]) * 1e-3
+    x0 = {"x": clean["x_mm"][0] * 1e-3}
+    sampled = replay(truth, t, {"x": ref}, initial_position=x0)
+    called = replay(truth, t, {"x": lambda q: np.interp(q, t, ref)}, initial_position=x0)
+    assert np.max(np.abs(called.position["x"] - sampled.position["x"])) < 1e-12  # m
+    assert np.max(np.abs(called.current["x"] - sampled.current["x"])) < 1e-9  # A
+
+
+def test_replay_disturbance_is_carried_by_the_current(servo_case):
+    """A constant load F at constant velocity is taken up by the integrator: the current rises by F / (kt 2 pi / Lb)."""
+    _, _, truth = servo_case
+    t = np.linspace(0.0, 1.0, 1001)
+    ref = {"x": 0.005 * t}  # 300 mm/min
+    load = 300.0  # N
+    free = replay(truth, t, ref)
+    loaded = replay(truth, t, ref, disturbance={"x": lambda q: np.full(np.shape(q), load)})
+    sec = truth.si("axis.x")
+    per_amp = float(sec["torque_constant"]) * 2.0 * np.pi / float(sec["screw_lead"])
+    rise = abs(float(np.mean(loaded.current["x"][-100:, 0] - free.current["x"][-100:, 0])))
+    assert rise == pytest.approx(load / per_amp, rel=0.01)
+
+
+def test_servo_log_that_cannot_be_aligned_is_refused_naming_the_file(servo_log, tmp_path):
+    """A program whose axes never move gives the twin nothing to align the log with."""
+    from orchestrator.identify import IdentificationError
+    from orchestrator.recording import Recording
+
+    folder = tmp_path / "still"
+    folder.mkdir()
+    (folder / "case.toml").write_text((servo_log[0] / "case.toml").read_text())
+    (folder / "program.nc").write_text("G21 G90 G94 G17\nG4 P1000\nM30\n")
+    t = 3.0 + 0.001 * np.arange(900)
+    Recording.from_channels({"t_s": t, "x_mm": np.zeros_like(t), "x_tcmd_A": np.zeros_like(t)},
+                            None, True, "", "still").write_csv(folder / "recording.csv")
+    with pytest.raises(IdentificationError, match=r"recording\.csv.*cannot be aligned"):
+        identify_servo([folder], machine=known_machine())

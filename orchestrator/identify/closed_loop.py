@@ -7,21 +7,25 @@ the components are the twin's own (:class:`fmus_src.servo.MCU`,
 Timing follows the twin (:mod:`orchestrator.twin`, Gauss-Seidel master):
 
 * the servo ticks at the velocity-loop period ``Tv`` on the grid
-  ``t0 + k Tv`` with ``t0`` the first sample of the recording; the MCU steps
+  ``t0 + k Tv`` with ``t0`` the first sample of the recording (or a given
+  ``t_start``, the controller's own tick grid); the MCU steps
   first (feedback from the drive at ``t_k``), then the drives (current
   command of this tick);
 * the position loop at ``t`` samples the NC command of the current
   interpolation period, i.e. the reference recorded at ``t`` (the twin steps
   MCU and drives before the NC kernel, as a real controller does); a
   different convention of a foreign logger is absorbed by ``ref_lead``
-  (linear interpolation of the recorded reference between samples);
+  (linear interpolation of the recorded reference between samples); a
+  reference may instead be a callable ``f(tick_times)`` that gives the
+  command at the ticks directly (the twin's own interpolation, for logs
+  without commands, :meth:`orchestrator.diagnose.prepare.Prepared.twin_commands`);
 * outputs are sampled after each tick and interpolated linearly to the
   requested times (the recording's).
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Mapping
+from typing import Callable, Mapping
 
 import numpy as np
 
@@ -66,13 +70,15 @@ def _column(values: np.ndarray, batch: int) -> np.ndarray:
 def replay(
     machine: Machine,
     t_ref: np.ndarray,
-    refs: Mapping[str, np.ndarray],
+    refs: Mapping[str, np.ndarray | Callable[[np.ndarray], np.ndarray]],
     batch: int = 1,
     mcu_values: Mapping[str, np.ndarray | float] | None = None,
     drive_values: Mapping[str, Mapping[str, np.ndarray | float]] | None = None,
     initial_position: Mapping[str, np.ndarray | float] | None = None,
     t_out: np.ndarray | None = None,
     ref_lead: float = 0.0,
+    t_start: float | None = None,
+    disturbance: Mapping[str, Callable[[np.ndarray], np.ndarray]] | None = None,
 ) -> ReplayResult:
     """Simulate the servo loops of some axes driven by recorded reference positions.
 
@@ -82,9 +88,11 @@ def replay(
         Gains, masses, friction (overridable per member below).
     t_ref : ndarray, shape (n,)
         Sample times of the reference, s (strictly increasing, any spacing).
-    refs : mapping axis -> ndarray, shape (n,) or (n, B)
-        Reference positions [m] of the axes to simulate; other axes stay at
-        rest and are not simulated.
+    refs : mapping axis -> ndarray, shape (n,) or (n, B), or callable
+        Reference positions [m] of the axes to simulate at ``t_ref``; or
+        ``f(q)`` giving them at the servo tick times ``q`` directly (shape
+        ``(len(q),)`` or ``(len(q), B)``; ``ref_lead`` is then not applied).
+        Other axes stay at rest and are not simulated.
     batch : int
         ``B``.
     mcu_values : mapping, optional
@@ -92,12 +100,20 @@ def replay(
     drive_values : mapping axis -> mapping, optional
         DriveAxis parameters per member (e.g. friction of a fitted set).
     initial_position : mapping axis -> float or (B,), optional
-        Table position at ``t_ref[0]`` [m]; default the reference there.
+        Table position at the first tick [m]; default the reference there.
     t_out : ndarray, optional
-        Output times (default ``t_ref``), within ``[t_ref[0], t_ref[-1]]``.
+        Output times (default ``t_ref``), within ``[t_ref[0], t_ref[-1]]``;
+        outputs before the first tick hold the initial state.
     ref_lead : float
         The position loop at ``t`` uses the reference recorded at
         ``t + ref_lead``, s (default 0, the twin's convention).
+    t_start : float, optional
+        First servo tick, s (default ``t_ref[0]``): the controller's own tick
+        grid when known, so that the position loop samples the command in
+        the controller's phase.
+    disturbance : mapping axis -> callable, optional
+        ``f(t)`` -> disturbance force on the axis [N] (cutting force on the
+        workpiece, ``Fd = +F``), evaluated at the middle of each servo tick.
 
     Returns
     -------
@@ -111,13 +127,14 @@ def replay(
     axes = [a for a in "xyz" if a in refs]
     if not axes:
         raise IdentificationError("replay needs the reference of at least one axis")
-    t0 = float(t_ref[0])
+    t0 = float(t_ref[0]) if t_start is None else float(t_start)
     n_ticks = int(np.floor((float(t_out[-1]) - t0) / tv + 1e-9)) + 1
     tick_t = t0 + tv * np.arange(n_ticks + 1)
     query = np.clip(tick_t + lead, t_ref[0], t_ref[-1])
     idx = np.clip(np.searchsorted(t_ref, query, side="right"), 1, t_ref.size - 1)
     w = ((query - t_ref[idx - 1]) / (t_ref[idx] - t_ref[idx - 1]))[:, None]
-    ref_ticks = {a: _column(refs[a], batch)[idx - 1] * (1.0 - w) + _column(refs[a], batch)[idx] * w for a in axes}
+    ref_ticks = {a: (_column(refs[a](tick_t), batch) if callable(refs[a]) else
+                     _column(refs[a], batch)[idx - 1] * (1.0 - w) + _column(refs[a], batch)[idx] * w) for a in axes}
 
     params = mcu_parameters(machine)
     params.update(dict(mcu_values or {}))
@@ -133,11 +150,13 @@ def replay(
     mcu.setup(t0)
     for d in drives.values():
         d.setup(t0)
-    traces = run_servo_ticks(mcu, drives, ref_ticks, t0, tv, n_ticks, ("position",))
+    dist = ({a: np.asarray(fd(tick_t[:-1] + 0.5 * tv), dtype=float) for a, fd in disturbance.items() if a in drives}
+            if disturbance else None)
+    traces = run_servo_ticks(mcu, drives, ref_ticks, t0, tv, n_ticks, ("position",), dist)
     pos, cur = traces["position"], traces["current_cmd"]
-    # linear interpolation of the tick outputs to the requested times
+    # linear interpolation of the tick outputs to the requested times (held before the first tick)
     j = np.clip(np.searchsorted(tick_t, t_out, side="right"), 1, n_ticks)
-    f = ((t_out - tick_t[j - 1]) / tv)[:, None]
+    f = np.maximum((t_out - tick_t[j - 1]) / tv, 0.0)[:, None]
     out_p = {a: pos[a][j - 1] * (1.0 - f) + pos[a][j] * f for a in axes}
     out_c = {a: cur[a][j - 1] * (1.0 - f) + cur[a][j] * f for a in axes}
     return ReplayResult(t_out, out_p, out_c, n_ticks)

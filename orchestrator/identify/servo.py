@@ -6,6 +6,21 @@ recorded following error ``e = ref - actual`` and current command ``Atc``.
 Friction, masses and nominal gains come from the machine file (identify
 friction first and pass that file).
 
+A servo log without commands (FANUC Servo Guide style: ``{a}_mm`` and
+``{a}_tcmd_A`` only, no ``line``, a clock of its own) is aligned with the
+twin's run of the case's program as the diagnosis aligns it
+(:func:`orchestrator.diagnose.prepare.prepare`); the replay then samples the
+twin's commands at its own servo ticks (:meth:`~orchestrator.diagnose.prepare.Prepared.twin_commands`),
+starts on the controller's tick grid (``Prepared.t_start``) and carries the
+cutting forces (``Prepared.disturbance``: recorded, or the twin's predicted
+ones for a case with a ``[stock]``). That alignment fits the twin's actual
+positions, whose servo lag depends on the very scale factors being
+identified (``1/(Kp Spp)``: 3.3 ms of clock error for Spp 1.2 against 1), so
+a residual clock shift per case is fitted together with the scale factors:
+the replay's outputs are compared ``shift`` earlier on its clock (logger
+offset = alignment offset + shift; the tick phase stays the controller's). With commands, the residual ``e - e_sim`` is the same as
+``x_sim - x`` on positions.
+
 Residuals per sample and axis, with weights ``w1`` [1/µm] and ``w2`` [1/A]
 (default: the reciprocal RMS of the measured channel, so both count alike)::
 
@@ -53,18 +68,32 @@ PAPER_GENERATIONS = 100
 PAPER_FITNESS_LIMIT = 10.0
 #: Search box of the scale factors.
 BOUNDS = (0.2, 5.0)
+#: Search box of the residual clock shift of a log aligned with the twin, ms.
+SHIFT_BOUNDS_MS = (-20.0, 20.0)
 
 
 @dataclass
 class _Series:
-    """One case, prepared: times, references, measured error and current per axis."""
+    """One case (or its axes of one command source), prepared: times, references, measured error and current.
+
+    ``ref[a]`` is the recorded reference [m] at ``t`` (``source == "recorded"``) or, for a log without
+    commands (``source == "twin"``), ``f(q)``: the twin's command at replay-clock times ``q``; ``cmd`` then
+    holds it at ``t`` and ``e = cmd - actual``.
+    """
 
     data: CaseData
     t: np.ndarray
-    ref: dict[str, np.ndarray]        # m
+    ref: dict                         # axis -> m at t, or callable
     x0: dict[str, float]              # m
     e: dict[str, np.ndarray]          # µm
     cur: dict[str, np.ndarray]        # A
+    source: str = "recorded"
+    cmd: dict[str, np.ndarray] = field(default_factory=dict)   # m at t (twin commands)
+    t_start: float | None = None
+    disturbance: dict | None = None
+    offset: float = 0.0               # logger clock minus program clock, s
+    offset_method: str = ""
+    forces: str = "none"
 
 
 @dataclass
@@ -91,6 +120,10 @@ class ServoFit:
     wall_time_ : float
     traces_ : list of dict
         Per case: ``t``, and per axis measured / simulated error and current (for plots).
+    commands_ : dict
+        Case -> where the replay's commands came from: ``"recorded"``, or for a log without them
+        ``"twin, aligned: offset … s, method …"`` (the logger clock minus the program clock after the
+        joint fit, and how the offset was found).
     """
 
     scales_: dict[str, dict[str, float]]
@@ -105,11 +138,13 @@ class ServoFit:
     wall_time_: float
     cases: list[str] = field(default_factory=list)
     traces_: list[dict] = field(default_factory=list, repr=False)
+    commands_: dict[str, str] = field(default_factory=dict)
 
     def report(self) -> dict:
-        """JSON-ready report."""
+        """JSON-ready report (``commands``: per case where the commands came from)."""
         return {
             "kind": "servo", "method": self.method, "cases": self.cases, "wall_time_s": self.wall_time_,
+            "commands": self.commands_,
             "iterations": self.iterations_, "batched_simulations": self.simulations_,
             "axes": {a: {**self.scales_[a], "fitness_J": self.fitness_[a],
                          "residual_rms_following_error_um": self.rms_[a]["following_error_um"],
@@ -129,35 +164,50 @@ class ServoFit:
         return files
 
 
-def _prepare(data: Sequence[CaseData], axes: Sequence[str] | None) -> tuple[list[_Series], list[str]]:
+def _has(recording, name: str) -> bool:
+    """The column exists and is not entirely empty (an optional column a logger left blank)."""
+    return name in recording and bool(np.isfinite(np.asarray(recording[name], dtype=float)).any())
+
+
+def _prepare(data: Sequence[CaseData], axes: Sequence[str] | None,
+             machine: Machine) -> tuple[list[_Series], list[str]]:
     series, used = [], []
     for d in data:
         rec = d.recording
-        present = [a for a in "xyz" if all(f"{a}{s}" in rec for s in ("_ref_mm", "_mm", "_tcmd_A"))]
-        want = list(axes) if axes else present
+        present = [a for a in "xyz" if all(f"{a}{s}" in rec for s in ("_ref_mm", "_mm", "_tcmd_A"))
+                   and _has(rec, f"{a}_ref_mm")]
+        logged = [a for a in "xyz" if a not in present and all(f"{a}{s}" in rec for s in ("_mm", "_tcmd_A"))]
+        want = list(axes) if axes else present + [a for a in logged if a not in present]
         if not want:
             raise IdentificationError(
-                f"{d.source}: servo identification needs '<axis>_ref_mm', '<axis>_mm' and '<axis>_tcmd_A' of at "
-                f"least one axis; the recording has {rec.channels}"
+                f"{d.source}: servo identification needs '<axis>_mm' and '<axis>_tcmd_A' of at least one axis "
+                f"(with '<axis>_ref_mm' when the log has the commands); the recording has {rec.channels}"
             )
-        moving = []
+        moving, from_twin = [], []
         for a in want:
+            if a in logged:
+                check_columns(rec, ["t_s", f"{a}_mm", f"{a}_tcmd_A"],
+                              f"servo identification of axis {a} (commands from the twin's run of the program)")
+                from_twin.append(a)
+                continue
             check_columns(rec, ["t_s", f"{a}_ref_mm", f"{a}_mm", f"{a}_tcmd_A"], f"servo identification of axis {a}")
             if np.ptp(rec[f"{a}_ref_mm"]) > 1e-3:
                 moving.append(a)
             elif axes:
                 raise IdentificationError(f"{d.source}: axis {a} does not move (reference range below 1 µm)")
-        if not moving:
-            continue
-        t = np.asarray(rec.t, dtype=float)
-        series.append(_Series(
-            d, t,
-            {a: np.asarray(rec[f"{a}_ref_mm"]) * 1e-3 for a in moving},
-            {a: float(rec[f"{a}_mm"][0]) * 1e-3 for a in moving},
-            {a: np.asarray(rec.following_error_um(a), dtype=float) for a in moving},
-            {a: np.asarray(rec[f"{a}_tcmd_A"], dtype=float) for a in moving},
-        ))
-        used += [a for a in moving if a not in used]
+        if moving:
+            t = np.asarray(rec.t, dtype=float)
+            series.append(_Series(
+                d, t,
+                {a: np.asarray(rec[f"{a}_ref_mm"]) * 1e-3 for a in moving},
+                {a: float(rec[f"{a}_mm"][0]) * 1e-3 for a in moving},
+                {a: np.asarray(rec.following_error_um(a), dtype=float) for a in moving},
+                {a: np.asarray(rec[f"{a}_tcmd_A"], dtype=float) for a in moving},
+            ))
+        twin = _twin_series(d, from_twin, machine, explicit=bool(axes)) if from_twin else None
+        if twin is not None:
+            series.append(twin)
+        used += [a for a in moving + (list(twin.ref) if twin is not None else []) if a not in used]
     if not series:
         raise IdentificationError(
             f"{', '.join(d.source for d in data)}: no axis moves; expected reciprocating runs "
@@ -166,13 +216,84 @@ def _prepare(data: Sequence[CaseData], axes: Sequence[str] | None) -> tuple[list
     return series, used
 
 
-def _simulate(machine: Machine, series: _Series, scales: dict[str, np.ndarray]) -> tuple[dict, dict]:
-    """Replay one case with per-member scale factors ``scales[axis]`` of shape (B, 3)."""
+def _twin_series(d: CaseData, axes: list[str], machine: Machine, explicit: bool) -> _Series | None:
+    """A log without commands: aligned with the twin's run of the program (the diagnosis's alignment)."""
+    from ..diagnose.errors import DiagnosisError  # local: only logs without commands need the diagnosis
+    from ..diagnose.prepare import prepare as align_with_twin
+
+    try:
+        prep = align_with_twin(d.case, d.recording, machine, axes=list(axes))
+    except DiagnosisError as exc:
+        msg = str(exc)
+        msg = msg[len(d.source) + 2:] if msg.startswith(f"{d.source}: ") else msg
+        raise IdentificationError(
+            f"{d.source}: the recording has no commanded positions ('<axis>_ref_mm' missing for axis "
+            f"{', '.join(axes)}) and cannot be aligned with the twin's run of {d.case.program} to take its commands "
+            f"instead: {msg}; record the commands, or check that the log belongs to that program"
+        ) from None
+    moving = [a for a in axes if a in prep.axes]
+    if explicit and len(moving) < len(axes):
+        still = [a for a in axes if a not in moving]
+        raise IdentificationError(f"{d.source}: axis {', '.join(still)} does not move in the twin's run of "
+                                  f"{d.case.program} (commanded stroke below 10 µm)")
+    if not moving:
+        return None
+    sel = prep.valid.copy()
+    for a in moving:
+        sel &= np.isfinite(prep.fe[a]) & np.isfinite(prep.current[a])
+    if sel.sum() < 3:
+        raise IdentificationError(f"{d.source}: fewer than 3 samples overlap the twin's run of {d.case.program} "
+                                  f"after alignment (offset {prep.offset:.6g} s, {prep.offset_method})")
+    twin = prep.twin_commands()
+    ref = {a: (lambda q, f=twin[a]: f(q, 0.0)) for a in moving}
+    return _Series(
+        d, prep.t[sel], ref,
+        {a: float(ref[a](np.array([prep.t_start]))[0]) for a in moving},
+        {a: prep.fe[a][sel] for a in moving},
+        {a: np.asarray(prep.current[a], dtype=float)[sel] for a in moving},
+        source="twin", cmd={a: prep.commands[a][sel] for a in moving}, t_start=prep.t_start,
+        disturbance=prep.disturbance, offset=prep.offset, offset_method=prep.offset_method,
+        forces=prep.forces_source,
+    )
+
+
+def _sample(grid: np.ndarray, values: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """Linear interpolation of ``values`` (m, B) on the uniform ``grid`` (m,) at ``q`` (n, B), held outside."""
+    step = grid[1] - grid[0]
+    k = np.clip(np.floor((q - grid[0]) / step).astype(int), 0, grid.size - 2)
+    f = np.clip((q - grid[k]) / step, 0.0, 1.0)
+    return np.take_along_axis(values, k, 0) * (1.0 - f) + np.take_along_axis(values, k + 1, 0) * f
+
+
+def _simulate(machine: Machine, series: _Series, scales: dict[str, np.ndarray],
+              shift: np.ndarray | None = None, smooth: bool = False) -> tuple[dict, dict]:
+    """Replay one case with per-member scale factors ``scales[axis]`` of shape (B, 3).
+
+    ``shift`` (B,) [s]: for a log aligned with the twin, each member's outputs are sampled ``shift`` earlier
+    on the replay clock (a residual clock offset: logger offset = ``offset + shift``; the servo ticks stay on
+    the controller's grid). ``smooth``: the simulated current is averaged over a position-loop period first
+    (its jump at every position-loop tick makes the fit's cost a staircase in ``shift``).
+    """
     batch = next(iter(scales.values())).shape[0]
     mcu = {f"{a}_{name}": scales[a][:, j] for a in series.ref for j, name in enumerate(FACTORS) if a in scales}
-    run = replay(machine, series.t, series.ref, batch=batch, mcu_values=mcu, initial_position=series.x0)
-    e = {a: (series.ref[a][:, None] - run.position[a]) * 1e6 for a in series.ref}
-    return e, run.current
+    if series.source == "recorded":
+        run = replay(machine, series.t, series.ref, batch=batch, mcu_values=mcu, initial_position=series.x0)
+        e = {a: (series.ref[a][:, None] - run.position[a]) * 1e6 for a in series.ref}
+        return e, run.current
+    tv = float(machine.si("servo")["velocity_loop_period"])
+    span = float(series.t[-1]) - series.t_start + max(map(abs, SHIFT_BOUNDS_MS)) * 1e-3
+    grid = series.t_start + tv * np.arange(int(np.ceil(span / tv)) + 2)
+    run = replay(machine, series.t, series.ref, batch=batch, mcu_values=mcu, initial_position=series.x0,
+                 t_out=grid, t_start=series.t_start, disturbance=series.disturbance)
+    lag = np.zeros(batch) if shift is None else np.broadcast_to(np.asarray(shift, dtype=float), (batch,))
+    q = series.t[:, None] - lag[None, :]
+    e = {a: (series.cmd[a][:, None] - _sample(grid, run.position[a], q)) * 1e6 for a in series.ref}
+    cur = run.current
+    if smooth:
+        width = max(int(round(float(machine.si("servo")["position_loop_period"]) / tv)), 1)
+        kernel = np.ones(width) / width
+        cur = {a: np.apply_along_axis(np.convolve, 0, c, kernel, "same") for a, c in cur.items()}
+    return e, {a: _sample(grid, cur[a], q) for a in series.ref}
 
 
 def _initial_spp(machine: Machine, series: list[_Series], axis: str) -> float:
@@ -207,7 +328,9 @@ def identify_servo(
     ----------
     cases : iterable of case folders / ``case.toml`` / Case
         Reciprocating runs (``cnctwin experiment servo``) with ``t_s``,
-        ``{a}_ref_mm``, ``{a}_mm``, ``{a}_tcmd_A``.
+        ``{a}_ref_mm``, ``{a}_mm``, ``{a}_tcmd_A``. Without ``{a}_ref_mm``
+        (a servo log), the commands are the twin's run of the case's program,
+        aligned with the log (see the module docstring and ``ServoFit.commands_``).
     method : {"default", "paper-ga"}
     seed : int
         GA seed.
@@ -234,7 +357,7 @@ def identify_servo(
     data = load_inputs(cases)
     base = machine if isinstance(machine, Machine) else (
         load_machine(machine) if machine is not None else data[0].case.machine)
-    series, used = _prepare(data, axes)
+    series, used = _prepare(data, axes, base)
     w: dict[str, tuple[float, float]] = {}
     for a in used:
         e_all = np.concatenate([s.e[a] for s in series if a in s.e])
@@ -244,12 +367,14 @@ def identify_servo(
     counter = {"sims": 0}
     journal = journal or Journal()
 
-    def residuals(scales: dict[str, np.ndarray], summed: bool = False) -> dict[str, np.ndarray]:
-        """Weighted residuals per axis, shape (B, m_a)."""
+    def residuals(scales: dict[str, np.ndarray], summed: bool = False,
+                  shifts: dict[int, np.ndarray] | None = None, smooth: bool = False) -> dict[str, np.ndarray]:
+        """Weighted residuals per axis, shape (B, m_a); ``shifts[i]`` (B,) [s] for the series aligned with the twin."""
         parts: dict[str, list[np.ndarray]] = {a: [] for a in used}
-        for s in series:
+        for i, s in enumerate(series):
             sub = {a: scales[a] for a in s.ref}
-            e_sim, c_sim = _simulate(base, s, sub)
+            e_sim, c_sim = (_simulate(base, s, sub, shifts.get(i), smooth) if shifts
+                            else _simulate(base, s, sub))
             for a in s.ref:
                 de = w[a][0] * (s.e[a][:, None] - e_sim[a]).T
                 dc = w[a][1] * (s.cur[a][:, None] - c_sim[a]).T
@@ -261,15 +386,21 @@ def identify_servo(
         counter["sims"] += len(series)
         return journal.memo(stage, key, compute)
 
-    if method == "default":
-        scales, iterations = _fit_least_squares(base, series, used, residuals, max_iterations, journaled)
-    elif method == "paper-ga":
-        scales, iterations = _fit_ga(used, residuals, seed, journaled)
-    else:
+    if method not in ("default", "paper-ga"):
         raise IdentificationError(f"unknown servo method {method!r}; expected 'default' or 'paper-ga'")
+    shifts: dict[int, float] = {}
+    iterations = 0
+    if method == "default" or any(s.source == "twin" for s in series):
+        # paper-ga on a log without commands: the residual clock shifts come from the least-squares fit first
+        scales, shifts, iterations = _fit_least_squares(base, series, used, residuals, max_iterations, journaled)
+    if method == "paper-ga":
+        scales, iterations = _fit_ga(used, residuals, seed, journaled, shifts)
+
+    def member_shifts(b: int) -> dict[int, np.ndarray]:
+        return {i: np.full(b, v) for i, v in shifts.items()}
 
     counter["sims"] += len(series)
-    final = residuals({a: scales[a][None, :] for a in used})
+    final = residuals({a: scales[a][None, :] for a in used}, shifts=member_shifts(1))
     fitness, rms = {}, {}
     for a in used:
         r = final[a][0]
@@ -278,66 +409,139 @@ def identify_servo(
         rms[a] = {"following_error_um": float(np.sqrt(np.mean(r[:half] ** 2)) / w[a][0]),
                   "current_A": float(np.sqrt(np.mean(r[half:] ** 2)) / w[a][1])}
     traces = []
-    for s in series:
+    for i, s in enumerate(series):
         counter["sims"] += 1
-        e_sim, c_sim = _simulate(base, s, {a: scales[a][None, :] for a in s.ref})
-        traces.append({"case": s.data.name, "t": s.t, "ref_mm": {a: s.ref[a] * 1e3 for a in s.ref},
+        e_sim, c_sim = _simulate(base, s, {a: scales[a][None, :] for a in s.ref}, member_shifts(1).get(i))
+        ref_mm = {a: (s.ref[a] if s.source == "recorded" else s.cmd[a]) * 1e3 for a in s.ref}
+        traces.append({"case": s.data.name, "t": s.t, "ref_mm": ref_mm,
                        "e_meas": s.e, "e_sim": {a: e_sim[a][:, 0] for a in s.ref},
                        "cur_meas": s.cur, "cur_sim": {a: c_sim[a][:, 0] for a in s.ref}})
     names = [d.name for d in data]
-    source = provenance(f"servo {method} (closed-loop replay of recorded references, Eq. 7-9)", names)
+    commands = _command_sources(data, series, shifts)
+    what = "recorded references" if all(s.source == "recorded" for s in series) else \
+        "recorded references or the twin's commands aligned with the log"
+    source = provenance(f"servo {method} (closed-loop replay of {what}, Eq. 7-9)", names)
     updates = {f"axis.{a}": {f: float(scales[a][j]) for j, f in enumerate(FACTORS)} for a in used}
     fitted, extra = fitted_machine(base, updates, source, "servo")
     return ServoFit(
         {a: dict(zip(SYMBOLS, map(float, scales[a]))) for a in used}, fitness, rms, w, iterations,
-        counter["sims"], fitted, extra, method, time.perf_counter() - start, names, traces,
+        counter["sims"], fitted, extra, method, time.perf_counter() - start, names, traces, commands,
     )
 
 
-def _fit_least_squares(base, series, used, residuals, max_iterations, journaled) -> tuple[dict[str, np.ndarray], int]:
-    z0 = np.concatenate([[np.log(_initial_spp(base, series, a)), 0.0, 0.0] for a in used])
+def _command_sources(data: Sequence[CaseData], series: list[_Series], shifts: dict[int, float]) -> dict[str, str]:
+    """Case -> where its replay's commands came from (``"recorded"`` or the twin's, with the alignment)."""
+    out = {}
+    for d in data:
+        parts = []
+        mine = [(i, s) for i, s in enumerate(series) if s.data is d]
+        for i, s in mine:
+            if s.source == "recorded":
+                text = "recorded"
+            else:
+                shift = shifts.get(i, 0.0)
+                text = (f"twin, aligned: offset {s.offset + shift:.6f} s, method {s.offset_method}; "
+                        f"residual clock shift {shift * 1e3:+.3f} ms fitted with the scale factors; "
+                        f"cutting forces on the drives: {s.forces}")
+            parts.append(text if len(mine) == 1 else f"{', '.join(s.ref)}: {text}")
+        out[d.name] = " | ".join(parts) if parts else "not used (no axis moves)"
+    return out
+
+
+def _fit_least_squares(base, series, used, residuals, max_iterations,
+                       journaled) -> tuple[dict[str, np.ndarray], dict[int, float], int]:
+    """Scale factors per axis (and a clock shift [s] per series aligned with the twin) by trust-region LS.
+
+    With logs aligned with the twin, a first fit compares the current averaged over a position-loop
+    period (smooth in the shift: the clock shift and ``Spp`` trade off along a long valley of the
+    following error, which the current's per-tick jumps would cut into local minima), a second one
+    the current as logged, from there.
+    """
+    twin = [i for i, s in enumerate(series) if s.source == "twin"]
+    if not twin:
+        return _least_squares_stage(base, series, used, residuals, max_iterations, journaled)
+    scales, shifts, n1 = _least_squares_stage(base, series, used, residuals, max_iterations, journaled, smooth=True)
+    scales, shifts, n2 = _least_squares_stage(base, series, used, residuals, max_iterations, journaled,
+                                              start=(scales, shifts))
+    return scales, shifts, n1 + n2
+
+
+def _least_squares_stage(base, series, used, residuals, max_iterations, journaled, smooth: bool = False,
+                         start: tuple | None = None) -> tuple[dict[str, np.ndarray], dict[int, float], int]:
+    """One trust-region fit; ``start`` = (scales, shifts [s]) of a previous stage, else the default start."""
+    twin = [i for i, s in enumerate(series) if s.source == "twin"]
+    if start is None:
+        z0 = np.concatenate([[np.log(_initial_spp(base, series, a)), 0.0, 0.0] for a in used])
+    else:
+        z0 = np.concatenate([np.log(start[0][a]) for a in used])
+    n_scale = z0.size
     step = 1e-3
+    members = 4 + (1 if twin else 0)
+    # row -> series of the stacked residual of each axis (error then current per series, as `residuals` stacks)
+    owner = {a: np.concatenate([np.full(2 * s.t.size, i) for i, s in enumerate(series) if a in s.ref]) for a in used}
     cache: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
 
     def evaluate(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         key = np.round(z, 12).tobytes()
         if key not in cache:
             cache.clear()
-            cache[key] = journaled("servo.least_squares", np.round(z, 12), lambda: residuals_and_jacobian(z))
+            stage = "servo.least_squares" + (".smooth" if smooth else "")
+            cache[key] = journaled(stage, np.round(z, 12), lambda: residuals_and_jacobian(z))
         return cache[key]
 
     def residuals_and_jacobian(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Residual vector at ``z`` and its forward-difference Jacobian: one batched replay of 4 members."""
+        """Residual vector at ``z`` and its forward-difference Jacobian: one batched replay of 4 (5) members.
+
+        Members: the point, one perturbation per factor (every axis at once: the axes are independent),
+        and with logs aligned with the twin one perturbation of every series' clock shift [ms].
+        """
         scales = {}
         for i, a in enumerate(used):
-            zz = np.tile(z[3 * i:3 * i + 3], (4, 1))
-            zz[1:] += step * np.eye(3)
+            zz = np.tile(z[3 * i:3 * i + 3], (members, 1))
+            zz[1:4] += step * np.eye(3)
             scales[a] = np.exp(zz)
-        r = residuals(scales)
+        shifts = {}
+        for k, i in enumerate(twin):
+            ms = np.full(members, z[n_scale + k])
+            ms[4] += step
+            shifts[i] = ms * 1e-3
+        r = residuals(scales, shifts=shifts, smooth=smooth) if twin else residuals(scales)
         vec = np.concatenate([r[a][0] for a in used])
         jac = np.zeros((vec.size, z.size))
         row = 0
         for i, a in enumerate(used):
             m = r[a].shape[1]
-            jac[row:row + m, 3 * i:3 * i + 3] = ((r[a][1:] - r[a][0]) / step).T
+            jac[row:row + m, 3 * i:3 * i + 3] = ((r[a][1:4] - r[a][0]) / step).T
+            for k, j in enumerate(twin):
+                mine = owner[a] == j
+                jac[row:row + m, n_scale + k][mine] = ((r[a][4] - r[a][0]) / step)[mine]
             row += m
         return vec, jac
 
     lo, hi = np.log(BOUNDS[0]), np.log(BOUNDS[1])
     z0 = np.clip(z0, lo + 1e-6, hi - 1e-6)
-    sol = least_squares(lambda z: evaluate(z)[0], z0, jac=lambda z: evaluate(z)[1], bounds=(lo, hi),
+    bounds = (lo, hi)
+    if twin:
+        z0 = np.concatenate([z0, [1e3 * start[1][i] if start else 0.0 for i in twin]])
+        bounds = (np.concatenate([np.full(n_scale, lo), np.full(len(twin), SHIFT_BOUNDS_MS[0])]),
+                  np.concatenate([np.full(n_scale, hi), np.full(len(twin), SHIFT_BOUNDS_MS[1])]))
+    sol = least_squares(lambda z: evaluate(z)[0], z0, jac=lambda z: evaluate(z)[1], bounds=bounds,
                         method="trf", x_scale=1.0, xtol=1e-8, ftol=1e-10, gtol=1e-10, max_nfev=max_iterations)
-    return {a: np.exp(sol.x[3 * i:3 * i + 3]) for i, a in enumerate(used)}, int(sol.nfev)
+    return ({a: np.exp(sol.x[3 * i:3 * i + 3]) for i, a in enumerate(used)},
+            {i: float(sol.x[n_scale + k]) * 1e-3 for k, i in enumerate(twin)}, int(sol.nfev))
 
 
-def _fit_ga(used, residuals, seed, journaled) -> tuple[dict[str, np.ndarray], int]:
+def _fit_ga(used, residuals, seed, journaled,
+            shifts: dict[int, float] | None = None) -> tuple[dict[str, np.ndarray], int]:
+    """The paper's GA per axis in lockstep; ``shifts`` [s]: clock shifts of logs aligned with the twin (fixed)."""
     bounds = [(np.full(3, BOUNDS[0]), np.full(3, BOUNDS[1])) for _ in used]
     def evaluate(xs: list[np.ndarray]) -> list[np.ndarray]:
         # an axis whose GA has stopped gets filler members (factors 1), evaluated and ignored
         p = max(x.shape[0] for x in xs)
         scales = {a: (np.vstack([x, np.ones((p - x.shape[0], 3))]) if x.shape[0] < p else x)
                   for a, x in zip(used, xs)}
-        r = residuals(scales, summed=True)
+        r = (residuals(scales, summed=True, shifts={i: np.full(p, v) for i, v in shifts.items()}) if shifts
+             else residuals(scales, summed=True))
         return [paper_objective(r[a])[: x.shape[0]] for a, x in zip(used, xs)]
 
     def evaluate_generation(xs: list[np.ndarray]) -> list[np.ndarray]:
