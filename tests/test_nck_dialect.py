@@ -285,3 +285,18 @@ def test_optimize_refuses_g95_cutting_lines_naming_file_and_line(tmp_path):
                                       "G95 X3. F0.08\nG0 Z2.\nM30\n")
     with pytest.raises(OptimizeError, match=r"slot\.nc:5: feed per revolution \(G95\)"):
         build_reference(load_case(tmp_path))
+
+
+# ---------------------------------------------------------------------------- M19 spindle orientation
+def test_m19_stops_the_spindle_exactly_as_m5():
+    # posts write M19 before a tool change: the spindle stops (ramping down at spindle_ramp) and waits for
+    # M3/M4; the next S6000 M3 ramps it up again and the cut waits for the speed arrival, as after M5
+    text = "G90 G0 X0 Y0 Z1.\nS6000 M3\nG1 Z-1. F600\nX10.\nG0 Z5.\n{stop}\nT2 M6\nS6000 M3\nG1 X20. F600\nM30\n"
+    with_m5 = NCKernel(program_text=text.format(stop="M5"))
+    with_m19 = NCKernel(program_text=text.format(stop="M19"))
+    with_m5.setup(0.0)
+    with_m19.setup(0.0)
+    assert with_m19.duration_[0] == with_m5.duration_[0]
+    np.testing.assert_array_equal(with_m19.plan_.position, with_m5.plan_.position)
+    np.testing.assert_array_equal(with_m19.plan_.spindle_ref, with_m5.plan_.spindle_ref)
+    assert np.any(with_m19.plan_.spindle_ref[0] == 0.0)           # it did stop between the two cuts

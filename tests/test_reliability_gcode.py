@@ -143,7 +143,7 @@ def valid_programs(draw):
         elif kind == "dwell":
             lines.append(draw(st.sampled_from(["G4 P250", "G4 X0.1", "G04 P0"])))
         elif kind == "spindle":
-            lines.append(draw(st.sampled_from(["S3000 M3", "M5", "S8000 M4", "S100"])))
+            lines.append(draw(st.sampled_from(["S3000 M3", "M5", "M19", "S8000 M4", "S100"])))
         elif kind == "tool":
             lines.append(f"T{draw(st.integers(1, 20))} M6")
         elif kind == "comment":

@@ -1,9 +1,12 @@
-"""Spindle, tool and coolant words of a block: S, T, M3/M4/M5, M6, M7/M8/M9 → typed blocks.
+"""Spindle, tool and coolant words of a block: S, T, M3/M4/M5/M19, M6, M7/M8/M9 → typed blocks.
 
 Conventions
 -----------
 * S is the commanded spindle speed in rev/min (modal, kept through M5); M3/M4 start the spindle clockwise /
   counter-clockwise at it, M5 stops it; an S without M3/M4/M5 changes the speed in the current direction.
+* M19 (spindle orientation, as posts write it before a tool change or a boring tool's retract): the spindle
+  stops as with M5 and stays stopped until M3/M4; the orientation itself (a fraction of a revolution at the
+  orientation speed, well under the ramp-down time) is not modelled.
 * T selects a tool (0..:data:`.input_ranges.MAX_TOOL`), M6 changes to the selected one.
 * M7/M8 switch the coolant on, M9 off.
 * Order within a block: tool change, spindle, coolant (then the modes and the motion of the block).
@@ -48,7 +51,7 @@ def auxiliary_blocks(st: ModalState, ms: MWords, vals: ValueWords, line: int, er
         out.append(ToolChange(line, st.tool_selected))
     if "spindle" in ms:
         code = ms["spindle"][0]
-        if code == 5:
+        if code in (5, 19):
             st.direction = 0
             out.append(SpindleStop(line))
             if "S" in vals:

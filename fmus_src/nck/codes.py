@@ -73,12 +73,13 @@ G_REJECT: dict[int | float, str] = {
 }
 # M code -> kind
 M_GROUP: dict[int, str] = {
-    0: "stop", 1: "stop", 2: "end", 30: "end", 3: "spindle", 4: "spindle", 5: "spindle", 6: "tool change",
+    0: "stop", 1: "stop", 2: "end", 30: "end", 3: "spindle", 4: "spindle", 5: "spindle", 19: "spindle",
+    6: "tool change",
     7: "coolant", 8: "coolant", 9: "coolant", 98: "subprogram", 99: "subprogram",
 }
 SUPPORTED_G = ("G0 G1 G2 G3 G4 G5 G5.1 G8 G9 G10 G13.1 G15 G17 G18 G19 G20 G21 G28 G30 G40 G41 G42 G43 G44 G49 G50 "
                "G50.1 G53 G54-G59 G54.1 G61 G64 G67 G69 G73 G80 G81 G82 G83 G85 G86 G89 G90 G91 G94 G95 G98 G99")
-SUPPORTED_M = "M0 M1 M2 M3 M4 M5 M6 M7 M8 M9 M30 M98 M99"
+SUPPORTED_M = "M0 M1 M2 M3 M4 M5 M6 M7 M8 M9 M19 M30 M98 M99"
 #: Address letters of the dialect.
 LETTERS = set("GMXYZIJKRFSTHDPQNOL")
 

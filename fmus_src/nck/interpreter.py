@@ -8,7 +8,7 @@ compensation with a zero radius only, see :mod:`.compensation`), G43/G44/G49 wit
 L2/L20/L10-L13 (programmable data input), G5.1 Q0/Q1, G8 P0/P1, G5
 P0/P10000 (look-ahead modes, accepted), G61/G64 (exact stop mode / cutting
 mode), canned drilling cycles G73 G81 G82 G83 G85 G86 G89 with G98/G99 and G80 (see
-:mod:`.cycles`), G90/G91, G94/G95; M0 M1 M2 M3 M4 M5 M6 M7 M8 M9 M30; subprograms
+:mod:`.cycles`), G90/G91, G94/G95; M0 M1 M2 M3 M4 M5 M6 M7 M8 M9 M19 M30; subprograms
 M98/M99 in the same file (see :mod:`.subprograms`); F S T H D P Q N O L words
 (K: arc centre, or repeat count in a canned cycle; L: repeat count of M98);
 ``( )`` and ``;`` comments, ``%`` lines, block delete ``/``.
