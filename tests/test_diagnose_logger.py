@@ -117,6 +117,38 @@ def test_an_uneven_sparse_log_replays_the_twins_commands_at_the_servo_ticks(logg
         assert np.sqrt(np.mean((r - np.median(r)) ** 2)) < 0.4, a   # 1 µm / sqrt(12) = 0.29 µm
 
 
+def test_a_servo_log_of_a_machine_with_more_friction_names_it(tmp_path):
+    # the "machine" has 100 N more Coulomb (and static) friction on X in both directions than the parameter
+    # set; its servo log (2 ms, 1 µm, 10 mA, no commands, no line, no forces, its own clock) must name
+    # exactly that: the X current steps by 100 N / (kt 2 pi / lead) = 0.19 A with the sign of the velocity
+    models = Path(__file__).resolve().parents[1] / "models" / "machines"
+    text = (models / "default.toml").read_text()
+    for old, new in (("coulomb_N = { value = 641.6,", "coulomb_N = { value = 741.6,"),
+                     ("coulomb_N = { value = 661.9,", "coulomb_N = { value = 761.9,"),
+                     ("static_N = { value = 775.2,", "static_N = { value = 875.2,"),
+                     ("static_N = { value = 756.8,", "static_N = { value = 856.8,")):
+        assert text.count(old) == 1
+        text = text.replace(old, new)
+    (tmp_path / "truth.toml").write_text(text)
+    case_text = (PAPER_PART / "case.toml").read_text()
+    for name, machine in (("machine", (tmp_path / "truth.toml").as_posix()), ("log", "default")):
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "program.nc").write_text(PROGRAM)
+        (tmp_path / name / "case.toml").write_text(
+            'recording = "recording.csv"\n' + case_text.replace('parameters = "default"', f'parameters = "{machine}"'))
+    run = simulate(case=tmp_path / "machine", plot=False).recording
+    rng = np.random.default_rng(7)
+    idx = np.arange(0, len(run), 2)
+    channels = {"t_s": run.t[idx] + SHIFT_S}
+    for a in "xyz":
+        channels[f"{a}_mm"] = np.round(run[f"{a}_mm"][idx] * 1e3) / 1e3
+        channels[f"{a}_tcmd_A"] = run[f"{a}_tcmd_A"][idx] + rng.normal(0.0, 0.01, idx.size)
+    Recording.from_channels(channels).write_csv(tmp_path / "log" / "recording.csv")
+    result = diagnose(tmp_path / "log")
+    assert [(e["effect"], e["axis"]) for e in result.effects] == [("friction_mismatch", "x")]
+    assert result.effects[0]["parameters"]["coulomb_N"] == pytest.approx(100.0, rel=0.05)
+
+
 def test_recorded_quantum_is_the_encoder_step_and_zero_for_smooth_channels():
     rng = np.random.default_rng(3)
     x = np.cumsum(rng.normal(0.0, 0.01, 500))
