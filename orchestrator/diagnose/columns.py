@@ -102,36 +102,16 @@ def plateau_limit(measured: np.ndarray, simulated: np.ndarray, sigma: float) -> 
     return None
 
 
-def build(prep: Prepared, base: Model, lead_mm: dict[str, float], vertical: tuple[str, ...] = ("z",)
-          ) -> tuple[dict[str, AxisColumns], Simulated]:
-    """Baseline replay, dynamic columns (one batched replay) and kinematic columns of every axis."""
-    variants = {a: candidate_variants(a, lead_mm[a], a in vertical) for a in prep.axes}
-    dyn = {a: dynamic_columns(variants[a]) for a in prep.axes}
-    # a current plateau below the model's limit: saturation candidate (needs the baseline first)
-    base_sim = simulate(prep.machine, prep.t, prep.commands, [base], prep.t_start, twin=prep.twin_commands(),
-                        disturbance=prep.disturbance)
-    for a in prep.axes:
-        cur = prep.current[a]
-        if cur is None:
-            continue
-        sig = noise_floor((cur - base_sim.current[a][:, 0])[prep.valid])
-        limit = plateau_limit(cur[prep.valid], base_sim.current[a][prep.valid, 0], sig)
-        if limit is not None:
-            col = Column(f"current_saturation.switch@limit_A={limit:.4g}", "current_saturation", "switch",
-                         (("limit_A", limit),), "dynamic", 1.0)
-            variants[a].append(Variant("current_saturation", (col,), {"limit_A": limit}))
-            dyn[a].append(col)
+def _members(axes: list[str], base: Model, dyn: dict[str, list[Column]]) -> list[Model]:
+    """Replay members: the baseline, then member ``j`` carrying dynamic column ``j - 1`` of every axis."""
     width = 1 + max(len(c) for c in dyn.values())
     members: list[Model] = []
     for j in range(width):
-        m: Model = {a: {e: dict(p) for e, p in base.get(a, {}).items()} for a in prep.axes}
+        m: Model = {a: {e: dict(p) for e, p in base.get(a, {}).items()} for a in axes}
         if j > 0:
-            for a in prep.axes:
+            for a in axes:
                 if j - 1 < len(dyn[a]):
                     col = dyn[a][j - 1]
-                    if col.effect == "current_saturation":
-                        m[a]["current_saturation"] = {"limit_A": dict(col.fixed)["limit_A"]}
-                        continue
                     extra = column_model(col)
                     for e, p in extra.items():
                         merged = dict(m[a].get(e, {}))
@@ -139,8 +119,50 @@ def build(prep: Prepared, base: Model, lead_mm: dict[str, float], vertical: tupl
                             merged[k] = merged.get(k, 0.0) + v if k == col.parameter else v
                         m[a][e] = merged
         members.append(m)
+    return members
+
+
+def _with_member(sim: Simulated, extra: Simulated, column: dict[str, int]) -> Simulated:
+    """``sim`` with member 0 of ``extra`` as column ``column[a]`` of the axes in ``column`` (the others kept)."""
+    out = Simulated({}, {}, {}, {})
+    for a in sim.fe:
+        for name in ("fe", "current", "motor", "force"):
+            arr = getattr(sim, name)[a]
+            if a in column:
+                arr = np.column_stack([arr[:, :column[a]], getattr(extra, name)[a][:, :1]])
+            getattr(out, name)[a] = arr
+    return out
+
+
+def build(prep: Prepared, base: Model, lead_mm: dict[str, float], vertical: tuple[str, ...] = ("z",)
+          ) -> tuple[dict[str, AxisColumns], Simulated]:
+    """Baseline replay, dynamic columns (one batched replay) and kinematic columns of every axis."""
+    variants = {a: candidate_variants(a, lead_mm[a], a in vertical) for a in prep.axes}
+    dyn = {a: dynamic_columns(variants[a]) for a in prep.axes}
+    members = _members(prep.axes, base, dyn)
     sim = simulate(prep.machine, prep.t, prep.commands, members, prep.t_start, twin=prep.twin_commands(),
                    disturbance=prep.disturbance)
+    # a current plateau below the model's limit: saturation candidate (member 0 is the baseline). Its member
+    # is replayed on its own: every member of a batched replay is its solo run bit for bit, whatever the rest
+    saturation: Model = {}
+    for a in prep.axes:
+        cur = prep.current[a]
+        if cur is None:
+            continue
+        sig = noise_floor((cur - sim.current[a][:, 0])[prep.valid])
+        limit = plateau_limit(cur[prep.valid], sim.current[a][prep.valid, 0], sig)
+        if limit is not None:
+            col = Column(f"current_saturation.switch@limit_A={limit:.4g}", "current_saturation", "switch",
+                         (("limit_A", limit),), "dynamic", 1.0)
+            variants[a].append(Variant("current_saturation", (col,), {"limit_A": limit}))
+            dyn[a].append(col)
+            saturation[a] = {**{e: dict(p) for e, p in base.get(a, {}).items()},
+                             "current_saturation": {"limit_A": limit}}
+    if saturation:
+        extra = simulate(prep.machine, prep.t, prep.commands,
+                         [{a: saturation.get(a, {e: dict(p) for e, p in base.get(a, {}).items()}) for a in prep.axes}],
+                         prep.t_start, twin=prep.twin_commands(), disturbance=prep.disturbance)
+        sim = _with_member(sim, extra, {a: len(dyn[a]) for a in saturation})
     out: dict[str, AxisColumns] = {}
     v = prep.valid
     for a in prep.axes:

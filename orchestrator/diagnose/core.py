@@ -242,8 +242,10 @@ def _replay_of(prep: Prepared, base: Model) -> Callable[[dict, int], Simulated]:
 
 def _name_and_refit(prep: Prepared, base: Model, lead: dict[str, float], vertical: tuple[str, ...],
                     machine: Machine, refit_scales: bool, say: Callable[[str], None], log: list[str]
-                    ) -> tuple[dict[str, AxisColumns], dict[str, Selection], dict[str, list[Choice]], RefitResult]:
-    """Library columns, selection per axis and the joint refit (steps 2-4 of the pipeline)."""
+                    ) -> tuple[dict[str, AxisColumns], dict[str, Selection], dict[str, list[Choice]], RefitResult,
+                               Simulated]:
+    """Library columns, selection per axis, the joint refit (steps 2-4 of the pipeline) and the library's
+    replay (member 0: ``base``)."""
     say("building the effect library (batched replay)")
     cols, base_sim = build(prep, base, lead, vertical)
     stuck = add_stuck_artefacts(prep.t, cols, base_sim, prep.disturbance, machine=prep.machine,
@@ -271,7 +273,7 @@ def _name_and_refit(prep: Prepared, base: Model, lead: dict[str, float], vertica
     say(f"refitting {len(free)} parameters")
     fit = refit(prep, cols, start, free)
     log += fit.log
-    return cols, selections, choices, fit
+    return cols, selections, choices, fit, base_sim
 
 
 def _timing_check(prep: Prepared, cols: dict[str, AxisColumns], final: Model, fit: RefitResult) -> float | None:
@@ -448,7 +450,8 @@ def _diagnose_drives(case: Case, prep: Prepared, base_machine: Machine, holdout,
     """Steps 2-5 of the pipeline for the feed drives and the controller."""
     lead = {a: _lead_mm(base_machine, a) for a in "xyz"}
     base: Model = {a: {} for a in prep.axes}
-    cols, selections, choices, fit = _name_and_refit(prep, base, lead, vertical, base_machine, refit_scales, say, log)
+    cols, selections, choices, fit, base_sim = _name_and_refit(prep, base, lead, vertical, base_machine,
+                                                               refit_scales, say, log)
     final = fit.model
     if _timing_effects(final):
         phase = _timing_check(prep, cols, final, fit)
@@ -457,8 +460,8 @@ def _diagnose_drives(case: Case, prep: Prepared, base_machine: Machine, holdout,
                        "well (the commands or the current ripple did not fix the phase); diagnosing again")
             prep.t_start += phase
             prep.phase_from_commands = False
-            cols, selections, choices, fit = _name_and_refit(prep, base, lead, vertical, base_machine,
-                                                             refit_scales, say, log)
+            cols, selections, choices, fit, base_sim = _name_and_refit(prep, base, lead, vertical, base_machine,
+                                                                       refit_scales, say, log)
             final = fit.model
 
     # final replay: baseline, final, and the final model without each effect (its contribution)
@@ -468,7 +471,12 @@ def _diagnose_drives(case: Case, prep: Prepared, base_machine: Machine, holdout,
     base = {a: ({"command_shift": dict(final[a]["command_shift"])} if "command_shift" in final.get(a, {}) else {})
             for a in prep.axes}
     members = [base, final] + [_without(final, a, e) for a, e in effect_keys]
-    sim = simulate(prep.machine, prep.t, prep.commands, members, prep.t_start, twin=twin, disturbance=prep.disturbance)
+    if all(not m for m in members[0].values()) and all(not m for m in final.values()):
+        # nothing found: both members are the library's baseline member, replayed at this same servo phase
+        sim = _repeat(base_sim, 2)
+    else:
+        sim = simulate(prep.machine, prep.t, prep.commands, members, prep.t_start, twin=twin,
+                       disturbance=prep.disturbance)
     # effects the refit made negligible are dropped (their contribution is below the minimum gain)
     kept = []
     r_final = residuals(prep, cols, sim, 1, proj)
@@ -545,6 +553,13 @@ def _diagnose_drives(case: Case, prep: Prepared, base_machine: Machine, holdout,
     return Diagnosis(alignment, effects, unexplained, rms_before, rms_after, machine_out, provenance,
                      holdout=hold, log=log, noise=noise, results=results, final_model=final,
                      case_name=Path(case.folder).name)
+
+
+def _repeat(sim: Simulated, count: int) -> Simulated:
+    """Member 0 of ``sim`` as ``count`` identical members (every member of a batched replay is its solo run)."""
+    def rep(d: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        return {a: np.repeat(arr[:, :1], count, axis=1) for a, arr in d.items()}
+    return Simulated(rep(sim.fe), rep(sim.current), rep(sim.motor), rep(sim.force))
 
 
 def _alignment(prep: Prepared, cols: dict[str, AxisColumns], art: dict[str, dict[str, float]],

@@ -106,9 +106,13 @@ def select(y: np.ndarray, artefacts: dict[str, np.ndarray], variants: list[Varia
     art_cols = [artefacts[k] for k in art_names]
     log: list[str] = []
 
+    fits: dict[tuple[str, ...], tuple[np.ndarray, float]] = {}
+
     def fit_set(chosen: list[Variant]) -> tuple[np.ndarray, float]:
-        cols = art_cols + [columns[c.key] for v in chosen for c in v.columns]
-        return _fit(y, cols)
+        key = tuple(c.key for v in chosen for c in v.columns)
+        if key not in fits:  # the forward, backward and final passes fit some sets twice
+            fits[key] = _fit(y, art_cols + [columns[k] for k in key])
+        return fits[key]
 
     def admissible(chosen: list[Variant], coef: np.ndarray) -> bool:
         i = len(art_cols)
