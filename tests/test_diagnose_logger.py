@@ -117,25 +117,41 @@ def test_an_uneven_sparse_log_replays_the_twins_commands_at_the_servo_ticks(logg
         assert np.sqrt(np.mean((r - np.median(r)) ** 2)) < 0.4, a   # 1 µm / sqrt(12) = 0.29 µm
 
 
-def test_a_servo_log_of_a_machine_with_more_friction_names_it(tmp_path):
-    # the "machine" has 100 N more Coulomb (and static) friction on X in both directions than the parameter
-    # set; its servo log (2 ms, 1 µm, 10 mA, no commands, no line, no forces, its own clock) must name
-    # exactly that: the X current steps by 100 N / (kt 2 pi / lead) = 0.19 A with the sign of the velocity
-    models = Path(__file__).resolve().parents[1] / "models" / "machines"
-    text = (models / "default.toml").read_text()
+def _x_friction_plus_100_N(text: str) -> str:
     for old, new in (("coulomb_N = { value = 641.6,", "coulomb_N = { value = 741.6,"),
                      ("coulomb_N = { value = 661.9,", "coulomb_N = { value = 761.9,"),
                      ("static_N = { value = 775.2,", "static_N = { value = 875.2,"),
                      ("static_N = { value = 756.8,", "static_N = { value = 856.8,")):
         assert text.count(old) == 1
         text = text.replace(old, new)
-    (tmp_path / "truth.toml").write_text(text)
+    return text
+
+
+def _x_feedforward_0_3(text: str) -> str:
+    head, sep, rest = text.partition("[axis.x]")
+    old = "velocity_feedforward = { value = 0.0,"
+    assert sep and old in rest.split("[axis.y]")[0]
+    return head + sep + rest.replace(old, "velocity_feedforward = { value = 0.3,", 1)
+
+
+@pytest.mark.parametrize("machine,effect,parameter,value", [
+    # the X current steps by 100 N / (kt 2 pi / lead) = 0.19 A with the sign of the velocity
+    (_x_friction_plus_100_N, "friction_mismatch", "coulomb_N", 100.0),
+    # X lags 0.3/Kp = 6 ms less: no clock shift fits it, so it must not pull the clock of y and z (it did,
+    # by 0.13 ms, and five false effects on all three axes followed)
+    (_x_feedforward_0_3, "velocity_feedforward", "gain", 0.3),
+])
+def test_a_servo_log_of_a_machine_with_one_difference_names_exactly_it(tmp_path, machine, effect, parameter, value):
+    # the "machine" differs from the parameter set in one X property; its servo log (2 ms, 1 µm, 10 mA, no
+    # commands, no line, no forces, its own clock) must name exactly that, with its value
+    models = Path(__file__).resolve().parents[1] / "models" / "machines"
+    (tmp_path / "truth.toml").write_text(machine((models / "default.toml").read_text()))
     case_text = (PAPER_PART / "case.toml").read_text()
-    for name, machine in (("machine", (tmp_path / "truth.toml").as_posix()), ("log", "default")):
+    for name, parameters in (("machine", (tmp_path / "truth.toml").as_posix()), ("log", "default")):
         (tmp_path / name).mkdir()
         (tmp_path / name / "program.nc").write_text(PROGRAM)
         (tmp_path / name / "case.toml").write_text(
-            'recording = "recording.csv"\n' + case_text.replace('parameters = "default"', f'parameters = "{machine}"'))
+            'recording = "recording.csv"\n' + case_text.replace('parameters = "default"', f'parameters = "{parameters}"'))
     run = simulate(case=tmp_path / "machine", plot=False).recording
     rng = np.random.default_rng(7)
     idx = np.arange(0, len(run), 2)
@@ -145,8 +161,8 @@ def test_a_servo_log_of_a_machine_with_more_friction_names_it(tmp_path):
         channels[f"{a}_tcmd_A"] = run[f"{a}_tcmd_A"][idx] + rng.normal(0.0, 0.01, idx.size)
     Recording.from_channels(channels).write_csv(tmp_path / "log" / "recording.csv")
     result = diagnose(tmp_path / "log")
-    assert [(e["effect"], e["axis"]) for e in result.effects] == [("friction_mismatch", "x")]
-    assert result.effects[0]["parameters"]["coulomb_N"] == pytest.approx(100.0, rel=0.05)
+    assert [(e["effect"], e["axis"]) for e in result.effects] == [(effect, "x")]
+    assert result.effects[0]["parameters"][parameter] == pytest.approx(value, rel=0.05)
 
 
 def test_recorded_quantum_is_the_encoder_step_and_zero_for_smooth_channels():
@@ -219,3 +235,43 @@ def test_a_few_block_changes_a_tick_off_the_twin_are_outvoted():
     assert np.mean(errors_consensus) < 0.5 * np.mean(errors_median)
     # without a 75 % majority there is no consensus: the brackets say nothing common
     assert consensus_bracket(np.array([0.0, 1.0, 2.0]), np.array([0.5, 1.5, 2.5])) is None
+
+
+def test_an_axis_whose_lag_differs_does_not_pull_the_clock_of_the_others():
+    # three axes moving at different times; the logger's clock is 2.5 s. The x of the "machine" lags its
+    # twin 6 ms less (a feed-forward of 0.3 at Kp 50/s): no shift within +-5 ms fits it. Refined jointly it
+    # pulls the clock off; refined per axis it is left out and the others give the clock.
+    from orchestrator.diagnose.align import refine_offset, refine_offset_by_axes
+
+    t_nc = np.arange(0.0, 6.0, 1e-3)
+
+    def move(t, start):
+        return 5.0 * np.clip((t - start) / 0.5, 0.0, 1.0) ** 2 * (3.0 - 2.0 * np.clip((t - start) / 0.5, 0.0, 1.0))
+
+    starts = {"x": 1.0, "y": 2.5, "z": 4.0}
+    nc = {a: move(t_nc, s) for a, s in starts.items()}
+    t_rec = 2.5 + np.arange(0.2, 5.8, 2e-3)
+    lag = {"x": -6e-3, "y": 0.0, "z": 0.0}
+    rec = {a: np.round(move(t_rec - 2.5 - lag[a], s) * 1e3) / 1e3 for a, s in starts.items()}
+    joint = refine_offset(t_rec, rec, t_nc, nc, 2.5)
+    assert abs(joint - 2.5) > 0.1e-3                                   # pulled by x
+    found, used = refine_offset_by_axes(t_rec, rec, t_nc, nc, 2.5)
+    assert used == ["y", "z"]
+    assert found == pytest.approx(2.5, abs=5e-6)
+
+
+def test_the_correlation_peak_is_numpys_full_correlation_peak_bit_for_bit():
+    # the offset search's cross-correlation by FFT must give np.correlate's argmax and the three values
+    # around it exactly (the reference implementation), for both length orders and a flat-topped peak
+    from orchestrator.diagnose.correlate import correlation_peak
+
+    rng = np.random.default_rng(9)
+    for n, m in ((4000, 2500), (1500, 3100), (64, 64)):
+        a = np.cumsum(rng.normal(size=n))
+        v = np.cumsum(rng.normal(size=m))
+        for x, y in ((a - a.mean(), v - v.mean()), (np.ones(n), np.ones(m))):
+            c = np.correlate(x, y, mode="full")
+            i = int(np.argmax(c))
+            j, c_m, c_0, c_p = correlation_peak(x, y)
+            assert j == i and c_0 == c[i]
+            assert c_m == (c[i - 1] if i > 0 else c_m) and c_p == (c[i + 1] if i + 1 < c.size else c_p)

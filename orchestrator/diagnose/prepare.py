@@ -13,8 +13,8 @@ from ..simulate import simulate as simulate_twin
 from ..twin import TwinOptions, nck_parameters
 from ..validation import validate_recording
 from .align import (
-    consensus_bracket, fill_gaps, offset_bracket_from_lines, refine_offset, time_offset_from_lines,
-    time_offset_from_signal,
+    consensus_bracket, fill_gaps, offset_bracket_from_lines, refine_offset, refine_offset_by_axes,
+    time_offset_from_lines, time_offset_from_signal,
 )
 from .errors import DiagnosisError
 
@@ -219,10 +219,10 @@ def prepare(case: Case, recording: Recording, machine: Machine, axes: list[str] 
                 method = (f"cross-correlation of {a}{suffix} with the twin's "
                           + ("command" if suffix == "_ref_mm" else "position"))
                 if suffix == "_mm":  # the correlation peak is good to a fraction of its 1 ms grid: refine
-                    offset = refine_offset(t, {c: np.asarray(recording[f"{c}_mm"], float) for c in cands},
-                                           np.asarray(nc.t, float),
-                                           {c: np.asarray(nc[f"{c}_mm"], float) for c in cands}, offset)
-                    method += "; refined on the positions"
+                    offset, used = refine_offset_by_axes(
+                        t, {c: np.asarray(recording[f"{c}_mm"], float) for c in cands}, np.asarray(nc.t, float),
+                        {c: np.asarray(nc[f"{c}_mm"], float) for c in cands}, offset)
+                    method += f"; refined on the positions of {', '.join(used)}"
                     refined_on_positions = True
                 break
     if not np.isfinite(offset):
