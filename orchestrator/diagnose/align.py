@@ -119,17 +119,30 @@ def consensus_bracket(lows: np.ndarray, highs: np.ndarray) -> tuple[float, float
     return min(spans, key=lambda sp: abs(0.5 * (sp[0] + sp[1]) - centre))
 
 
+def _offset_cost(t_rec: np.ndarray, rec: np.ndarray, t_nc: np.ndarray, ref: np.ndarray, shift: float) -> float:
+    """Mean square of recorded minus twin positions at clock ``shift`` (median removed), or inf."""
+    ok = np.isfinite(rec)
+    tp = t_rec[ok] - shift
+    inside = (tp >= t_nc[0]) & (tp <= t_nc[-1])
+    if inside.sum() < 10:
+        return float("inf")
+    d = rec[ok][inside] - np.interp(tp[inside], t_nc, ref)
+    d = d - np.median(d)
+    return float(np.mean(d * d))
+
+
 def refine_offset_by_axes(t_rec: np.ndarray, ref_rec: dict[str, np.ndarray], t_nc: np.ndarray,
                           ref_nc: dict[str, np.ndarray], offset: float, span_s: float = 0.005,
                           step_s: float = 2.5e-5) -> tuple[float, list[str]]:
-    """:func:`refine_offset` on the axes that agree on a clock, with the axes that use it.
+    """:func:`refine_offset` axis by axis, combined by how sharply and how well each axis fixes the clock.
 
-    Each axis is refined on its own first. An axis whose best shift lies at the edge of the search span
-    has no clock of its own there: its actual positions differ from the twin's by more than a shift (a
-    feed-forward on that axis alone takes 0.3/Kp = 6 ms off its lag; in a joint fit it pulled the clock
-    of the other axes by 0.13 ms, and their residuals then looked like feed-forward and inertia). Such
-    axes are left out; with three axes that agree the median of their own offsets is taken, else the
-    joint fit over the agreeing ones; with none, the joint fit over all.
+    Each axis is refined on its own. Its estimate has the variance ``c / (n k)`` (least squares: ``c``
+    the mean square residual at its best shift, ``k`` the curvature of the mean square there, ``n`` the
+    samples, the same for every axis of one recording), and the clock is the inverse-variance weighted mean. An axis whose positions differ from
+    the twin's by more than a shift (a feed-forward, a compliance, a backlash on that axis alone) leaves a
+    large residual and so gets little weight: fitted jointly, such an axis pulled the clock of the others
+    by up to 0.13 ms, and their residuals then looked like feed-forward and inertia. An axis whose best
+    shift lies at the edge of the search span has no clock of its own there and is left out.
 
     Returns
     -------
@@ -138,13 +151,20 @@ def refine_offset_by_axes(t_rec: np.ndarray, ref_rec: dict[str, np.ndarray], t_n
     used : list of str
         The axes the offset rests on.
     """
-    own = {a: refine_offset(t_rec, {a: ref_rec[a]}, t_nc, {a: ref_nc[a]}, offset, span_s, step_s) for a in ref_rec}
-    agree = sorted(a for a, v in own.items() if abs(v - offset) < span_s - 1.5 * step_s)
-    if len(agree) >= 3:
-        return float(np.median([own[a] for a in agree])), agree
-    use = agree or sorted(ref_rec)
-    return refine_offset(t_rec, {a: ref_rec[a] for a in use}, t_nc, {a: ref_nc[a] for a in use}, offset, span_s,
-                         step_s), use
+    est: dict[str, tuple[float, float]] = {}
+    h = 0.5 * step_s
+    for a in sorted(ref_rec):
+        o = refine_offset(t_rec, {a: ref_rec[a]}, t_nc, {a: ref_nc[a]}, offset, span_s, step_s)
+        if abs(o - offset) >= span_s - 1.5 * step_s:
+            continue
+        c0, cp, cm = (_offset_cost(t_rec, ref_rec[a], t_nc, ref_nc[a], o + d) for d in (0.0, h, -h))
+        curvature = (cp - 2.0 * c0 + cm) / h ** 2
+        if np.isfinite(curvature) and curvature > 0.0:
+            est[a] = (o, curvature / max(c0, 1e-30))
+    if not est:
+        return refine_offset(t_rec, ref_rec, t_nc, ref_nc, offset, span_s, step_s), sorted(ref_rec)
+    weights = np.array([w for _, w in est.values()])
+    return float(np.dot([o for o, _ in est.values()], weights) / weights.sum()), list(est)
 
 
 def time_offset_from_signal(t_rec: np.ndarray, y_rec: np.ndarray, t_nc: np.ndarray, y_nc: np.ndarray,
