@@ -59,7 +59,7 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
         )
     bar.close()
     s = result.summary
-    keys = ["cycle_time_s", "max_cutting_load_N", "cost_KRW", "rms_following_error_um"]
+    keys = ["cycle_time_s", "max_cutting_load_N", "cost_KRW", "rms_following_error_um", "notes"]
     emit(json.dumps({k: s[k] for k in keys if k in s}, indent=2))
     for name, path in result.files.items():
         emit(f"wrote {name}: {path}")

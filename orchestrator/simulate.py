@@ -6,13 +6,15 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
+from fmus_src.nck.blocks import ToolChange
+
 from .atomic import atomic_write_json
 from .case import Case, CaseError, case_for_program, load_case
 from .cost import CostModel
 from .master import Master, MasterSettings
 from .plots import overview_png
 from .recording import Recording
-from .summary import summarize
+from .summary import summarize, tool_notes
 from .twin import TwinOptions, build_twin
 
 
@@ -122,6 +124,11 @@ def simulate(
     summary = summarize(recording, cycle_time, CostModel.from_machine(resolved.machine), resolved.tool.diameter_mm)
     summary["program"] = str(resolved.program)
     summary["machine"] = resolved.machine.name
+    changes = [(b.line, b.tool) for b in twin.nck.program_.blocks if isinstance(b, ToolChange)]
+    summary["tool_changes"], notes = tool_notes(changes, twin.cutting is not None, resolved.tool.diameter_mm,
+                                                resolved.tool.flutes)
+    if notes:
+        summary["notes"] = notes
     result = SimulationResult(recording, summary, run.success, run.message)
     if out is not None:
         out = Path(out)

@@ -99,3 +99,37 @@ def summarize(
         }
     summary["lines"] = line_table(recording)
     return summary
+
+
+def tool_notes(changes: list[tuple[int, int]], cutting: bool, diameter_mm: float, flutes: int
+               ) -> tuple[list[dict[str, int]], list[str]]:
+    """The program's tool changes, and what the twin assumes about them.
+
+    Parameters
+    ----------
+    changes : list of (int, int)
+        ``(line, tool)`` of every M6, in execution order.
+    cutting : bool
+        Whether the run computes a cutting load (the case has a ``[stock]``).
+    diameter_mm, flutes : float, int
+        The case's ``[tool]``.
+
+    Returns
+    -------
+    tool_changes : list of dict
+        ``{"line": ..., "tool": ...}`` per M6.
+    notes : list of str
+        When the program uses more than one tool and the run cuts: the case describes one tool, so every
+        tool's cutting load is computed with it (a drill or a tap after an end mill is modelled as that end
+        mill). Empty otherwise.
+    """
+    table = [{"line": int(line), "tool": int(tool)} for line, tool in changes]
+    tools = sorted({int(tool) for _, tool in changes})
+    notes = []
+    if cutting and len(tools) > 1:
+        first = next(line for line, tool in changes if tool != changes[0][1])
+        notes.append(
+            f"the program uses tools {', '.join(f'T{t}' for t in tools)} (the first change to another tool at line "
+            f"{first}); the case describes one tool ([tool]: {diameter_mm:g} mm, {flutes} flutes), and the cutting "
+            "load of every tool is computed with it")
+    return table, notes

@@ -53,3 +53,22 @@ def test_loads_per_line_and_cost():
     assert rows[20]["mean_load_N"] == pytest.approx(40.0, abs=0.05)   # 75 full sine periods average out
     assert rows[10]["max_load_N"] == 0.0
     assert s["cost_KRW"] == pytest.approx(3.0 * 2.841 + s["cost"]["tool_KRW"])
+
+
+def test_tool_changes_are_listed_and_a_second_tool_on_a_cutting_case_is_noted(tmp_path):
+    from orchestrator.simulate import simulate
+    from orchestrator.summary import tool_notes
+
+    table, notes = tool_notes([(2, 1), (9, 2), (15, 1)], True, 6.0, 2)
+    assert table == [{"line": 2, "tool": 1}, {"line": 9, "tool": 2}, {"line": 15, "tool": 1}]
+    assert len(notes) == 1 and "T1, T2" in notes[0] and "line 9" in notes[0] and "6 mm, 2 flutes" in notes[0]
+    assert tool_notes([(2, 1), (9, 1)], True, 6.0, 2)[1] == []          # one tool: nothing to say
+    assert tool_notes([(2, 1), (9, 2)], False, 6.0, 2)[1] == []         # no stock: no cutting load at all
+    # a program that drills with T2 after milling with T1, on a case with a stock
+    (tmp_path / "case.toml").write_text('program = "p.nc"\n[stock]\nmin = [0.0, 0.0, -10.0]\nmax = [30.0, 20.0, 0.0]\n'
+                                        '[tool]\ndiameter_mm = 6.0\nflutes = 2\n[machine]\nparameters = "default"\n')
+    (tmp_path / "p.nc").write_text("G21 G90\nT1 M6\nS6000 M3\nG0 X-5. Y6. Z1.\nG1 Z-0.5 F200\nX35. F300\nG0 Z5.\n"
+                                   "T2 M6\nS3000 M3\nG0 X10. Y10.\nG81 Z-3. R2. F100\nG80\nM30\n")
+    summary = simulate(case=tmp_path, plot=False).summary
+    assert summary["tool_changes"] == [{"line": 2, "tool": 1}, {"line": 8, "tool": 2}]
+    assert "line 8" in summary["notes"][0]
