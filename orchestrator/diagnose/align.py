@@ -7,9 +7,13 @@
   ``line``;
 * :func:`noise_floor` estimates the white-noise level of a residual from its
   first differences (robust to a smooth model error);
-* :func:`fill_gaps` interpolates commanded positions over empty cells.
+* :func:`fill_gaps` interpolates commanded positions over empty cells;
+* :func:`time_offset_from_forces` aligns a dynamometer's own clock by the
+  envelope of the cutting load when the recording has nothing else.
 """
 from __future__ import annotations
+
+from typing import Callable
 
 import numpy as np
 
@@ -260,3 +264,101 @@ def refine_offset(t_rec: np.ndarray, ref_rec: dict[str, np.ndarray], t_nc: np.nd
         if den > 0:
             return float(shifts[i] + 0.5 * (cost[i - 1] - cost[i + 1]) / den * step_s)
     return float(shifts[i])
+
+
+#: Spindle revolutions averaged by the cutting-load envelope (whole revolutions: runout and the tooth
+#: phase average out, the edges of the cuts stay sharp to this width).
+ENVELOPE_REVOLUTIONS = 2
+#: Half-width of the least-squares refinement around the coarse correlation peak, s.
+FORCE_REFINE_SPAN_S = 3e-3
+
+
+def load_envelope(t: np.ndarray, load: np.ndarray, window_s: float) -> Callable[[np.ndarray], np.ndarray]:
+    """Centred moving mean of a cutting load over ``window_s``, as a function of time.
+
+    The mean of the linear interpolation of ``load`` between its (possibly uneven) samples, taken from
+    its running integral, so it can be read at any time (a clock shift is continuous, not a whole
+    sample); zero outside the samples. The mean of ``|F|`` over whole spindle revolutions is nearly
+    linear in the chip, so a runout or the tooth phase leave it unchanged.
+
+    Parameters
+    ----------
+    t : ndarray, shape (n,)
+        Sample times, increasing, s.
+    load : ndarray, shape (n,)
+        Load at those times (finite), N.
+    window_s : float
+        Averaging window, s.
+
+    Returns
+    -------
+    callable
+        ``f(q)`` -> envelope at times ``q`` (any shape), N.
+    """
+    t = np.asarray(t, float)
+    y = np.asarray(load, float)
+    integral = np.concatenate([[0.0], np.cumsum(0.5 * (y[1:] + y[:-1]) * np.diff(t))])
+    half = 0.5 * float(window_s)
+
+    def envelope(q: np.ndarray) -> np.ndarray:
+        q = np.asarray(q, float)
+        return (np.interp(q + half, t, integral) - np.interp(q - half, t, integral)) / (2.0 * half)
+
+    return envelope
+
+
+def _affine_misfit(y: np.ndarray, x: np.ndarray) -> float:
+    """Residual sum of squares of ``y ~ a + b x`` (least squares in ``a``, ``b``)."""
+    xc, yc = x - x.mean(), y - y.mean()
+    sxx = float(xc @ xc)
+    b = float(xc @ yc) / sxx if sxx > 0.0 else 0.0
+    r = yc - b * xc
+    return float(r @ r)
+
+
+def time_offset_from_forces(t_rec: np.ndarray, f_rec: np.ndarray, t_twin: np.ndarray, f_twin: np.ndarray,
+                            window_s: float, grid_s: float = 1e-3) -> float:
+    """Logger clock minus program clock from the cutting load ``|F|`` alone (a dynamometer's own clock).
+
+    Both loads are smoothed by :func:`load_envelope`. The envelopes, sampled on a ``grid_s`` grid (means
+    removed), are cross-correlated (:func:`.correlate.correlation_peak`, every lag of the two records)
+    for a coarse offset; it is then refined to a small fraction of ``grid_s`` by least squares: the shift
+    ``s`` minimising the misfit of ``E_rec(t) ~ a + b E_twin(t - s)`` over the recorded samples (``a``
+    takes the noise's mean ``|F|`` in air, ``b`` a cutting-coefficient error), bounded to
+    :data:`FORCE_REFINE_SPAN_S` around the coarse offset.
+
+    Parameters
+    ----------
+    t_rec, f_rec : ndarray, shape (n,)
+        Recorded sample times [s] and load ``hypot(fx, fy)`` [N] (finite).
+    t_twin, f_twin : ndarray, shape (m,)
+        The twin's run (program clock) and its predicted load [N].
+    window_s : float
+        Envelope window (a few tooth periods), s.
+    grid_s : float
+        Grid of the coarse correlation, s.
+
+    Returns
+    -------
+    float
+        Offset, s.
+    """
+    from scipy.optimize import minimize_scalar
+
+    t_rec, t_twin = np.asarray(t_rec, float), np.asarray(t_twin, float)
+    e_rec = load_envelope(t_rec, f_rec, window_s)
+    e_twin = load_envelope(t_twin, f_twin, window_s)
+    g_rec_t = np.arange(t_rec[0], t_rec[-1], grid_s)
+    g_twin_t = np.arange(t_twin[0], t_twin[-1], grid_s)
+    g_rec, g_twin = e_rec(g_rec_t), e_twin(g_twin_t)
+    i, c_m, c_0, c_p = correlation_peak(g_twin - g_twin.mean(), g_rec - g_rec.mean())
+    frac = 0.0
+    if np.isfinite(c_m) and np.isfinite(c_p):
+        den = c_m - 2.0 * c_0 + c_p
+        frac = float(np.clip(0.5 * (c_m - c_p) / den, -0.5, 0.5)) if den < 0 else 0.0
+    coarse = float(g_rec_t[0] - (g_twin_t[0] + (i - g_rec.size + 1 + frac) * grid_s))
+    y = e_rec(t_rec)
+    best = minimize_scalar(lambda s: _affine_misfit(y, e_twin(t_rec - s)), method="bounded",
+                           bounds=(coarse - FORCE_REFINE_SPAN_S, coarse + FORCE_REFINE_SPAN_S),
+                           options={"xatol": 1e-7})
+    return float(best.x)

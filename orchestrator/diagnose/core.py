@@ -38,6 +38,7 @@ from .cutting import has_forces
 from .cutting_core import CuttingResult, diagnose_cutting
 from .cutting_merge import holdout_cutting, merge_cutting
 from .errors import DiagnosisError
+from .force_only import force_only_recording, needs_force_clock
 from .library import machine_keys
 from .locate import Locator, residual_windows
 from .model import Model, Simulated, simulate
@@ -397,11 +398,22 @@ def diagnose(
     if do_cut and not has_forces(recording, case):
         raise DiagnosisError(f"{case.recording}: a cutting diagnosis needs 'fx_N' and 'fy_N' (at least 100 samples) "
                              f"and a [stock] in {case.source or case.folder}")
+    clock, notes = None, []
+    if do_cut and needs_force_clock(recording):
+        # a dynamometer on its own clock (forces only): aligned by its cutting load, the twin's path added
+        say("aligning the dynamometer's clock by the cutting load")
+        only = force_only_recording(case_m, recording, base_machine)
+        recording, clock = only.recording, (only.offset, only.method)
+        notes.append("forces only (no line, no moving position): the tool path, spindle speed and lines are the "
+                     "twin's run with cutting at t - offset, not measured")
+        if drives:
+            notes.append("drive diagnosis skipped: no measured position, command or current of the feed drives")
+        drives = False
     say("aligning the recording with the twin")
     forces = recorded_forces(recording)
     drive_rec = _cnc_rows(recording) if do_cut else recording
-    prep = prepare(case, drive_rec, base_machine, axes, disturbance=forces)
-    log: list[str] = [f"time offset: {prep.offset:.6f} s ({prep.offset_method})"]
+    prep = prepare(case, drive_rec, base_machine, axes, disturbance=forces, clock=clock)
+    log: list[str] = [f"time offset: {prep.offset:.6f} s ({prep.offset_method})", *notes]
     if prep.forces_source == "predicted":
         log.append("no fx_N/fy_N recorded: the replayed drives carry the twin's predicted cutting forces")
     if drives:

@@ -167,8 +167,12 @@ def predicted_forces(case: Case, machine: Machine, offset: Callable[[], float]) 
 
 
 def prepare(case: Case, recording: Recording, machine: Machine, axes: list[str] | None = None,
-            nc: Recording | None = None, disturbance: dict | None = None) -> Prepared:
+            nc: Recording | None = None, disturbance: dict | None = None,
+            clock: tuple[float, str] | None = None) -> Prepared:
     """Align a recording with the twin and collect what the diagnosis compares.
+
+    ``clock`` is ``(offset, method)`` when the offset was found elsewhere (a dynamometer's clock from
+    its cutting load, :mod:`.force_only`): it is taken as is, and the servo phase from it.
 
     Raises
     ------
@@ -184,9 +188,9 @@ def prepare(case: Case, recording: Recording, machine: Machine, axes: list[str] 
     nc = nc if nc is not None else twin_commands(case, machine)
     t = np.asarray(recording.t, dtype=float)
     # --- time offset: block transitions first (pure timing), else velocities
-    offset, method = float("nan"), ""
-    refined_on_positions = False
-    if "line" in recording and np.isfinite(recording["line"]).any():
+    offset, method = (float(clock[0]), clock[1]) if clock is not None else (float("nan"), "")
+    refined_on_positions = clock is not None
+    if clock is None and "line" in recording and np.isfinite(recording["line"]).any():
         offset, matched = time_offset_from_lines(t, recording["line"], nc.t, nc["line"])
         method = f"{matched} matched block transitions"
         if matched < 2:
@@ -228,7 +232,8 @@ def prepare(case: Case, recording: Recording, machine: Machine, axes: list[str] 
     if not np.isfinite(offset):
         raise DiagnosisError(f"{src}: cannot align the recording with the program: no 'line' transitions and no "
                              "position channel that moves")
-    with_ref = {a: np.asarray(recording[f"{a}_ref_mm"], float) for a in _moving_axes(recording, nc, "_ref_mm")}
+    with_ref = {} if clock is not None else {
+        a: np.asarray(recording[f"{a}_ref_mm"], float) for a in _moving_axes(recording, nc, "_ref_mm")}
     if with_ref:
         offset = refine_offset(t, with_ref, np.asarray(nc.t, float),
                                {a: np.asarray(nc[f"{a}_ref_mm"], float) for a in with_ref}, offset)

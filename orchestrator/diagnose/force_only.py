@@ -1,0 +1,114 @@
+"""A dynamometer-only recording: its clock from the cutting load, its tool path from the twin.
+
+A dynamometer on its own DAQ (the paper's Kistler and NI card) records ``t_s``, ``fx_N``, ``fy_N`` (maybe
+``fc_N``) and nothing of the controller: no ``line``, no positions. Its clock is found by lining up the
+recorded cutting load with the twin's predicted one (:func:`.align.time_offset_from_forces`), and the
+cutting diagnosis then drives the cutting model with the tool path, spindle speed and lines of the twin's
+run (with cutting) at ``t - offset``: the recording is augmented with them (:func:`force_only_recording`).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from ..case import Case
+from ..machine import Machine
+from ..recording import Recording
+from ..simulate import simulate as simulate_twin
+from .align import ENVELOPE_REVOLUTIONS, time_offset_from_forces
+from .errors import DiagnosisError
+from .prepare import MIN_STROKE_M
+
+#: Twin channels taken at ``t - offset`` into the augmented recording.
+TWIN_CHANNELS = ("x_mm", "y_mm", "z_mm", "spindle_ref_rpm")
+#: Recorded channels that the augmented recording drops (they did not move, or are not measured).
+CNC_CHANNELS = ("line", "x_mm", "y_mm", "z_mm", "x_ref_mm", "y_ref_mm", "z_ref_mm", "x_tcmd_A", "y_tcmd_A",
+                "z_tcmd_A")
+
+
+@dataclass
+class ForceOnly:
+    """A force recording aligned by its cutting load and completed with the twin's path.
+
+    Attributes
+    ----------
+    recording : Recording
+        Recorded ``t_s`` and forces (and ``spindle_rpm`` when measured) plus the twin's ``x_mm``,
+        ``y_mm``, ``z_mm``, ``spindle_ref_rpm``, ``spindle_rpm`` (unless measured) and ``line`` at
+        ``t - offset``.
+    offset : float
+        Recording clock minus program clock, s.
+    method : str
+        How the offset was found.
+    """
+
+    recording: Recording
+    offset: float
+    method: str
+
+
+def _moves(recording: Recording, name: str) -> bool:
+    if name not in recording:
+        return False
+    v = np.asarray(recording[name], float)
+    ok = np.isfinite(v)
+    return bool(ok.mean() > 0.5 and np.ptp(v[ok]) > MIN_STROKE_M * 1e3)
+
+
+def needs_force_clock(recording: Recording) -> bool:
+    """True when nothing but the forces can align the recording: no ``line`` and no moving position or command."""
+    if "line" in recording and np.isfinite(recording["line"]).any():
+        return False
+    return not any(_moves(recording, f"{a}{s}") for a in "xyz" for s in ("_mm", "_ref_mm"))
+
+
+def force_only_recording(case: Case, recording: Recording, machine: Machine) -> ForceOnly:
+    """Align a force-only recording by its cutting load and add the twin's tool path, spindle speed and lines.
+
+    Parameters
+    ----------
+    case : Case
+        With a ``[stock]``: the twin's run with cutting predicts the load.
+    recording : Recording
+        ``t_s``, ``fx_N``, ``fy_N`` (at least).
+    machine : Machine
+        Parameter set of the twin's run.
+
+    Raises
+    ------
+    DiagnosisError
+        The twin's run does not cut the stock, or the recording has no force samples.
+    """
+    src = recording.source
+    twin = simulate_twin(case=replace(case, machine=machine), plot=False).recording
+    t_twin = np.asarray(twin.t, float)
+    load_twin = np.hypot(np.asarray(twin["fx_N"], float), np.asarray(twin["fy_N"], float))
+    cutting = load_twin > 0.0
+    if len(twin) < 3 or not cutting.any():
+        raise DiagnosisError(f"{src}: the recording has forces only (no 'line', no moving position): its clock is "
+                             f"found from the twin's predicted cutting load, but the twin's run of {case.program} "
+                             f"does not cut the stock of {case.source or case.folder}")
+    t = np.asarray(recording.t, float)
+    fx, fy = np.asarray(recording["fx_N"], float), np.asarray(recording["fy_N"], float)
+    ok = np.isfinite(fx) & np.isfinite(fy)
+    if ok.sum() < 100:
+        raise DiagnosisError(f"{src}: fewer than 100 rows with both fx_N and fy_N; a force-only recording is "
+                             "aligned by its cutting load")
+    rpm = float(np.median(np.asarray(twin["spindle_rpm"], float)[cutting]))
+    window = ENVELOPE_REVOLUTIONS * 60.0 / max(rpm, 1.0)
+    offset = time_offset_from_forces(t[ok], np.hypot(fx[ok], fy[ok]), t_twin, load_twin, window)
+    method = (f"cutting load |F| = hypot(fx_N, fy_N) against the twin's prediction: cross-correlation of "
+              f"{1e3 * window:.3g} ms moving means ({ENVELOPE_REVOLUTIONS} spindle revolutions), refined by "
+              "least squares")
+    t_prog = t - offset
+    channels = {c: np.asarray(recording[c], float) for c in recording.channels if c not in CNC_CHANNELS}
+    for c in TWIN_CHANNELS:
+        channels[c] = np.interp(t_prog, t_twin, np.asarray(twin[c], float))
+    measured_rpm = "spindle_rpm" in recording and np.isfinite(recording["spindle_rpm"]).mean() > 0.5
+    if not measured_rpm:
+        channels["spindle_rpm"] = np.interp(t_prog, t_twin, np.asarray(twin["spindle_rpm"], float))
+    idx = np.clip(np.searchsorted(t_twin, t_prog, side="right") - 1, 0, t_twin.size - 1)
+    channels["line"] = np.asarray(twin["line"], float)[idx]
+    out = Recording.from_channels(channels, source=src)
+    return ForceOnly(out, float(offset), method)
