@@ -21,20 +21,10 @@ from orchestrator.diagnose.force_only import force_only_recording, needs_force_c
 from orchestrator.machine import load_machine
 from orchestrator.recording import Recording
 from orchestrator.simulate import simulate
+from tests.test_diagnose_logger import PAPER_PART, PROGRAM  # the short part with X slots and a Y move
 
 SHIFT_S = 1.7373
 NOISE_N = 0.5
-PROGRAM = """G21 G17 G90 G94 G54
-S6000 M3
-G0 X-5. Y6. Z1.
-G1 Z-1.5 F200
-X14. F400
-Y10.
-X-5.
-G0 Z5.
-M30
-"""
-PAPER_PART = Path(__file__).resolve().parents[1] / "models" / "examples" / "paper_part"
 
 
 def _dynamometer_case(folder: Path, effects: dict[str, float], seed: int) -> Path:

@@ -282,3 +282,19 @@ def test_the_correlation_peak_is_numpys_full_correlation_peak_bit_for_bit():
             j, c_m, c_0, c_p = correlation_peak(x, y)
             assert j == i and c_0 == c[i]
             assert c_m == (c[i - 1] if i > 0 else c_m) and c_p == (c[i + 1] if i + 1 < c.size else c_p)
+
+
+def test_residual_autocorrelation_is_the_lag_1_correlation_and_0_for_an_exact_fit():
+    # an AR(1) residual r_k = 0.5 r_(k-1) + e_k has lag-1 correlation 0.5; an exact fit (r = 0) has none (the
+    # confidence intervals of a refit with it were NaN); a trend is clipped at 0.98
+    from orchestrator.diagnose.align import residual_autocorrelation
+
+    rng = np.random.default_rng(2)
+    e = rng.normal(size=200_000)
+    r = np.zeros_like(e)
+    for k in range(1, e.size):
+        r[k] = 0.5 * r[k - 1] + e[k]
+    assert residual_autocorrelation(r) == pytest.approx(0.5, abs=0.01)
+    assert residual_autocorrelation(np.zeros(50)) == 0.0
+    assert residual_autocorrelation(np.arange(50.0)) == 0.98
+    assert residual_autocorrelation(-r) == pytest.approx(0.5, abs=0.01)

@@ -214,6 +214,18 @@ def recorded_quantum(values: np.ndarray, tolerance: float = 1e-3) -> float:
     return q if float(np.max(np.abs(k - np.round(k)))) < tolerance else 0.0
 
 
+def residual_autocorrelation(r: np.ndarray) -> float:
+    """Lag-1 correlation of a residual, clipped to [0, 0.98] (the CI inflation ``(1 + rho) / (1 - rho)``).
+
+    0 for fewer than 4 samples or a constant residual (an exact fit: ``np.corrcoef`` would give NaN and the
+    intervals NaN with it).
+    """
+    r = np.asarray(r, dtype=float)
+    if r.size < 4 or np.ptp(r[:-1]) == 0.0 or np.ptp(r[1:]) == 0.0:
+        return 0.0
+    return float(np.clip(np.corrcoef(r[:-1], r[1:])[0, 1], 0.0, 0.98))
+
+
 def noise_floor(residual: np.ndarray, quantum: float = 0.0) -> float:
     """White-noise standard deviation of a residual from its first differences.
 

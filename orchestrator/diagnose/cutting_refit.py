@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .align import residual_autocorrelation
 from .cutting import CuttingColumns, CuttingData, CuttingModel, lagged_torque
 
 #: (effect, parameter) -> (step, lower, upper, relative step?)
@@ -150,7 +151,7 @@ def refit_cutting(data: CuttingData, cols: CuttingColumns, start: CuttingModel,
     if j is not None:
         n = r_b.size
         s2 = float(r_b @ r_b) / max(n - len(free), 1)
-        rho = float(np.clip(np.corrcoef(r_b[:-1], r_b[1:])[0, 1], 0.0, 0.98)) if n > 3 else 0.0
+        rho = residual_autocorrelation(r_b)
         cov = np.linalg.pinv(j.T @ j) * s2 * (1.0 + rho) / (1.0 - rho)
         sd = np.sqrt(np.maximum(np.diag(cov), 0.0))
         ci = np.column_stack([th_b - 1.645 * sd, th_b + 1.645 * sd])
@@ -175,7 +176,7 @@ def refit_droop(data: CuttingData, torque_force_rows: np.ndarray) -> tuple[float
     coef, *_ = np.linalg.lstsq(x, y, rcond=None)
     r = y - x @ coef
     s2 = float(r @ r) / max(y.size - 2, 1)
-    rho = float(np.clip(np.corrcoef(r[:-1], r[1:])[0, 1], 0.0, 0.98)) if r.size > 3 else 0.0
+    rho = residual_autocorrelation(r)
     cov = np.linalg.pinv(x.T @ x) * s2 * (1.0 + rho) / (1.0 - rho)
     sd = math.sqrt(max(cov[0, 0], 0.0))
     return float(coef[0]), (float(coef[0] - 1.645 * sd), float(coef[0] + 1.645 * sd)), float(coef[1])

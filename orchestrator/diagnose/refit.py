@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .align import residual_autocorrelation
 from .columns import AxisColumns
 from .model import Model, Simulated, simulate
 from .prepare import Prepared
@@ -221,8 +222,7 @@ def refit(prep: Prepared, cols: dict[str, AxisColumns], start: Model, free: list
         n = best_r.size
         dof = max(n - len(free), 1)
         s2 = float(best_r @ best_r) / dof
-        rho = float(np.corrcoef(best_r[:-1], best_r[1:])[0, 1]) if n > 3 else 0.0
-        rho = float(np.clip(rho, 0.0, 0.98))
+        rho = residual_autocorrelation(best_r)
         inflation = (1.0 + rho) / (1.0 - rho)
         try:
             cov = np.linalg.pinv(best_jac.T @ best_jac) * s2 * inflation
