@@ -27,24 +27,30 @@ from orchestrator.twin import engagement_table
 DYN = Dynamometer(period_s=0.4e-3)
 
 
-def test_stuck_artefacts_absorb_an_offset_and_ramp_of_the_held_current():
+def test_the_held_current_of_a_loaded_hold_is_left_out_and_still_counted():
     # motor: moves, sticks from 0.2 to 0.6 s, moves again; the load is on only while it sticks
     t = np.linspace(0.0, 1.0, 1001)
     motor = np.where(t < 0.2, t, np.where(t < 0.6, 0.2, 0.2 + (t - 0.6)))
     assert stuck_stretches(t, motor) == [(200, 600)]
     rows = np.arange(t.size)
     sigma = 0.02
-    held = np.where((t >= 0.2) & (t <= 0.6), 0.05 + 0.3 * (t - 0.4), 0.0)  # offset 0.05 A, ramp 0.3 A/s
-    cols = {"y": AxisColumns(rows, rows, 0.4, sigma, np.concatenate([np.zeros(t.size), held / sigma]), {}, {}, [])}
+    held = np.where((t >= 0.2) & (t <= 0.6), 0.05 + 0.3 * (t - 0.4), 0.0)  # not predictable: left out
+    y = np.concatenate([np.zeros(t.size), held / sigma])
+    column = np.concatenate([np.zeros(t.size), np.ones(t.size)])
+    cols = {"y": AxisColumns(rows, rows, 0.4, sigma, y, {"c": column}, {"o": column.copy()}, [])}
     sim = Simulated({}, {}, {"y": motor[:, None]}, {})
     counts = add_stuck_artefacts(t, cols, sim, {"y": lambda q: np.where((q > 0.3) & (q < 0.5), 30.0, 0.0)})
     assert counts == {"y": 1}
-    x = np.column_stack(list(cols["y"].artefacts.values()))
-    coef, *_ = np.linalg.lstsq(x, cols["y"].y, rcond=None)
-    assert np.max(np.abs(cols["y"].y - x @ coef)) < 1e-9
-    assert coef == pytest.approx([0.05, 0.3])  # A and A/s: column and residual are both weighted by sigma
-    # an unloaded axis gets none (its replay holds the recorded current exactly)
-    assert add_stuck_artefacts(t, cols, sim, {"x": lambda q: np.ones_like(q)}) == {}
+    c = cols["y"]
+    kept = np.r_[0:200, 601:1001]
+    np.testing.assert_array_equal(c.rows_tc, kept)                 # the 401 rows of the hold are gone
+    assert c.rows_left_out == 401 and c.y.size == t.size + kept.size
+    assert not np.any(c.y[t.size:])                                 # what is left is what was predictable
+    assert c.columns["c"].size == c.artefacts["o"].size == c.y.size
+    # an unloaded axis keeps its rows (its replay holds the recorded current exactly)
+    cols = {"y": AxisColumns(rows, rows, 0.4, sigma, y, {}, {}, [])}
+    assert add_stuck_artefacts(t, cols, sim, {"y": lambda q: np.zeros_like(q)}) == {}
+    assert cols["y"].rows_tc.size == t.size
 
 
 def test_a_hold_is_split_into_its_rests_and_the_creep_between_them():

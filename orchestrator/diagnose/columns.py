@@ -84,6 +84,7 @@ class AxisColumns:
     columns: dict[str, np.ndarray]
     artefacts: dict[str, np.ndarray]
     variants: list[Variant]
+    rows_left_out: int = 0
 
 
 def plateau_limit(measured: np.ndarray, simulated: np.ndarray, sigma: float) -> float | None:

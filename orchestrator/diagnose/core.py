@@ -252,11 +252,11 @@ def _name_and_refit(prep: Prepared, base: Model, lead: dict[str, float], vertica
     stuck = add_stuck_artefacts(prep.t, cols, base_sim, prep.disturbance, machine=prep.machine,
                                 replay=_replay_of(prep, base))
     if stuck:
-        log.append("held current of stuck, loaded axes fitted as artefacts: "
+        log.append("held current of loaded axes left out (holds, with a breakaway artefact at each end): "
                    + ", ".join(f"{a}: {n} stretches" for a, n in stuck.items()))
     selections: dict[str, Selection] = {}
     for a, c in cols.items():
-        selections[a] = select(c.y, c.artefacts, c.variants, c.columns)
+        selections[a] = select(c.y, c.artefacts, c.variants, c.columns, rows=c.y.size + c.rows_left_out)
         log += [f"[{a}] {line}" for line in selections[a].log]
     choices = {a: s.choices for a, s in selections.items()}
     start, free = _start_model(choices)
@@ -495,7 +495,7 @@ def _diagnose_drives(case: Case, prep: Prepared, base_machine: Machine, holdout,
     for k, (a, e) in enumerate(effect_keys):
         r_wo = residuals(prep, cols, sim, 2 + k, proj)
         gain = float(r_wo @ r_wo - r_final @ r_final)
-        n_axis = cols[a].y.size
+        n_axis = cols[a].y.size + cols[a].rows_left_out
         if gain < MIN_GAIN * n_axis:
             log.append(f"[{a}] drop {e} after the refit: gain {gain / n_axis:.4f} n below {MIN_GAIN}")
             final[a].pop(e, None)

@@ -16,21 +16,22 @@ friction); they only disagree about a state no recording resolves.
 So for every stretch in which the baseline replay of a loaded axis holds
 its position (:func:`stuck_stretches`: at rest, or creeping by stick-slip
 slower than 3 mm/min, split where it changes between the two, since the
-machine's slips need not be the replay's), an offset and a ramp of the
-current are fitted
-as artefacts with the channel offsets (:func:`add_stuck_artefacts`), and
-neither the selection nor the unexplained-residual search sees them. Axes
-without a measured load are untouched: there the replay reproduces the
-held current exactly.
+machine's slips need not be the replay's), the current rows are left out of
+the regression (:func:`add_stuck_artefacts`): neither the selection nor the
+refit nor the unexplained-residual search sees them, and the minimum gains
+are still counted per sample including them. (An offset and a ramp per hold
+fitted as artefacts, as before, left the part of an effect's column inside
+the holds unabsorbed: a 1 ms servo delay on a mostly held axis then got a
+coefficient of nearly 0.) Axes without a measured load are untouched: there
+the replay reproduces the held current exactly.
 
 The held-current difference does not end with the hold: it is a difference
 of the velocity loop's integrator, and when the axis breaks away into its
 next move the loop starts from it. An integrator offset ``δ`` adds ``δ`` to
 the current command, which is the same as a force ``-Kf δ`` on the table
-(``Kf = 2π kt / lead``) with the loop answering it. So the artefacts of the
-last piece of a hold carry on into the move as ``δ (1 + Δi(t) / δ)`` in the
-current and ``Δe(t)`` in the following error, scaled by their value at the
-hold's end, where ``Δi, Δe`` are the replay's answer to that force step
+(``Kf = 2π kt / lead``) with the loop answering it. So each hold end gets an
+artefact ``δ (1 + Δi(t) / δ)`` in the current and ``Δe(t)`` in the following
+error, where ``Δi, Δe`` are the replay's answer to that force step
 (:func:`breakaway_responses`, one batched replay, a member per hold). The
 answer decays as the loop winds the integrator back (tens of ms here).
 Without it, the 0.6 A transient at the start of a loaded axis's move read
@@ -174,29 +175,30 @@ def add_stuck_artefacts(t: np.ndarray, cols: Mapping[str, AxisColumns], sim: Sim
                         disturbance: Mapping[str, Callable[[np.ndarray], np.ndarray]] | None,
                         member: int = 0, machine: Machine | None = None, replay: Replay | None = None
                         ) -> dict[str, int]:
-    """Add held-current offset and ramp artefacts for the stuck stretches of loaded axes, in place.
+    """Leave out the current rows of the holds of loaded axes, and add their breakaway artefacts, in place.
 
     Parameters
     ----------
     t : ndarray, shape (n,)
         Sample times (the replay's clock), s.
     cols : mapping axis -> AxisColumns
-        The regression columns; ``artefacts`` gains ``"{a} stuck k offset A"`` and
-        ``"{a} stuck k ramp A/s"`` (weighted like the current rows).
+        The regression columns. The current rows inside the holds leave ``rows_tc`` (and ``y``,
+        ``columns`` and ``artefacts`` lose them); ``artefacts`` gains ``"{a} stuck k breakaway A"`` per
+        hold end, the loop's answer to the integrator offset the hold leaves (weighted like the rows).
     sim : Simulated
-        The replay whose member ``member`` is the baseline (its motor positions define the stretches).
+        The replay whose member ``member`` is the baseline (its motor positions define the holds).
     disturbance : mapping axis -> callable, or None
-        The measured load of the replay (``f(t)`` [N]); only axes loaded within a stretch get artefacts.
+        The load of the replay (``f(t)`` [N]); only axes loaded within a hold are concerned.
     machine : Machine, optional
     replay : callable, optional
-        ``replay(disturbance, batch)``: the baseline model under per-member loads. With ``machine``, the
-        artefacts of the last piece of a hold carry on into the move that follows as the loop's answer to
-        the integrator offset they leave (:func:`breakaway_responses`); without, they end with the piece.
+        ``replay(disturbance, batch)``: the baseline model under per-member loads. With ``machine``, each
+        hold end gets its breakaway artefact (:func:`breakaway_responses`); without, the rows are only
+        left out.
 
     Returns
     -------
     dict axis -> int
-        Number of stretches given artefacts per axis.
+        Number of hold pieces left out per axis.
     """
     counts: dict[str, int] = {}
     if not disturbance:
@@ -216,20 +218,24 @@ def add_stuck_artefacts(t: np.ndarray, cols: Mapping[str, AxisColumns], sim: Sim
     if ends and replay is not None and machine is not None:
         answers = breakaway_responses(t, [(pieces[k][0], pieces[k][2]) for k in ends], machine, disturbance, replay)
         after = dict(zip(ends, answers))
-    for k, (a, i0, i1) in enumerate(pieces):
+    for a in {a for a, _, _ in pieces}:
         c = cols[a]
-        count = counts.get(a, 0)
-        nf = c.rows_fe.size
-        inside = (c.rows_tc >= i0) & (c.rows_tc <= i1)
-        tt = t[c.rows_tc]
-        mid = 0.5 * (t[i0] + t[i1])
-        for name, values, held in (("offset A", np.ones(tt.size), 1.0), ("ramp A/s", tt - mid, t[i1] - mid)):
-            col = np.zeros(nf + c.rows_tc.size)
-            col[nf:] = np.where(inside, values, 0.0) / c.sigma_tc
-            if k in after:
-                tc_after, fe_after = after[k]
-                col[nf:] += held * tc_after[c.rows_tc] / c.sigma_tc
-                col[:nf] = held * fe_after[c.rows_fe] / c.sigma_fe
-            c.artefacts[f"{a} stuck {count} {name}"] = col
-        counts[a] = count + 1
+        held = np.zeros(t.size, dtype=bool)
+        for b, i0, i1 in pieces:
+            if b == a:
+                held[i0:i1 + 1] = True
+        keep_tc = ~held[c.rows_tc]
+        keep = np.concatenate([np.ones(c.rows_fe.size, dtype=bool), keep_tc])
+        c.rows_left_out += int((~keep_tc).sum())
+        c.rows_tc = c.rows_tc[keep_tc]
+        c.y = c.y[keep]
+        c.columns = {key: col[keep] for key, col in c.columns.items()}
+        c.artefacts = {key: col[keep] for key, col in c.artefacts.items()}
+        counts[a] = sum(1 for b, _, _ in pieces if b == a)
+    for count, k in enumerate(sorted(after)):
+        a = pieces[k][0]
+        c = cols[a]
+        tc_after, fe_after = after[k]
+        col = np.concatenate([fe_after[c.rows_fe] / c.sigma_fe, tc_after[c.rows_tc] / c.sigma_tc])
+        c.artefacts[f"{a} stuck {count} breakaway A"] = col
     return counts

@@ -87,7 +87,7 @@ def _bic(rss: float, n: int, p: int) -> float:
 
 
 def select(y: np.ndarray, artefacts: dict[str, np.ndarray], variants: list[Variant],
-           columns: dict[str, np.ndarray]) -> Selection:
+           columns: dict[str, np.ndarray], rows: int | None = None) -> Selection:
     """Forward-backward selection of effects explaining the weighted residual ``y``.
 
     Parameters
@@ -100,8 +100,12 @@ def select(y: np.ndarray, artefacts: dict[str, np.ndarray], variants: list[Varia
         Candidates.
     columns : dict column key -> ndarray (n,)
         Weighted columns of the variants (per unit of their parameter).
+    rows : int, optional
+        The number of samples the minimum gains are counted per (default ``y.size``): rows left out of
+        ``y`` (the held current of loaded axes) still count, so that leaving them out does not lower the
+        bar for the rest.
     """
-    n = y.size
+    n = y.size if rows is None else int(rows)
     art_names = list(artefacts)
     art_cols = [artefacts[k] for k in art_names]
     log: list[str] = []
