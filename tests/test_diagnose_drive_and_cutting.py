@@ -18,7 +18,7 @@ from orchestrator.diagnose.cutting_case import LOGGER_START_S, SHORT_PROGRAM, wr
 from orchestrator.diagnose.model import Simulated
 from orchestrator.diagnose.prepare import twin_commands
 from orchestrator.diagnose.replay import run_replay
-from orchestrator.diagnose.rest import add_stuck_artefacts, stuck_stretches
+from orchestrator.diagnose.rest import leave_out_held_current, stuck_stretches
 from orchestrator.diagnose.truth import simulate_truth
 from orchestrator.diagnose.truth_cutting import (Dynamometer, cutting_parameters_packed, fine_grid,
                                                  simulate_cutting, tick_mean)
@@ -39,7 +39,7 @@ def test_the_held_current_of_a_loaded_hold_is_left_out_and_still_counted():
     column = np.concatenate([np.zeros(t.size), np.ones(t.size)])
     cols = {"y": AxisColumns(rows, rows, 0.4, sigma, y, {"c": column}, {"o": column.copy()}, [])}
     sim = Simulated({}, {}, {"y": motor[:, None]}, {})
-    counts = add_stuck_artefacts(t, cols, sim, {"y": lambda q: np.where((q > 0.3) & (q < 0.5), 30.0, 0.0)})
+    counts = leave_out_held_current(t, cols, sim, {"y": lambda q: np.where((q > 0.3) & (q < 0.5), 30.0, 0.0)})
     assert counts == {"y": 1}
     c = cols["y"]
     kept = np.r_[0:200, 601:1001]
@@ -49,7 +49,7 @@ def test_the_held_current_of_a_loaded_hold_is_left_out_and_still_counted():
     assert c.columns["c"].size == c.artefacts["o"].size == c.y.size
     # an unloaded axis keeps its rows (its replay holds the recorded current exactly)
     cols = {"y": AxisColumns(rows, rows, 0.4, sigma, y, {}, {}, [])}
-    assert add_stuck_artefacts(t, cols, sim, {"y": lambda q: np.zeros_like(q)}) == {}
+    assert leave_out_held_current(t, cols, sim, {"y": lambda q: np.zeros_like(q)}) == {}
     assert cols["y"].rows_tc.size == t.size
 
 

@@ -260,16 +260,8 @@ def refine_offset(t_rec: np.ndarray, ref_rec: dict[str, np.ndarray], t_nc: np.nd
     shifts = offset + np.arange(-span_s, span_s + step_s / 2, step_s)
     cost = np.zeros(shifts.size)
     for a, rec in ref_rec.items():
-        ok = np.isfinite(rec)
         for i, s in enumerate(shifts):
-            tp = t_rec[ok] - s
-            inside = (tp >= t_nc[0]) & (tp <= t_nc[-1])
-            if inside.sum() < 10:
-                cost[i] = np.inf
-                continue
-            d = rec[ok][inside] - np.interp(tp[inside], t_nc, ref_nc[a])
-            d = d - np.median(d)
-            cost[i] += float(np.mean(d * d))
+            cost[i] += _offset_cost(t_rec, rec, t_nc, ref_nc[a], s)
     i = int(np.argmin(cost))
     if 0 < i < shifts.size - 1 and np.all(np.isfinite(cost[i - 1:i + 2])):
         den = cost[i - 1] - 2 * cost[i] + cost[i + 1]

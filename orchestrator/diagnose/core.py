@@ -44,7 +44,7 @@ from .locate import Locator, residual_windows
 from .model import Model, Simulated, simulate
 from .prepare import Prepared, prepare, recorded_forces
 from .refit import Parameter, RefitResult, artefact_values, projectors, refit, residuals
-from .rest import add_stuck_artefacts
+from .rest import leave_out_held_current
 from .select import MIN_GAIN, Choice, Selection, select
 
 #: Residual RMS (noise floors) above which a channel's remaining residual is looked at for `unexplained`.
@@ -249,8 +249,8 @@ def _name_and_refit(prep: Prepared, base: Model, lead: dict[str, float], vertica
     replay (member 0: ``base``)."""
     say("building the effect library (batched replay)")
     cols, base_sim = build(prep, base, lead, vertical)
-    stuck = add_stuck_artefacts(prep.t, cols, base_sim, prep.disturbance, machine=prep.machine,
-                                replay=_replay_of(prep, base))
+    stuck = leave_out_held_current(prep.t, cols, base_sim, prep.disturbance, machine=prep.machine,
+                                   replay=_replay_of(prep, base))
     if stuck:
         log.append("held current of loaded axes left out (holds, with a breakaway artefact at each end): "
                    + ", ".join(f"{a}: {n} stretches" for a, n in stuck.items()))
@@ -330,8 +330,8 @@ def _evaluate_case(name: str, prep: Prepared, base: Model, final: Model, lead: d
                    cols: dict[str, AxisColumns] | None = None) -> CaseResult:
     if cols is None:
         cols, base_sim = build(prep, base, lead)
-        add_stuck_artefacts(prep.t, cols, base_sim, prep.disturbance, machine=prep.machine,
-                            replay=_replay_of(prep, base))
+        leave_out_held_current(prep.t, cols, base_sim, prep.disturbance, machine=prep.machine,
+                               replay=_replay_of(prep, base))
     sim = simulate(prep.machine, prep.t, prep.commands, [base, final], prep.t_start, twin=prep.twin_commands(),
                    disturbance=prep.disturbance)
     return CaseResult(name, prep, cols, sim, _rms(prep, cols, sim, 0), _rms(prep, cols, sim, 1))

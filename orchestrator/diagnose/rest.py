@@ -17,7 +17,7 @@ So for every stretch in which the baseline replay of a loaded axis holds
 its position (:func:`stuck_stretches`: at rest, or creeping by stick-slip
 slower than 3 mm/min, split where it changes between the two, since the
 machine's slips need not be the replay's), the current rows are left out of
-the regression (:func:`add_stuck_artefacts`): neither the selection nor the
+the regression (:func:`leave_out_held_current`): neither the selection nor the
 refit nor the unexplained-residual search sees them, and the minimum gains
 are still counted per sample including them. (An offset and a ramp per hold
 fitted as artefacts, as before, left the part of an effect's column inside
@@ -171,7 +171,7 @@ def breakaway_responses(t: np.ndarray, ends: list[tuple[str, int]], machine: Mac
     return out
 
 
-def add_stuck_artefacts(t: np.ndarray, cols: Mapping[str, AxisColumns], sim: Simulated,
+def leave_out_held_current(t: np.ndarray, cols: Mapping[str, AxisColumns], sim: Simulated,
                         disturbance: Mapping[str, Callable[[np.ndarray], np.ndarray]] | None,
                         member: int = 0, machine: Machine | None = None, replay: Replay | None = None
                         ) -> dict[str, int]:
