@@ -11,15 +11,20 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from fmus_src.nck.component import N_TOOL_LENGTHS, N_TOOL_RADII
+
 from .errors import CncTwinError
 from .machine import Machine, _line_of, load_machine
 
-_TOP_KEYS = {"program", "recording", "stock", "tool", "machine", "material"}
+_TOP_KEYS = {"program", "recording", "stock", "tool", "machine", "material", "offsets"}
 _SECTION_KEYS = {
     "stock": {"min", "max"},
     "tool": {"diameter_mm", "flutes"},
     "machine": {"parameters"},
+    "offsets": {"radius_mm", "length_mm"},
 }
+#: ``[offsets]`` key -> (NC kernel parameter prefix, address, number of registers).
+_OFFSET_TABLES = {"radius_mm": ("tool_radius", "D", N_TOOL_RADII), "length_mm": ("tool_length", "H", N_TOOL_LENGTHS)}
 
 
 class CaseError(CncTwinError):
@@ -42,6 +47,28 @@ class Tool:
     flutes: int = 2
 
 
+@dataclass(frozen=True)
+class ToolOffsets:
+    """The control's tool offset memory as the case states it (``[offsets]`` in case.toml), mm.
+
+    Attributes
+    ----------
+    radius_mm : dict int -> float
+        Tool radius offsets D1..D20 (geometry + wear) used by G41/G42; registers not given are 0.
+    length_mm : dict int -> float
+        Tool length offsets H1..H20 used by G43/G44; registers not given are 0.
+    """
+
+    radius_mm: dict[int, float] = field(default_factory=dict)
+    length_mm: dict[int, float] = field(default_factory=dict)
+
+    def nck_parameters(self) -> dict[str, float]:
+        """The NC kernel parameters ``tool_radius_<n>`` / ``tool_length_<n>`` (m) of the given registers."""
+        out = {f"tool_radius_{n}": v * 1e-3 for n, v in self.radius_mm.items()}
+        out.update({f"tool_length_{n}": v * 1e-3 for n, v in self.length_mm.items()})
+        return out
+
+
 @dataclass
 class Case:
     """A loaded case.
@@ -62,6 +89,8 @@ class Case:
         Machine parameter set.
     material : str
         Material name in the machine file (default: its first material, A6061).
+    offsets : ToolOffsets
+        Tool radius (D) and length (H) offsets of the control (default: all 0, as CAM "wear"-mode posts need).
     """
 
     folder: Path
@@ -73,6 +102,7 @@ class Case:
     material: str
     source: Path | None = None
     extra: dict[str, Any] = field(default_factory=dict)
+    offsets: ToolOffsets = field(default_factory=ToolOffsets)
 
 
 def _vector(path: Path, text: str, section: str, key: str, value: Any) -> tuple[float, float, float]:
@@ -184,7 +214,30 @@ def load_case(path: str | Path, machine_override: str | Path | None = None) -> C
             f"{toml_path}:{_find_top_key(text, 'material')}: material {material!r} is not in {machine.path}; "
             f"it defines {materials}"
         )
-    return Case(folder, program, recording, stock, tool, machine, material, toml_path)
+    offsets = _offsets(toml_path, text, raw["offsets"]) if "offsets" in raw else ToolOffsets()
+    return Case(folder, program, recording, stock, tool, machine, material, toml_path, offsets=offsets)
+
+
+def _offsets(path: Path, text: str, table: dict[str, Any]) -> ToolOffsets:
+    """``[offsets] radius_mm = { 1 = 3.0 }, length_mm = { 1 = 120.5 }`` -> :class:`ToolOffsets` (keys checked)."""
+    tables: dict[str, dict[int, float]] = {}
+    for key, (_, address, count) in _OFFSET_TABLES.items():
+        line = _line_of(text, "offsets", key)
+        value = table.get(key, {})
+        if not isinstance(value, dict):
+            raise CaseError(f"{path}:{line}: [offsets] {key} must be a table of register numbers, e.g. "
+                            f"{key} = {{ 1 = 3.0 }}, got {value!r}")
+        regs: dict[int, float] = {}
+        for number, v in value.items():
+            if not number.isdigit() or not 1 <= int(number) <= count:
+                raise CaseError(f"{path}:{line}: [offsets] {key}: unknown register {number!r}; expected "
+                                f"{address} numbers 1..{count}")
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or abs(v) >= 1000:
+                raise CaseError(f"{path}:{line}: [offsets] {key}: {address}{number} must be a number in mm "
+                                f"(|value| < 1000), got {v!r}")
+            regs[int(number)] = float(v)
+        tables[key] = regs
+    return ToolOffsets(tables["radius_mm"], tables["length_mm"])
 
 
 def case_for_program(program: str | Path, machine: str | Path = "default") -> Case:

@@ -63,6 +63,7 @@ SCHEMA: dict[str, set[str]] = {
         "in_position_width_mm", "tool_change_time_s",
         "reference_x_mm", "reference_y_mm", "reference_z_mm", "g73_retract_mm", "g83_clearance_mm",
         *(f"reference{n}_{a}_mm" for n in (2, 3, 4) for a in AXES),
+        "rigid_tapping_time_constant_ms", "rigid_tapping_mode", "boring_shift",
     },
     "spindle": {"max_speed_rpm", "ramp_rpm_per_s", "speed_arrival_tolerance_percent", "power_kW"},
     "servo": {"position_loop_period_ms", "velocity_loop_period_ms"},
@@ -83,7 +84,8 @@ OPTIONAL_SECTIONS: set[str] = {"machine", "material.*", *(f"axis.{a}.effects" fo
 #: used): keys added after machine files were written, so that a user's older file still loads.
 OPTIONAL_KEYS: dict[str, set[str]] = {
     "nck": {"reference_x_mm", "reference_y_mm", "reference_z_mm", "g73_retract_mm", "g83_clearance_mm",
-            *(f"reference{n}_{a}_mm" for n in (2, 3, 4) for a in AXES)},
+            *(f"reference{n}_{a}_mm" for n in (2, 3, 4) for a in AXES),
+            "rigid_tapping_time_constant_ms", "rigid_tapping_mode", "boring_shift"},
 }
 
 

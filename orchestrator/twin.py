@@ -201,6 +201,7 @@ def build_twin(
     rate = max(1, int(round(options.step / float(servo["velocity_loop_period"]))))
 
     nck_params = nck_parameters(machine)
+    nck_params.update(case.offsets.nck_parameters())  # [offsets] of case.toml: D and H registers
     nck_params.update({f"{a}_initial": start[i] for i, a in enumerate(AXES)})
     nck = NCKernel("nck", batch=batch, program_file=str(case.program), **nck_params)
     if program_text is not None:
@@ -352,6 +353,7 @@ def reference_path(case: Case, options: TwinOptions | None = None, program_text:
     options = options or TwinOptions()
     start = np.asarray(options.start_mm, dtype=float) * 1e-3
     params = nck_parameters(case.machine)
+    params.update(case.offsets.nck_parameters())
     params.update({f"{a}_initial": start[i] for i, a in enumerate(AXES)})
     nck = NCKernel("nck", batch=1, program_file=str(case.program), **params)
     if program_text is not None:

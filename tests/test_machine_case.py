@@ -73,11 +73,16 @@ def test_machine_file_without_the_newer_nck_keys_loads_with_the_shipped_values(t
     path = tmp_path / "older.toml"
     path.write_text(text)
     params = nck_parameters(load_machine(path))
-    assert not {k[: -len("_mm")] for k in newer} & set(params)
+    from fmus_src.units import split_unit_suffix, to_si
+    assert not {split_unit_suffix(k)[0] for k in newer} & set(params)
     shipped = load_machine("default").values["nck"]
     defaults = {v.name: v.start for v in NCKernel.variables}
-    for key in newer:
-        assert defaults[key[: -len("_mm")]] == pytest.approx(shipped[key] * 1e-3, rel=1e-12)
+    for key in newer:  # numbers in the key's unit (mm, ms), strings (rigid_tapping_mode, boring_shift) as they are
+        name, symbol = split_unit_suffix(key)
+        if isinstance(shipped[key], str):
+            assert defaults[name] == shipped[key]
+        else:
+            assert defaults[name] == pytest.approx(to_si(shipped[key], symbol), rel=1e-12)
 
 def write_case(folder, body):
     folder.mkdir(parents=True, exist_ok=True)

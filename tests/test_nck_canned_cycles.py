@@ -1,4 +1,5 @@
-"""Canned drilling cycles G73 G81 G82 G83 G85 G86 G89, G98/G99, K repeats, G80; safe-line cancel codes.
+"""Canned cycles G73 G81 G82 G83 G85 G86 G89, G98/G99, K repeats, G80; safe-line cancel codes; the errors of
+tapping G84/G74 and boring G76/G87/G88 (their moves and times: tests/test_nck_tapping_boring.py).
 
 Every expected move is written out by hand from the FANUC 0i-MF / 31i-B definition of the cycle:
 (1) X/Y positioning at the current level, (2) rapid to R, (3) machining, (4) bottom operation,
@@ -234,9 +235,20 @@ def test_g81_pattern_time_is_at_least_the_feed_time():
 
 
 @pytest.mark.parametrize("text, word, fragment", [
-    ("G84 X0 Z-5 R1 F100\n", "G84", "tapping"),
-    ("G74 X0 Z-5 R1 F100\n", "G74", "tapping"),
-    ("G76 X0 Z-5 R1 F100\n", "G76", "fine boring"),
+    ("G84 X0 Z-5 R1 F100\n", "G84", "spindle stopped"),  # conventional G84 needs M3
+    ("S100 M4\nG84 X0 Z-5 R1 F100\n", "G84", "M4 (counter-clockwise)"),
+    ("S100 M3\nG74 X0 Z-5 R1 F100\n", "G74", "M3 (clockwise)"),
+    ("S100 M3\nG84 X0 Z-5 R1 Q1 F100\n", "Q1", "peck tapping"),
+    ("S0 M3\nG84 X0 Z-5 R1 F100\n", "G84", "S0"),
+    ("M29\n", "M29", "without a spindle speed"),
+    ("M29 S100 M3\n", "M3", "M29 and M3 in one block"),
+    ("M29 S100\nG81 X0 Z-5 R1 F100\n", "G81", "after M29"),
+    ("M29 S100\nG80\n", "G80", "after M29"),
+    ("G76 X0 Z-5 R1 F100\n", "G76", "without a shift amount Q"),
+    ("G76 X0 Z-5 R1 Q1 F100\n", "G76", "without the spindle turning clockwise"),
+    ("S100 M3\nG87 X0 Z-5 R1 Q1 F100\n", "Z-5", "not above the R point"),
+    ("S100 M3\nG99 G87 X0 Z-5 R-9 Q1 F100\n", "G87", "under G99"),
+    ("G88 X0 Z-5 R1 F100\n", "G88", "manual operation"),
     ("G83 X0 Z-5 R1 F100\n", "G83", "without a peck depth Q"),
     ("G81 X0 Z2 R1 F100\n", "Z2", "not below the R point"),
     ("G81 X0 Z-2 F100\n", "G81", "without an R point"),
@@ -255,7 +267,7 @@ def test_cycle_errors_name_the_word(text, word, fragment):
     with pytest.raises(GCodeError) as info:
         interpret("G0 Z10\n" + text, "p.nc")
     err = info.value
-    assert err.line == 2 and err.word == word and fragment in str(err) and "expected" in str(err)
+    assert err.line == text.count("\n") + 1 and err.word == word and fragment in str(err) and "expected" in str(err)
 
 
 # ------------------------------------------------------------------ safe-line cancel codes

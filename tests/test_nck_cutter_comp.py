@@ -4,19 +4,16 @@ A post in "wear" (or "computer") compensation mode writes the tool-centre path a
 operator can enter a wear value; with the D register at 0 FANUC executes exactly the programmed path. So the
 expected blocks of a program with G41/G42 ... G40 and D = 0 are those of the same program with the G41/G42/G40/D
 words deleted (same lines, same numbers), and the end points are the programmed coordinates (written out below).
-A nonzero radius is not simulated and must be an error naming the file, line and word.
+A nonzero radius (the tool-centre path computed by the NC kernel) is tested in test_nck_radius_offset.py.
 """
 from __future__ import annotations
 
-import math
 import re
 
 import pytest
 
-from fmus_src.errors import CncTwinError
 from fmus_src.nck import Arc, GCodeError, InterpreterSettings, Linear, NCKernel, Rapid, interpret
 from fmus_src.nck.component import N_TOOL_LENGTHS, N_TOOL_RADII
-from fmus_src.nck.interpreter import RADIUS_ZERO
 
 MM = 1e-3
 MPM = 1e-3 / 60.0  # 1 mm/min in m/s
@@ -121,55 +118,6 @@ def test_mastercam_wear_mode_g42_d0_gives_the_tool_centre_path_in_inch():
     assert last_rapid.line == 14 and last_rapid.end[2] == pytest.approx(0.5 * inch)
 
 
-def test_radius_below_the_tolerance_is_zero_and_one_micrometre_is_not():
-    text = "G0 X0 Y0\nG1 G41 D1 X10 F500\nG40 X20\n"
-    assert interpret(text, "a.nc", _settings(D1=0.1 * RADIUS_ZERO)).blocks == interpret(
-        _strip_compensation(text), "a.nc", _settings()).blocks
-    with pytest.raises(GCodeError) as info:
-        interpret(text, "a.nc", _settings(D1=1e-6))  # a 1 um wear value
-    assert info.value.line == 2 and info.value.word == "D1" and "D1 = 0.001 mm" in str(info.value)
-    with pytest.raises(GCodeError):
-        interpret(text, "a.nc", _settings(D1=math.nan))
-
-
-def test_nonzero_radius_is_an_error_naming_file_line_and_word():
-    with pytest.raises(GCodeError) as info:
-        interpret(FUSION_WEAR, "fusion.nc", _settings(D1=3e-3))
-    err = info.value
-    assert isinstance(err, CncTwinError)
-    assert err.file == "fusion.nc" and err.line == 14 and err.word == "D1"
-    msg = str(err)
-    assert msg.startswith("fusion.nc:14: 'N60 G41 X0. Y0. D1 F1000.': ")
-    assert "cutter radius compensation with a nonzero radius (D1 = 3 mm) is not simulated" in msg
-    assert "'wear'" in msg and "D = 0" in msg
-
-
-def test_nonzero_radius_in_inch_is_reported_in_inch():
-    with pytest.raises(GCodeError) as info:
-        interpret(MASTERCAM_WEAR, "mc.nc", _settings(D2=0.25 * 25.4e-3))
-    assert info.value.line == 8 and info.value.word == "D2" and "(D2 = 0.25 in)" in str(info.value)
-
-
-def test_g41_without_d_uses_the_modal_d_starting_at_d0():
-    text = "G0 X0 Y0\nG41 G1 X10 F500\nG40 X20\n"
-    # power-on D0: zero radius whatever the registers hold
-    assert interpret(text, "a.nc", _settings(D1=3e-3)).blocks == interpret(
-        _strip_compensation(text), "a.nc", _settings()).blocks
-    # D1 set earlier (G40 mode, not used yet), then G41 without D: D1 is active
-    with pytest.raises(GCodeError) as info:
-        interpret("D1\n" + text, "a.nc", _settings(D1=3e-3))
-    assert info.value.line == 3 and info.value.word == "G41" and "D1 = 3 mm" in str(info.value)
-
-
-def test_changing_d_while_compensation_is_on_matters_only_when_nonzero():
-    text = "G0 X0 Y0\nG42 D1 G1 X10 F500\nD3 Y10\nX0\nG40 Y0\n"
-    assert interpret(text, "a.nc", _settings(D2=2e-3)).blocks == interpret(
-        _strip_compensation(text), "a.nc", _settings()).blocks
-    with pytest.raises(GCodeError) as info:
-        interpret(text, "a.nc", _settings(D3=2e-3))
-    assert info.value.line == 3 and info.value.word == "D3" and "D3 = 2 mm" in str(info.value)
-
-
 @pytest.mark.parametrize("word", ["D21", "D1.5", "D1.", "D-1"])
 def test_d_out_of_range_is_an_error(word):
     with pytest.raises(GCodeError) as info:
@@ -228,7 +176,8 @@ def test_nck_parameters_tool_radius_feed_the_interpreter():
     k = NCKernel(program_text=prog)
     k.setup(0.0)
     assert k.program_.blocks == interpret(_strip_compensation(prog)).blocks
+    # D2 = 4 mm: a straight start-up and cancel; G41 offsets to +Y (left of +X): the start-up ends at (5, 4)
     k = NCKernel(program_text=prog, tool_radius_2=4e-3)
-    with pytest.raises(GCodeError) as info:
-        k.setup(0.0)
-    assert info.value.line == 2 and info.value.word == "D2" and "D2 = 4 mm" in str(info.value)
+    k.setup(0.0)
+    start_up = k.program_.blocks[1]
+    assert start_up.line == 2 and start_up.end == pytest.approx((5 * MM, 4 * MM, 0.0), abs=1e-15)

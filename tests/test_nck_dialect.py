@@ -115,14 +115,14 @@ def test_g10_tool_length_geometry_and_wear():
     assert [e[2] for e in ends] == pytest.approx([0.0998, 0.1048], abs=1e-15)
 
 
-def test_g10_tool_radius_zero_stays_accepted_and_nonzero_is_an_error_when_used():
+def test_g10_tool_radius_geometry_plus_wear_is_the_radius_of_g41():
     s = InterpreterSettings(tool_radii=[0.0, 0.0])
-    # geometry 3 mm and wear -3 mm: radius 0 -> G41 D1 accepted
-    interpret("G10 L12 P1 R3.\nG10 L13 P1 R-3.\nG41 D1 G1 X10 F100\nG40 X20\nM30\n", settings=s)
-    err = _error("G10 L12 P2 R3.\nG41 D2 G1 X10 F100\n", s)
-    assert (err.line, err.word) == (2, "D2") and "nonzero radius" in str(err)
-    err = _error("G41 D1 G1 X10 F100\nG10 L13 P1 R0.1\n", s)
-    assert (err.line, err.word) == (2, "R0.1") and "G41" in str(err)
+    # geometry 3 mm and wear -3 mm: radius 0 -> the programmed path
+    p = interpret("G10 L12 P1 R3.\nG10 L13 P1 R-3.\nG41 D1 G1 X10 F100\nG40 X20\nM30\n", settings=s)
+    assert p.blocks[0].end == pytest.approx((0.010, 0.0, 0.0), abs=1e-15)
+    # geometry 3 mm: a start-up to X10 ending the program in offset mode ends 3 mm to the left (+Y) of it
+    p = interpret("G10 L12 P2 R3.\nG41 D2 G1 X10 F100\n", settings=s)
+    assert p.blocks[0].end == pytest.approx((0.010, 0.003, 0.0), abs=1e-15)
 
 
 @pytest.mark.parametrize("text,line,word,fragment", [

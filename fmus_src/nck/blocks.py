@@ -43,6 +43,11 @@ class Linear:
     feed_per_rev : float
         G95: the programmed feed per revolution (m/rev), and ``feed`` is it x the commanded spindle speed in
         effect (rev/s); 0.0 under G94.
+    tap_pitch : float
+        A tapping feed of G84/G74 (F tied to S): the thread pitch (m/rev); 0.0 for any other feed.
+    rigid_tap : int
+        A rigid-tapping stroke: the spindle direction during it (+1 CW, -1 CCW), Z synchronised with the
+        spindle from rest to rest (:mod:`fmus_src.nck.tapping`); 0 otherwise.
     """
 
     line: int
@@ -52,6 +57,8 @@ class Linear:
     feed_line: int
     exact_stop: bool = False
     feed_per_rev: float = 0.0
+    tap_pitch: float = 0.0
+    rigid_tap: int = 0
 
 
 @dataclass(frozen=True, slots=True)
@@ -164,9 +171,10 @@ class SpindleSpeed:
 
 @dataclass(frozen=True, slots=True)
 class SpindleStop:
-    """M5 spindle stop."""
+    """M5 spindle stop; ``orient``: a spindle orientation of G76/G87 (the next move waits for the spindle at rest)."""
 
     line: int
+    orient: bool = False
 
 
 @dataclass(frozen=True, slots=True)

@@ -6,8 +6,8 @@ G50 (scaling cancel; a mill: G50 with X/Y/Z/S, the lathe meaning, is an
 error), G50.1 (programmable mirror image cancel), G69 (coordinate rotation
 cancel), G67 (macro modal call cancel), G13.1 (polar interpolation cancel).
 Rejected with a :class:`GCodeError`: the codes switching those features on
-(G16, G51, G51.1, G68, G66, G65, G12.1), cutter compensation G41/G42 with a
-nonzero radius (see :mod:`.compensation`), tapping cycles G74/G84, G76/G87/G88,
+(G16, G51, G51.1, G68, G66, G65, G12.1), what cutter compensation G41/G42 with a
+nonzero radius does not simulate (see :mod:`.compensation`), G88 (boring with a manual operation),
 G29, and every other G/M code or address.
 
 Conventions
@@ -47,6 +47,7 @@ G_GROUP: dict[int | float, str] = {
     61: "path mode", 64: "path mode",
     80: "canned cycle", **{c: "canned cycle" for c in CYCLES},
     90: "distance", 91: "distance",
+    90.1: "arc centre", 91.1: "arc centre",  # LinuxCNC: I/J/K absolute / incremental (see motion)
     94: "feed mode", 95: "feed mode",
     # look-ahead / contour-control modes (accepted, see lookahead_codes)
     5.1: "look-ahead", 8: "look-ahead", 5: "look-ahead",
@@ -57,11 +58,8 @@ G_GROUP: dict[int | float, str] = {
 }
 #: Known G codes the twin does not execute -> why.
 G_REJECT: dict[int | float, str] = {
-    74: "tapping cycle G74 is not supported (needs rigid tapping with the feed per revolution)",
-    84: "tapping cycle G84 is not supported (needs rigid tapping with the feed per revolution)",
-    76: "fine boring cycle G76 is not supported (needs spindle orientation and a tool shift)",
-    87: "back boring cycle G87 is not supported (needs spindle orientation and a tool shift)",
-    88: "boring cycle G88 is not supported (needs a manual operation at the hole bottom)",
+    88: "boring cycle G88 is not supported: it stops at the hole bottom for a manual operation (the operator "
+        "jogs the tool out), which the twin cannot do (use G76, G85, G86 or G89)",
     16: "polar coordinate command G16 is not supported (only its cancel G15)",
     51: "scaling G51 is not supported (only its cancel G50)",
     51.1: "programmable mirror image G51.1 is not supported (only its cancel G50.1)",
@@ -76,10 +74,12 @@ M_GROUP: dict[int, str] = {
     0: "stop", 1: "stop", 2: "end", 30: "end", 3: "spindle", 4: "spindle", 5: "spindle", 19: "spindle",
     6: "tool change",
     7: "coolant", 8: "coolant", 9: "coolant", 98: "subprogram", 99: "subprogram",
+    29: "rigid tapping",
 }
 SUPPORTED_G = ("G0 G1 G2 G3 G4 G5 G5.1 G8 G9 G10 G13.1 G15 G17 G18 G19 G20 G21 G28 G30 G40 G41 G42 G43 G44 G49 G50 "
-               "G50.1 G53 G54-G59 G54.1 G61 G64 G67 G69 G73 G80 G81 G82 G83 G85 G86 G89 G90 G91 G94 G95 G98 G99")
-SUPPORTED_M = "M0 M1 M2 M3 M4 M5 M6 M7 M8 M9 M19 M30 M98 M99"
+               "G50.1 G53 G54-G59 G54.1 G61 G64 G67 G69 G73 G74 G76 G80 G81 G82 G83 G84 G85 G86 G87 G89 G90 G90.1 G91 "
+               "G91.1 G94 G95 G98 G99")
+SUPPORTED_M = "M0 M1 M2 M3 M4 M5 M6 M7 M8 M9 M19 M29 M30 M98 M99"
 #: Address letters of the dialect.
 LETTERS = set("GMXYZIJKRFSTHDPQNOL")
 

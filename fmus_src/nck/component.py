@@ -89,6 +89,13 @@ def _variables() -> tuple[Variable, ...]:
                       "return amount d of the G73 high-speed peck cycle (FANUC No. 5114)"))
     v.append(Variable("g83_clearance", p, "m", CycleMachine().g83_clearance,
                       "clearance d of the G83 peck cycle above the previous bottom (FANUC No. 5115)"))
+    v.append(Variable("rigid_tapping_mode", p, "1", "M29",
+                      "G84/G74 are rigid tapping after M29 (M29) or always (always; FANUC No. 5200#0)", "String"))
+    v.append(Variable("boring_shift", p, "1", CycleMachine().boring_shift,
+                      "G76/G87 shift direction after the spindle orientation: +X|-X|+Y|-Y (FANUC No. 5101 #4/#5)",
+                      "String"))
+    v.append(Variable("rigid_tapping_time_constant", p, "s", _D.rigid_tapping_time_constant,
+                      "rigid-tapping linear acc/dec time to the maximum spindle speed (FANUC No. 5261)"))
     v.append(Variable("block_delete", p, "1", False, "block delete switch: skip blocks starting with /", "Boolean"))
     o = "output"
     v += [
@@ -103,6 +110,13 @@ def _variables() -> tuple[Variable, ...]:
         Variable("tool", o, "1", 0, "tool in the spindle", "Integer"),
     ]
     return tuple(v)
+
+
+def _rigid_always(mode: str, name: str) -> bool:
+    """``rigid_tapping_mode`` → :attr:`CycleMachine.rigid_always` ("M29": False, "always": True)."""
+    if mode not in ("M29", "always"):
+        raise NCParameterError(f"{name}.rigid_tapping_mode must be 'M29' or 'always', got {mode!r}")
+    return mode == "always"
 
 
 class NCKernel(Component):
@@ -202,7 +216,9 @@ class NCKernel(Component):
             reference2=tuple(self._uniform(f"reference2_{a}") for a in "xyz"),  # type: ignore[arg-type]
             reference3=tuple(self._uniform(f"reference3_{a}") for a in "xyz"),  # type: ignore[arg-type]
             reference4=tuple(self._uniform(f"reference4_{a}") for a in "xyz"),  # type: ignore[arg-type]
-            cycles=CycleMachine(self._uniform("g73_retract"), self._uniform("g83_clearance")),
+            cycles=CycleMachine(self._uniform("g73_retract"), self._uniform("g83_clearance"),
+                                _rigid_always(str(self.values["rigid_tapping_mode"]), self.name),
+                                str(self.values["boring_shift"])),
         )
         for n in (1, 2, 3, 4):
             if not all(np.isfinite(settings.reference_position(n))):

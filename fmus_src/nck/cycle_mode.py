@@ -8,6 +8,8 @@ Conventions
   X/Y increments each time under G91; a hole is drilled when the block holds X, Y, Z or R; K0 stores the
   data only.
 * Under G95 the feed blocks of a hole keep their feed per revolution (spindle overrides rescale them).
+* Tapping G84/G74 (feed = pitch x S, M29 rigid tapping): :mod:`.tapping`; G76/G87 need Q > 0 (the shift) and
+  the spindle turning clockwise (M3); G87 needs Z above R and G98 (FANUC returns it to the initial level only).
 """
 from __future__ import annotations
 
@@ -16,13 +18,14 @@ from dataclasses import replace
 
 from .blocks import AXIS_INDEX, Block, Linear
 from .codes import ValueWords
-from .cycles import MAX_CYCLE_MOVES, CycleError, Hole, LevelWord, cycle_levels, expand_hole
+from .cycles import MAX_CYCLE_MOVES, TAPPING, CycleError, Hole, LevelWord, cycle_levels, expand_hole
 from .dwell import dwell_seconds
 from .errors import ErrorFactory, fmt_number
 from .feed import block_feed
 from .modal import ModalState
 from .motion import SAME_POINT
 from .settings import INCH
+from .tapping import RIGID_ACTIVE, RIGID_PENDING, start_tapping, tap_feed
 
 #: Largest repeat count K of a canned cycle (FANUC: 4 digits).
 MAX_REPEAT = 9999
@@ -48,10 +51,18 @@ def canned_cycle_block(st: ModalState, vals: ValueWords, code: int | None, line:
         The program's blocks so far; the moves of the hole(s) are appended.
     """
     if code is not None:
+        if st.rigid == RIGID_PENDING and code not in TAPPING:
+            raise err(f"G{code}", f"canned cycle G{code} after M29 (FANUC alarm PS0203 style)",
+                      "G84 or G74 after M29 S<rpm> (M29 selects rigid tapping)")
         if st.cycle is None:
             st.cycle_initial = st.prog[2]
         st.cycle = code
     gname = f"G{st.cycle}"
+    if st.cycle in TAPPING and st.rigid == RIGID_PENDING:
+        st.rigid = RIGID_ACTIVE
+    if st.cycle in TAPPING and "Q" in vals:
+        raise err("Q" + vals["Q"].text, f"Q in tapping cycle {gname} (peck tapping)",
+                  f"{gname} X Y Z R P F K without Q (peck tapping is not supported)")
     for a in "IJ":
         if a in vals:
             raise err(a + vals[a].text, f"word {a} in canned cycle {gname}", "X Y Z R Q P K F words in a cycle block")
@@ -83,7 +94,15 @@ def canned_cycle_block(st: ModalState, vals: ValueWords, code: int | None, line:
     u = 1.0 / scale
     unit_name = "in" if scale == INCH else "mm"
     r_level, bottom = cycle_levels(st.cycle_initial, st.cycle_r, st.cycle_bottom)
-    if bottom >= r_level - SAME_POINT:
+    if st.cycle == 87:  # back boring: from R below the part up to Z
+        if bottom <= r_level + SAME_POINT:
+            word = "Z" + vals["Z"].text if "Z" in vals else gname
+            raise err(word, f"back boring G87 top Z {fmt_number(bottom * u)} {unit_name} is not above the R point "
+                      f"{fmt_number(r_level * u)} {unit_name}", "Z above R (G87 bores upwards from R below the part)")
+        if not st.return_initial:
+            raise err(gname, "back boring G87 under G99", "G98: FANUC returns G87 to the initial level only "
+                      "(the R point is below the part)")
+    elif bottom >= r_level - SAME_POINT:
         word = "Z" + vals["Z"].text if "Z" in vals else ("R" + vals["R"].text if "R" in vals else gname)
         raise err(word, f"hole bottom Z {fmt_number(bottom * u)} {unit_name} is not below the R point "
                   f"{fmt_number(r_level * u)} {unit_name}", "Z below R (the cycles drill towards -Z; under G91 "
@@ -91,7 +110,20 @@ def canned_cycle_block(st: ModalState, vals: ValueWords, code: int | None, line:
     assert st.cycle is not None
     if st.cycle in (73, 83) and st.cycle_q is None:
         raise err(gname, f"{gname} without a peck depth Q", "Q > 0 on this or an earlier cycle block")
-    feed, per_rev = block_feed(st, err, gname, f"canned cycle {gname}")
+    if st.cycle in (76, 87):
+        if st.cycle_q is None:
+            raise err(gname, f"{gname} without a shift amount Q", "Q > 0 (the tool shift after the spindle "
+                      "orientation) on this or an earlier cycle block")
+        if st.direction != 1:
+            raise err(gname, f"boring cycle {gname} without the spindle turning clockwise",
+                      f"M3 S<rpm> before {gname} (FANUC orients the spindle and restarts it clockwise)")
+    pitch, rigid, tap_per_rev = 0.0, False, 0.0
+    if st.cycle in TAPPING:
+        rigid = start_tapping(st, st.cycle, gname, vals, line, err, st.settings.cycles.rigid_always, out)
+        feed, pitch, tap_per_rev = tap_feed(st, err, gname)
+        per_rev = 0.0  # the tapping blocks carry their own feed per revolution
+    else:
+        feed, per_rev = block_feed(st, err, gname, f"canned cycle {gname}")
     pecks = 1 if st.cycle not in (73, 83) else math.ceil((r_level - bottom) / st.cycle_q - 1e-9)
     moves = repeat * (3 * pecks + 4)
     if moves > MAX_CYCLE_MOVES:
@@ -111,7 +143,8 @@ def canned_cycle_block(st: ModalState, vals: ValueWords, code: int | None, line:
         hole = Hole(code=st.cycle, line=line, x=st.prog[0] + off[0], y=st.prog[1] + off[1], initial=levels[0],
                     r_level=levels[1], bottom=levels[2], return_to_initial=st.return_initial, feed=feed,
                     feed_line=st.feed_line, peck=st.cycle_q, dwell=st.cycle_dwell,
-                    spindle=(st.speed, st.direction, st.speed_line))
+                    spindle=(st.speed, st.direction, st.speed_line), pitch=pitch, rigid=rigid,
+                    feed_per_rev=tap_per_rev)
         try:
             blocks, end = expand_hole(hole, tuple(st.machine), st.settings.cycles)  # type: ignore[arg-type]
         except CycleError as exc:
@@ -121,4 +154,4 @@ def canned_cycle_block(st: ModalState, vals: ValueWords, code: int | None, line:
         out.extend(blocks)
         st.machine = list(end)
         st.applied_tool = tool
-        st.prog[2] = st.cycle_initial if st.return_initial else r_level
+        st.prog[2] = st.cycle_initial if (st.return_initial or st.cycle == 87) else r_level

@@ -3,12 +3,14 @@
 Supported: G0 G1 G2 G3 (arcs by R, negative R for > 180 deg, or by I/J/K incl.
 full circles), G4 (dwell), G9 (exact stop, one block), G17/G18/G19, G20/G21,
 G28/G30 (1st/2nd-4th reference position return), G40/G41/G42 with D (cutter radius
-compensation with a zero radius only, see :mod:`.compensation`), G43/G44/G49 with H, G53
+compensation, see :mod:`.compensation` and :mod:`.radius_offset`), G43/G44/G49 with H, G53
 (machine coordinates), G54-G59, G54.1 P1-P48 (also written G54 Pn), G10
 L2/L20/L10-L13 (programmable data input), G5.1 Q0/Q1, G8 P0/P1, G5
 P0/P10000 (look-ahead modes, accepted), G61/G64 (exact stop mode / cutting
-mode), canned drilling cycles G73 G81 G82 G83 G85 G86 G89 with G98/G99 and G80 (see
-:mod:`.cycles`), G90/G91, G94/G95; M0 M1 M2 M3 M4 M5 M6 M7 M8 M9 M19 M30; subprograms
+mode; LinuxCNC G64 P Q, see :mod:`.path_blending`), canned cycles G73 G74 G76 G81-G87 G89
+with G98/G99 and G80 (see :mod:`.cycles`; tapping and M29: :mod:`.tapping`), G90/G91,
+G90.1/G91.1 (arc centre I/J/K absolute/incremental), G94/G95; M0 M1 M2 M3 M4 M5 M6 M7 M8 M9
+M19 M29 M30; subprograms
 M98/M99 in the same file (see :mod:`.subprograms`); F S T H D P Q N O L words
 (K: arc centre, or repeat count in a canned cycle; L: repeat count of M98);
 ``( )`` and ``;`` comments, ``%`` lines, block delete ``/``.
@@ -67,10 +69,13 @@ from .machine_moves import machine_move
 from .modal import ModalState
 from .motion import programmed_move
 from .offsets import program_data, select_work_offset
+from .radius_offset import RadiusOffset
+from .path_blending import blending_tolerance_words
 from .settings import (
     DEFAULT_REFERENCE, EXTERNAL_OFFSET, INCH, MM, RPM, InterpreterSettings, additional_offset_key,
 )
 from .subprograms import MAX_CALLED_LINES, Call, Return, Subprogram, index_subprograms, next_program_start
+from .tapping import end_cycle_mode, rigid_tapping_word
 
 # re-exported for importers of the former single-module interpreter (their homes: settings, compensation)
 __all__ = [
@@ -105,6 +110,7 @@ def interpret(text: str, file: str = "<text>", settings: InterpreterSettings | N
     """
     settings = settings or InterpreterSettings()
     st = ModalState(settings)
+    radius = RadiusOffset(file)  # cutter radius compensation: the tool-centre path, after the program
     out: list[Block] = []
     lines = split_lines(text)
     seen_percent = False
@@ -127,8 +133,9 @@ def interpret(text: str, file: str = "<text>", settings: InterpreterSettings | N
 
     def finished(number: int) -> Program:
         close_run(number)
-        return Program(file, tuple(out), tuple(settings.initial), tuple(segments),  # type: ignore[arg-type]
-                       tuple(seg_blocks))
+        blocks, runs = radius.apply(out, seg_blocks)
+        return Program(file, tuple(blocks), tuple(settings.initial), tuple(segments),  # type: ignore[arg-type]
+                       tuple(runs))
 
     while pc < len(lines):
         number = pc + 1
@@ -153,7 +160,9 @@ def interpret(text: str, file: str = "<text>", settings: InterpreterSettings | N
                                  "lines executed in subprograms (smaller repeat counts L)",
                                  f"the subprogram calls execute more than {MAX_CALLED_LINES} lines",
                                  lines[top.call_line - 1].strip())
+        first = len(out)
         action = _block(st, lexed.words, number, lexed.text, file, out)
+        radius.record(st, number, lexed.text, first)
         if action is None:
             continue
         if action == _END:
@@ -220,6 +229,7 @@ def _block(st: ModalState, words: tuple[Word, ...], line: int, text: str, file: 
     read_speed_and_tool(st, vals, line, err)
     check_sequence_words(vals, err)
     # 4.-6. tool change, spindle, coolant
+    rigid_tapping_word(st, ms, vals, line, err, out)  # M29: spindle stop, then the S word below
     auxiliary_blocks(st, ms, vals, line, err, out)
     # 7. modes
     if "plane" in gs:
@@ -236,6 +246,9 @@ def _block(st: ModalState, words: tuple[Word, ...], line: int, text: str, file: 
     cutter_compensation(st, gs, vals, err, unit_name)
     if "path mode" in gs:
         st.exact_stop = gs["path mode"][0] == 61
+        blending_tolerance_words(gs, vals, st.cycle is not None or "canned cycle" in gs or "non-modal" in gs, err)
+    if "arc centre" in gs:
+        st.arc_centre_absolute = gs["arc centre"][0] == 90.1
     if "return level" in gs:
         st.return_initial = gs["return level"][0] == 98
     # 8. dwell, reference return, machine coordinates (non-modal), canned cycles, motion
@@ -251,9 +264,9 @@ def _block(st: ModalState, words: tuple[Word, ...], line: int, text: str, file: 
         check_coordinates(vals, unit_name, err)
         if "motion" in gs:
             st.motion = gs["motion"][0]
-            st.cycle = None  # a group 01 code cancels the canned cycle
+            end_cycle_mode(st, "G" + gs["motion"][1].text, err)  # a group 01 code cancels the canned cycle
         if cycle == 80:
-            st.cycle = None
+            end_cycle_mode(st, "G80", err)
         if non_modal == 10:
             if st.cycle is not None:
                 raise err("G10", f"G10 in canned-cycle mode G{st.cycle}", "G80 (or G0) before G10")

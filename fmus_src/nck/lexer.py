@@ -4,7 +4,8 @@ Rules (FANUC milling dialect):
 
 * ``( ... )`` comments anywhere on the line (several allowed, not nested);
   ``;`` starts a comment running to the end of the line.
-* A line whose only content is ``%`` is a tape start/end marker.
+* A line starting with ``%`` is a tape start/end marker; the rest of the line (``%O1000``, ``% (comment)``,
+  as some posts and DNC senders write it) is not read.
 * A ``/`` as first non-blank character marks a block-delete block.
 * A word is a letter (either case) followed by a number; blanks between the
   letter and the number are allowed. Numbers: optional sign, digits with an
@@ -114,7 +115,7 @@ def lex_line(raw: str) -> LexedLine:
         number, or a character that starts no word.
     """
     text = raw.strip()
-    if text == "%":
+    if text.startswith("%"):
         return LexedLine((), True, False, text)
     code = raw
     if "(" in code or ")" in code:

@@ -2,7 +2,7 @@
 
 Conventions
 -----------
-* Power-on modes: G0, G17, G21, G40, G49, G54, G64, G80, G90, G94, G98; H0, D0.
+* Power-on modes: G0, G17, G21, G40, G49, G54, G64, G80, G90, G91.1, G94, G98; H0, D0.
 * An offset change takes effect on the next move of the axis: the machine
   target of a programmed axis is programmed value + work offset (+ tool length
   on Z); axes not programmed do not move. A work-offset change shifts the
@@ -63,6 +63,8 @@ class ModalState:
         self.cycle_bottom: LevelWord | None = None  # Z word as programmed (G90 level / G91 from the R point)
         self.cycle_q: float | None = None  # peck depth (m)
         self.cycle_dwell = 0.0  # s
+        self.rigid = 0  # rigid tapping: 0 off, 1 M29 given, 2 in a G84/G74 cycle (see .tapping)
+        self.arc_centre_absolute = False  # G90.1 (True, I/J/K are work coordinates) / G91.1 (see .motion)
         self.comp = 40  # cutter compensation G40/G41/G42
         self.d = 0  # tool radius offset number (modal)
         self.comp_pending: str | None = None  # "start-up"/"cancel" until the next move block

@@ -6,6 +6,9 @@ Conventions
   for > 180 deg, or by I/J/K (incremental from the start point) incl. full circles (end point = start point).
   The radii at start and end of an I/J/K arc may differ by at most :data:`ARC_RADIUS_TOLERANCE` (FANUC alarm
   PS0020 style).
+* G90.1 (LinuxCNC, modal until G91.1): I/J/K are the centre in work coordinates (plus the work offset, and
+  the tool length on Z, as an end point); both centre words of the plane are then required. G91.1 (the
+  power-on mode, FANUC's only one): I/J/K are incremental from the start point.
 * G61 (modal) and G9 (one block): the feed block decelerates to rest at its
   end and the next block starts after the in-position check; G64 cancels G61.
   Rapids always end with an exact stop.
@@ -115,8 +118,13 @@ def programmed_move(st: ModalState, vals: ValueWords, g9: bool, line: int, err: 
             raise err(cl + vals[cl].text, f"centre word {cl} is not in the {st.plane} plane",
                       f"{plane_letters[0]} and {plane_letters[1]} in G{ {'XY': 17, 'ZX': 18, 'YZ': 19}[st.plane]}")
     c = list(start)
+    if st.arc_centre_absolute and len(centre) < 2:
+        raise err(gname, f"{gname} under G90.1 without both centre words {plane_letters[0]} and {plane_letters[1]}",
+                  f"{plane_letters[0]} and {plane_letters[1]} (the centre in work coordinates under G90.1)")
     for cl in centre:
-        c[CENTRE_INDEX[cl]] = start[CENTRE_INDEX[cl]] + vals[cl].value * scale
+        i = CENTRE_INDEX[cl]
+        v = vals[cl].value * scale
+        c[i] = v + off[i] + (st.applied_tool if i == 2 else 0.0) if st.arc_centre_absolute else start[i] + v
     r1 = math.hypot(start[i1] - c[i1], start[i2] - c[i2])
     if r1 <= SAME_POINT:
         raise err(gname, "arc centre coincides with the start point", "a non-zero radius from I/J/K")

@@ -24,8 +24,8 @@ Conventions
   values in the unit in effect (G20/G21). The change takes effect like the
   other offset changes (:mod:`.modal`): a changed active work offset shifts the programmed
   coordinates of the current position, a changed tool length is applied by
-  the next Z move, and a D radius made nonzero is an error when G41/G42 uses
-  it (also in the G10 block itself if G41/G42 is on with that D). Other L,
+  the next Z move, and a changed active D radius is used for the end vector of the
+  next move under G41/G42 (:mod:`.radius_offset`). Other L,
   a missing P or data word, P out of range, words of the other form, a
   motion G code in the block and G10 in canned-cycle mode are errors.
 """
@@ -33,7 +33,6 @@ from __future__ import annotations
 
 from .blocks import AXIS_INDEX
 from .codes import GWords, ValueWords
-from .compensation import RADIUS_ZERO
 from .errors import ErrorFactory
 from .modal import ModalState
 from .settings import EXTERNAL_OFFSET, N_ADDITIONAL_OFFSETS, additional_offset_key
@@ -137,7 +136,3 @@ def program_data(st: ModalState, gs: GWords, vals: ValueWords, err: ErrorFactory
     part = 0 if ell in (10, 12) else 1  # geometry, wear
     v = vals["R"].value * st.scale
     table[p - 1][part] = v if st.absolute else table[p - 1][part] + v
-    if ell in (12, 13) and st.comp != 40 and st.d == p and not abs(st.tool_radius()) <= RADIUS_ZERO:
-        raise err("R" + vals["R"].text, f"G10 L{ell} gives the active D{p} a nonzero radius while cutter "
-                  f"compensation G{st.comp} is on (the offset path is not simulated)",
-                  "tool radius offsets that stay 0 while G41/G42 is on")

@@ -17,7 +17,8 @@ class NCParams:
     """Scalar NC parameters (one batch member), SI units.
 
     Defaults are the values of ``models/machines/default.toml`` ([nck], [spindle],
-    [axis.*] rapid_feed); ``tool_change_time`` (3 s) is an assumption.
+    [axis.*] rapid_feed); ``tool_change_time`` (3 s) is an assumption. ``rigid_tapping_time_constant`` (s,
+    FANUC No. 5261): linear acc/dec time of rigid tapping to ``spindle_max_speed`` (see :mod:`.tapping`).
     """
 
     interpolation_period: float = 1e-3
@@ -39,6 +40,7 @@ class NCParams:
     y_rapid_feed: float = 36000.0 * MM_PER_MIN
     z_rapid_feed: float = 30000.0 * MM_PER_MIN
     tool_change_time: float = 3.0
+    rigid_tapping_time_constant: float = 2.0
 
     def __post_init__(self) -> None:
         positive = ("interpolation_period", "max_cutting_feed", "accel_before_interp", "corner_velocity_difference",
@@ -49,7 +51,7 @@ class NCParams:
             if not (math.isfinite(value) and value > 0.0):
                 raise NCParameterError(f"NC parameter {name} must be a finite number > 0, got {value!r}")
         for name in ("accel_change_time_before_interp", "cutting_time_constant", "rapid_time_constant",
-                     "tool_change_time"):
+                     "tool_change_time", "rigid_tapping_time_constant"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0.0):
                 raise NCParameterError(f"NC parameter {name} must be a finite number >= 0, got {value!r}")

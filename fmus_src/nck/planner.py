@@ -21,6 +21,13 @@ kernel plans everything at setup, sampled at the interpolation period Ts:
    before the next block), spindle speed arrival before the next chain
    of feed blocks, ``tool_change_time`` for M6.
 
+A rigid-tapping stroke (:attr:`Linear.rigid_tap`) is an item of its own: it
+waits for the axes in position and the spindle at rest, then runs Z
+synchronised with the spindle (:func:`.tapping.rigid_tap_stroke`), without
+the after-interpolation filter; the spindle reference is that synchronised
+speed. A spindle orientation of G76/G87 (:attr:`SpindleStop.orient`) makes
+the next move wait until the spindle is at rest.
+
 A spindle command that changes the commanded speed (or direction), M5 and a
 tool change stop the path (the chain ends at rest). A spindle command that
 leaves the command as it is (an S word repeating the speed in effect, as the
@@ -55,6 +62,7 @@ from .lookahead import plan_chain_speeds
 from .params import NCParams
 from .profiles import SpeedChange
 from .spindle import arrival_time, sample_spindle, speed_after
+from .tapping import rigid_tap_accel, rigid_tap_stroke
 
 #: Feed blocks shorter than this are treated as zero-length (no motion, no time), m.
 MIN_LENGTH = 1e-12
@@ -65,8 +73,8 @@ MAX_PLAN_SAMPLES = 10_000_000
 
 @dataclass(frozen=True)
 class Item:
-    """One step of the schedule: ``kind`` in {"chain", "rapid", "dwell", "spindle", "stop", "tool",
-    "coolant", "halt", "end"}; ``blocks`` are indices into the block list. ``exact_stop``: a chain whose
+    """One step of the schedule: ``kind`` in {"chain", "tap", "rapid", "dwell", "spindle", "stop", "tool",
+    "coolant", "halt", "end"} ("tap": one rigid-tapping stroke); ``blocks`` are indices into the block list. ``exact_stop``: a chain whose
     last block is an exact stop (the next item waits for the in-position check)."""
 
     kind: str
@@ -186,6 +194,10 @@ def build_schedule(blocks: Sequence[Block], initial: Sequence[float], file: str 
     for i, b in enumerate(blocks):
         if i in skipped:
             continue
+        if isinstance(b, Linear) and b.rigid_tap:
+            flush()
+            items.append(Item("tap", (i,)))
+            continue
         if isinstance(b, (Linear, Arc)):
             chain.append(i)
             if b.exact_stop:
@@ -259,7 +271,7 @@ def _ceil_periods(seconds: float, period: float) -> int:
 def _item_min_seconds(item: Item, blocks: Sequence[Block], params: NCParams, feeds: np.ndarray) -> float:
     """A lower bound of the time an item takes (s), computed before anything is allocated."""
     b = blocks[item.blocks[0]]
-    if item.kind == "chain":
+    if item.kind in ("chain", "tap"):
         total = 0.0
         for i in item.blocks:
             speed = min(float(feeds[i]), params.max_cutting_feed)
@@ -287,6 +299,30 @@ def _check_length(schedule: Schedule, item: Item, k: int, params: NCParams, feed
         schedule.file, b.line, "", f"a program that runs at most {limit:.6g} s (the planning limit)",
         f"the program would run longer than {limit:.6g} s: this block alone takes at least {seconds:.6g} s "
         f"after {k * ts:.6g} s (a tiny feed rate or a huge dwell?)")
+
+
+def _tap_item(schedule: Schedule, item: Item, feeds: np.ndarray, params: NCParams, accel: float, k: int,
+              spindle_now, sp_last: tuple[int, float, float]) -> tuple[int, Segment, np.ndarray]:
+    """A rigid-tapping stroke: its first sample (axes in position, spindle at rest), samples, spindle speed.
+
+    Raises GCodeError naming the line when the spindle is commanded to turn (not stopped by M29) or the
+    synchronised speed exceeds the spindle's maximum speed.
+    """
+    b = schedule.blocks[item.blocks[0]]
+    assert isinstance(b, Linear)
+    ts = params.interpolation_period
+    if sp_last[2] != 0.0:
+        raise GCodeError(schedule.file, b.line, "", "M29 S<rpm> (spindle stopped) before a rigid-tapping stroke",
+                         "rigid-tapping stroke while the spindle is commanded to turn")
+    k0 = k + _ceil_periods(abs(spindle_now(k)) / params.spindle_ramp, ts)  # the spindle comes to rest
+    feed = min(float(feeds[item.blocks[0]]), params.max_cutting_feed)  # clamped like any cutting feed
+    speed = feed / b.tap_pitch * 2.0 * math.pi
+    if speed > params.spindle_max_speed * (1.0 + 1e-9):
+        raise GCodeError(schedule.file, b.line, "S", f"S <= {params.spindle_max_speed * 60 / (2 * math.pi):.6g} "
+                         "rpm (the maximum spindle speed, FANUC No. 5241)",
+                         f"rigid tapping at {speed * 60 / (2 * math.pi):.6g} rpm exceeds the maximum spindle speed")
+    seg, omega = rigid_tap_stroke(b.start, b.end, feed, b.tap_pitch, b.rigid_tap, accel, ts)
+    return k0, seg, omega
 
 
 def plan_member(schedule: Schedule, params: NCParams, feeds: np.ndarray, speeds: np.ndarray) -> MemberPlan:
@@ -321,6 +357,8 @@ def plan_member(schedule: Schedule, params: NCParams, feeds: np.ndarray, speeds:
     last: tuple[int, Segment, list[int]] | None = None
     end_reason = "end of file"
     stop_spindle_at_end = False
+    synced: list[tuple[int, np.ndarray]] = []  # (first sample, signed spindle speed) of rigid-tapping strokes
+    tap_accel = rigid_tap_accel(params.spindle_ramp, params.spindle_max_speed, params.rigid_tapping_time_constant)
 
     def settled(k_now: int) -> int:
         if last is None:
@@ -352,6 +390,15 @@ def plan_member(schedule: Schedule, params: NCParams, feeds: np.ndarray, speeds:
             k = k0 + seg.n
             if item.exact_stop:
                 k = settled(k)
+        elif item.kind == "tap":
+            k0, seg, omega = _tap_item(schedule, item, feeds, params, tap_accel, max(settled(k), ready),
+                                       spindle_now, sp_last)
+            line_cp.append((k, b.line))
+            segments.append((k0, "sync", seg))
+            synced.append((k0, omega))
+            last = (k0, seg, [])
+            k = k0 + seg.n
+            sp_last = (k, 0.0, 0.0)
         elif item.kind == "rapid":
             line_cp.append((k, b.line))
             seg = interpolate_rapid(np.array(b.start), np.array(b.end), params.rapid_feed, ts)  # type: ignore[union-attr]
@@ -378,6 +425,8 @@ def plan_member(schedule: Schedule, params: NCParams, feeds: np.ndarray, speeds:
             sp_last = (k, w, cmd)
             ready = k + _ceil_periods(arrival_time(w, cmd, params.spindle_ramp,
                                                    params.spindle_speed_arrival_tolerance), ts)
+            if item.kind == "stop" and b.orient:  # G76/G87: the tool shift waits for the oriented spindle
+                k += _ceil_periods(abs(w) / params.spindle_ramp, ts)
         elif item.kind == "coolant":
             line_cp.append((k, b.line))
         elif item.kind == "halt":
@@ -391,16 +440,14 @@ def plan_member(schedule: Schedule, params: NCParams, feeds: np.ndarray, speeds:
     k_interp_end = k
     ext = filter_extension(cut_boxes) + filter_extension(rapid_boxes)
     K = max(k_interp_end, max((k0 + s.n for k0, _, s in segments), default=0)) + ext + 2
-    inc_cut = np.zeros((K, 3))
-    inc_rapid = np.zeros((K, 3))
+    inc = {"cut": np.zeros((K, 3)), "rapid": np.zeros((K, 3)), "sync": np.zeros((K, 3))}
     feed = np.zeros(K)
     for k0, kind, seg in segments:
         if seg.n == 0:
             continue
-        target = inc_cut if kind == "cut" else inc_rapid
-        target[k0 + 1 : k0 + seg.n + 1] += np.diff(seg.position, axis=0)
+        inc[kind][k0 + 1 : k0 + seg.n + 1] += np.diff(seg.position, axis=0)
         feed[k0 : k0 + seg.n + 1] = seg.speed
-    y = apply_fir(inc_cut, cut_boxes) + apply_fir(inc_rapid, rapid_boxes)
+    y = apply_fir(inc["cut"], cut_boxes) + apply_fir(inc["rapid"], rapid_boxes) + inc["sync"]
     position = schedule.initial + np.cumsum(y, axis=0)
     final = segments[-1][2].position[-1] if segments else schedule.initial
     moving = np.nonzero(np.any(y != 0.0, axis=1))[0]
@@ -420,6 +467,9 @@ def plan_member(schedule: Schedule, params: NCParams, feeds: np.ndarray, speeds:
         position = np.concatenate((position, np.repeat(position[-1:], k_total - K, axis=0)))
         feed = np.concatenate((feed, np.zeros(k_total - K)))
     spindle_ref, spindle_speed = sample_spindle(sp_events, k_total, ts, params.spindle_ramp)
+    for k0, omega in synced:  # rigid tapping: the spindle runs synchronised with Z
+        spindle_ref[k0 : k0 + len(omega)] = omega
+        spindle_speed[k0 : k0 + len(omega)] = omega
     grid = np.arange(k_total)
     lk = np.array([c[0] for c in line_cp])
     lv = np.array([c[1] for c in line_cp])

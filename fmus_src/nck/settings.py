@@ -67,7 +67,7 @@ class InterpreterSettings:
     tool_radii : Sequence[float]
         Tool radius offsets (m) for D1..Dn (index 0 is D1; FANUC's radius, geometry + wear). D0 is always zero.
         Geometry of ``G10 L12``; the wear (``G10 L13``) starts at zero.
-        G41/G42 are accepted only while the active one is zero (see :mod:`.compensation`).
+        A nonzero one under G41/G42 gives the tool-centre path (:mod:`.radius_offset`).
     block_delete : bool
         Block delete switch: True skips blocks starting with ``/``.
     reference : Vec3

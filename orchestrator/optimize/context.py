@@ -15,6 +15,8 @@ Rules (documented for machinists)
   feed grid is ``feed_step_in_per_min`` (0.1 in/min = 2.54 mm/min) instead,
   so the written in/min F words are round numbers and read back exactly as
   the genes (mm/min) say.
+* **Tapping lines** (G84/G74: F = pitch x S) are never cutting lines; one whose F is modal (G94) is pinned
+  (:mod:`.tapping`).
 * **Non-cutting feed lines keep their feed**: a non-cutting feed line that
   would inherit a changed F modally from a cutting line gets its original F
   written explicitly (a "pin").
@@ -283,9 +285,15 @@ def classify_lines(blocks: tuple[Block, ...], removed_mm3: dict[int, float], min
     for b in blocks:
         if isinstance(b, (Linear, Arc)) and b.line not in feed_lines:
             feed_lines[b.line] = (round(b.feed * MM_PER_MIN_PER_M_S, 6), b.feed_line)  # the written value
-    cutting = sorted(line for line in feed_lines if removed_mm3.get(line, 0.0) >= min_removed_mm3)
+    tapping = {b.line for b in blocks if isinstance(b, Linear) and b.tap_pitch > 0.0}  # F tied to S: never genes
+    cutting = sorted(line for line in feed_lines
+                     if line not in tapping and removed_mm3.get(line, 0.0) >= min_removed_mm3)
     cut_set = set(cutting)
-    pins = {line: f for line, (f, src) in feed_lines.items() if line not in cut_set and src in cut_set}
+    # a G94 tapping line with a modal F gets it written (an F override of a cutting line in between would govern it)
+    tap_modal = {b.line for b in blocks if isinstance(b, Linear) and b.tap_pitch > 0.0 and b.feed_per_rev == 0.0
+                 and b.feed_line != b.line}
+    pins = {line: f for line, (f, src) in feed_lines.items()
+            if line not in cut_set and (src in cut_set or line in tap_modal)}
     # spindle speed in effect at each cutting line, and where its S word goes
     speed_at: dict[int, float] = {}
     speed = 0.0

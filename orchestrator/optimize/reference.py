@@ -12,6 +12,7 @@ from ..twin import TwinOptions, build_twin, engagement_table
 from .context import ProblemContext, Ranges, check_context, classify_lines
 from .evaluate import Evaluation, figures, run_twin
 from .errors import OptimizeError
+from .tapping import check_tapping_spindle
 
 #: Default threshold of a cutting line: removed volume in the reference run, mm3.
 MIN_REMOVED_MM3 = 0.1
@@ -107,6 +108,7 @@ def build_reference(case: Case, program_text: str | None = None, ranges: Ranges 
     blocks = twin.nck.blocks_
     removed = removed_volume_by_line(run.recording)
     lines, s_lines, pins, f0, s0 = classify_lines(blocks, removed, min_removed_mm3)
+    check_tapping_spindle(twin.nck.program_, s_lines, str(case.program))  # tapping: F tied to S
     per_rev = sorted({b.line for b in blocks if getattr(b, "feed_per_rev", 0.0) > 0.0} & (set(lines) | set(pins)))
     if per_rev:  # the feed genes are mm/min; an F word in mm/rev is not rewritten (fmus_src.nck.writer)
         raise OptimizeError(f"{case.program}:{per_rev[0]}: feed per revolution (G95) on a line whose feed the "
