@@ -167,3 +167,39 @@ def test_servo_log_that_cannot_be_aligned_is_refused_naming_the_file(servo_log, 
                             None, True, "", "still").write_csv(folder / "recording.csv")
     with pytest.raises(IdentificationError, match=r"recording\.csv.*cannot be aligned"):
         identify_servo([folder], machine=known_machine())
+
+
+def test_a_log_taken_while_cutting_replays_the_twins_drive_load(tmp_path):
+    """A log of the short part's slots (commands, positions, currents; no dynamometer) of a machine with Spp 1.2,
+    Svp 0.8, Svi 1.1 on X: the case's [stock] makes the replay carry the cutting load the twin's drives carry.
+
+    Replayed in the air, the slot's load (about 1 A on X) was fitted by the factors (Svp 0.839, Svi 1.147:
+    +5 % / +4 %), and carried as the 1 ms samples of the instantaneous force, interpolated, it still moved Svp by
+    3 % (a 2-flute tool at 6000 rpm repeats its tooth load every 5 ms).
+    """
+    from dataclasses import replace
+
+    from orchestrator.case import load_case
+    from orchestrator.recording import Recording
+    from orchestrator.simulate import simulate
+    from tests.test_diagnose_logger import PAPER_PART, PROGRAM
+
+    folder = tmp_path / "cutting_log"
+    folder.mkdir()
+    (folder / "program.nc").write_text(PROGRAM)
+    (folder / "case.toml").write_text('recording = "recording.csv"\n' + (PAPER_PART / "case.toml").read_text())
+    case = load_case(folder)
+    truth = case.machine.with_values("axis.x", position_scale=1.2, velocity_p_scale=0.8, velocity_i_scale=1.1)
+    run = simulate(case=replace(case, machine=truth), plot=False).recording
+    rng = np.random.default_rng(3)
+    channels = {"t_s": np.asarray(run.t, float), "line": np.asarray(run["line"], float),
+                "x_ref_mm": np.asarray(run["x_ref_mm"], float),
+                "x_mm": np.round(np.asarray(run["x_mm"], float) * 1e3) / 1e3,                 # 1 µm encoder
+                "x_tcmd_A": np.asarray(run["x_tcmd_A"], float) + rng.normal(0.0, CURRENT_NOISE_A, len(run))}
+    Recording.from_channels(channels).write_csv(folder / "recording.csv")
+    fit = identify_servo([folder])
+    assert fit.commands_ == {"cutting_log": "recorded; cutting forces on the drives: predicted"}
+    # the load is the twin's prediction with the machine file's factors (Spp 1): the truth's slower loop moves
+    # its path and so its load a little (measured: Spp +0.06 %, Svp -0.7 %, Svi +1.2 %)
+    assert fit.scales_["x"] == pytest.approx({"Spp": 1.2, "Svp": 0.8, "Svi": 1.1}, rel=0.02)
+    assert fit.rms_["x"]["current_A"] < 1.2 * CURRENT_NOISE_A

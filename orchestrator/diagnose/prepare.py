@@ -10,7 +10,8 @@ from ..case import Case
 from ..machine import Machine
 from ..recording import Recording, RecordingError
 from ..simulate import simulate as simulate_twin
-from ..twin import TwinOptions, nck_parameters
+from ..master import Master, MasterSettings, Probe
+from ..twin import TwinOptions, build_twin, nck_parameters
 from ..validation import validate_recording
 from .align import (
     consensus_bracket, fill_gaps, offset_bracket_from_lines, refine_offset, refine_offset_by_axes,
@@ -146,24 +147,64 @@ def recorded_forces(recording: Recording) -> dict | None:
     return out or None
 
 
+#: Simulated-time limit of the twin's run for the drive loads, s (``simulate``'s default).
+TWIN_TIME_LIMIT_S = 3600.0
+#: Outputs of the twin's cutting component that its x and y feed drives carry (``disturbance_force``).
+DRIVE_LOADS = {"x": "cutting.fx_mean", "y": "cutting.fy_mean"}
+
+
 def predicted_forces(case: Case, machine: Machine, offset: Callable[[], float]) -> dict | None:
-    """``{axis: f(t)}``: the twin's cutting force on the workpiece (``fx_N``, ``fy_N``) on the logger clock.
+    """``{axis: f(t)}``: the cutting load the twin's feed drives carry, on the logger clock [N].
 
     For recordings of a cutting program without a dynamometer (a servo log: positions and currents
     only): the machine's drives carried the cutting load, so the replays must carry it too, else the
-    load shows up as friction or inertia. ``offset()`` is read at every call (the servo-phase alignment
+    load shows up as friction or inertia. The replays are the twin's servo loops, so they carry the
+    load as the twin's drives do (:func:`_carried_step_mean`): the cutting component's force on the
+    workpiece averaged over a communication step (``fx_mean``, ``fy_mean``). Not the instantaneous
+    ``fx_N`` at the step ends: with a 2-flute tool at 6000 rpm the tooth load repeats every 5 ms, and
+    1 ms samples of it, interpolated, are another force (on the short part's servo log they moved the
+    identified X velocity gain by 3 %). ``offset()`` is read at every call (the servo-phase alignment
     refines it after this is built). None when the program does not cut the case's stock.
     """
-    result = simulate_twin(case=replace(case, machine=machine), plot=False)
-    rec = result.recording
+    twin = build_twin(replace(case, machine=machine), batch=1)
+    if twin.cutting is None:
+        return None
+    probes = [Probe(f"{a}_load_N", ref, "N") for a, ref in DRIVE_LOADS.items()]
+    settings = MasterSettings(step=twin.options.step, time_limit=TWIN_TIME_LIMIT_S, stop_when=twin.stop_when,
+                              limits=twin.limits or {})
+    master = Master(twin.system, settings, probes)
+    run = master.run()
+    if not run.success:
+        raise DiagnosisError(f"{case.program}: the twin's run with cutting, for the load on the drives, failed: "
+                             f"{run.message}")
+    t0, h = float(run.recording.t[0]), float(twin.options.step)
+    cutting = DRIVE_LOADS["x"].split(".")[0]
     out = {}
-    t_twin = np.asarray(rec.t, float)
-    for a in "xy":
-        name = f"f{a}_N"
-        if name in rec and np.any(np.asarray(rec[name], float) != 0.0):
-            out[a] = (lambda q, f=np.asarray(rec[name], float): np.interp(np.asarray(q, float) - offset(), t_twin, f,
-                                                                          left=0.0, right=0.0))
+    for a in DRIVE_LOADS:
+        drive = f"{a}_drive"
+        # the cutting component steps once a step (rate 1, the twin's), at the first fine tick: the drive's
+        # first tick runs before it when the drive comes first in the execution order
+        stale = 1 if master.order.index(drive) < master.order.index(cutting) else 0
+        load = np.asarray(run.recording[f"{a}_load_N"], float)
+        if np.any(load != 0.0):
+            out[a] = (lambda q, f=load, n=stale: _carried_step_mean(np.asarray(q, float) - offset(), t0, h,
+                                                                      twin.system.rates[drive], n, f))
     return out or None
+
+
+def _carried_step_mean(q: np.ndarray, t0: float, h: float, rate: int, stale: int, mean: np.ndarray) -> np.ndarray:
+    """The step means of the cutting load as a drive stepping ``rate`` times a step carries them, at times ``q``.
+
+    ``mean[k]`` is recorded at ``t0 + k h``: the mean over the step before it. In the step
+    ``(t0 + k h, t0 + (k + 1) h]`` the cutting component steps once, at the start, after the drive's first
+    ``stale`` ticks (Gauss-Seidel order): those carry ``mean[k]``, the later ticks the step's own
+    ``mean[k + 1]``. Before the first sample 0, after the last the last.
+    """
+    x = (q - t0) / h
+    k = np.ceil(x - 1e-9).astype(int) - 1                     # q in (t0 + k h, t0 + (k + 1) h]
+    tick = np.floor((x - k) * rate + 1e-9).astype(int)        # the drive's tick within that step
+    own = np.where(tick < stale, k, k + 1)
+    return np.where(own < 1, 0.0, mean[np.clip(own, 0, mean.size - 1)])
 
 
 def prepare(case: Case, recording: Recording, machine: Machine, axes: list[str] | None = None,

@@ -197,12 +197,14 @@ def _prepare(data: Sequence[CaseData], axes: Sequence[str] | None,
                 raise IdentificationError(f"{d.source}: axis {a} does not move (reference range below 1 µm)")
         if moving:
             t = np.asarray(rec.t, dtype=float)
+            load, forces = _cutting_load(d, machine, moving)
             series.append(_Series(
                 d, t,
                 {a: np.asarray(rec[f"{a}_ref_mm"]) * 1e-3 for a in moving},
                 {a: float(rec[f"{a}_mm"][0]) * 1e-3 for a in moving},
                 {a: np.asarray(rec.following_error_um(a), dtype=float) for a in moving},
                 {a: np.asarray(rec[f"{a}_tcmd_A"], dtype=float) for a in moving},
+                disturbance=load, forces=forces,
             ))
         twin = _twin_series(d, from_twin, machine, explicit=bool(axes)) if from_twin else None
         if twin is not None:
@@ -214,6 +216,36 @@ def _prepare(data: Sequence[CaseData], axes: Sequence[str] | None,
             "(`cnctwin experiment servo`)"
         )
     return series, used
+
+
+def _cutting_load(d: CaseData, machine: Machine, axes: list[str]) -> tuple[dict | None, str]:
+    """The cutting force the drives of a log with recorded commands carried: ``({axis: f(t)}, source)``.
+
+    A log taken while cutting holds the cutting load in its currents (a 2 mm slot in A6061: about 1 A on the
+    feeding axis and as much on the one at rest); a replay in the air would fit the scale factors to it.
+    The forces are the recorded ``fx_N``/``fy_N`` when the log has them, else the twin's predicted ones
+    when the case has a ``[stock]`` the program cuts (placed on the logger clock by the diagnosis's
+    alignment, which uses the recorded commands here), else none (an air run, as the servo experiment).
+    ``f(t)`` takes logger-clock times [s] and gives the force on the workpiece [N].
+    """
+    from ..diagnose.errors import DiagnosisError  # local: only cutting logs need the diagnosis's alignment
+    from ..diagnose.prepare import prepare as align_with_twin
+    from ..diagnose.prepare import recorded_forces
+
+    recorded = recorded_forces(d.recording)
+    if recorded is not None:
+        return recorded, "recorded"
+    if d.case.stock is None:
+        return None, "none"
+    try:
+        prep = align_with_twin(d.case, d.recording, machine, axes=list(axes))
+    except DiagnosisError as exc:
+        raise IdentificationError(
+            f"{d.source}: the case has a [stock], so the drives carried the cutting load of {d.case.program}; "
+            f"the log cannot be aligned with the twin's run to place the predicted forces: {exc}; record "
+            "fx_N and fy_N, or remove [stock] from the case for an air run"
+        ) from None
+    return prep.disturbance, prep.forces_source
 
 
 def _twin_series(d: CaseData, axes: list[str], machine: Machine, explicit: bool) -> _Series | None:
@@ -277,7 +309,8 @@ def _simulate(machine: Machine, series: _Series, scales: dict[str, np.ndarray],
     batch = next(iter(scales.values())).shape[0]
     mcu = {f"{a}_{name}": scales[a][:, j] for a in series.ref for j, name in enumerate(FACTORS) if a in scales}
     if series.source == "recorded":
-        run = replay(machine, series.t, series.ref, batch=batch, mcu_values=mcu, initial_position=series.x0)
+        run = replay(machine, series.t, series.ref, batch=batch, mcu_values=mcu, initial_position=series.x0,
+                     disturbance=series.disturbance)
         e = {a: (series.ref[a][:, None] - run.position[a]) * 1e6 for a in series.ref}
         return e, run.current
     tv = float(machine.si("servo")["velocity_loop_period"])
@@ -437,7 +470,7 @@ def _command_sources(data: Sequence[CaseData], series: list[_Series], shifts: di
         mine = [(i, s) for i, s in enumerate(series) if s.data is d]
         for i, s in mine:
             if s.source == "recorded":
-                text = "recorded"
+                text = "recorded" if s.forces == "none" else f"recorded; cutting forces on the drives: {s.forces}"
             else:
                 shift = shifts.get(i, 0.0)
                 text = (f"twin, aligned: offset {s.offset + shift:.6f} s, method {s.offset_method}; "
