@@ -184,6 +184,38 @@ def test_a_servo_log_of_a_machine_with_one_difference_names_exactly_it(tmp_path,
     assert result.effects[0]["parameters"][parameter] == pytest.approx(value, rel=0.05)
 
 
+def _same_machine(text: str) -> str:
+    return text
+
+
+def _scale_current(log: Path, axis: str, scale: float) -> None:
+    """Rewrite the log's ``{axis}_tcmd_A`` as a logger with a scale error would have written it."""
+    rec = Recording.read_csv(log / "recording.csv")
+    channels = {n: np.asarray(rec[n], float) for n in rec.channels}
+    channels[f"{axis}_tcmd_A"] = channels[f"{axis}_tcmd_A"] * scale
+    Recording.from_channels(channels).write_csv(log / "recording.csv")
+
+
+@pytest.mark.parametrize("machine,axis,scale,effects", [
+    # recorded = 1.05 x true on X: as physics it read as a Coulomb change of 36 N, a servo delay and a
+    # feed-forward; on Z (0.95) as four effects. A scale error of a channel is a recording artefact
+    (_same_machine, "x", 1.05, []),
+    (_same_machine, "z", 0.95, []),
+    # with a real difference as well, both are found: the scale and the 100 N of friction
+    (_x_friction_plus_100_N, "x", 1.05, [("friction_mismatch", "x", "coulomb_N", 100.0)]),
+])
+def test_a_current_logged_with_a_scale_error_is_corrected_in_the_alignment(tmp_path, machine, axis, scale, effects):
+    log = _servo_log(tmp_path, machine)
+    _scale_current(log, axis, scale)
+    result = diagnose(log)
+    assert [(e["effect"], e["axis"]) for e in result.effects] == [(e, a) for e, a, _, _ in effects], result.log
+    for (_, _, parameter, value), found in zip(effects, result.effects):
+        assert found["parameters"][parameter] == pytest.approx(value, rel=0.05)
+    channels = result.alignment["channels"]
+    assert channels[f"{axis}_tcmd_A"]["scale"] == pytest.approx(scale, abs=0.005)
+    assert all(channels[f"{a}_tcmd_A"]["scale"] == 1.0 for a in "xyz" if a != axis)
+
+
 def test_a_servo_delay_on_a_mostly_held_axis_is_named_alone(tmp_path):
     # y stands loaded through both X slots and moves once (4 mm): a 1 ms delay in its loop shows only in that
     # move's answer to the 200 Hz tooth load, far from linear in the delay. The held rows are left out and

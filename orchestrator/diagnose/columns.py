@@ -6,7 +6,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .align import noise_floor, recorded_quantum
-from .library import Column, Variant, candidate_variants, dynamic_columns
+from .library import Column, Variant, candidate_variants, channel_scale_variant, dynamic_columns
 from .model import Model, Simulated, simulate
 from .prepare import Prepared
 
@@ -135,9 +135,14 @@ def _with_member(sim: Simulated, extra: Simulated, column: dict[str, int]) -> Si
     return out
 
 
-def build(prep: Prepared, base: Model, lead_mm: dict[str, float], vertical: tuple[str, ...] = ("z",)
-          ) -> tuple[dict[str, AxisColumns], Simulated]:
-    """Baseline replay, dynamic columns (one batched replay) and kinematic columns of every axis."""
+def build(prep: Prepared, base: Model, lead_mm: dict[str, float], vertical: tuple[str, ...] = ("z",),
+          channel_scales: bool = False) -> tuple[dict[str, AxisColumns], Simulated]:
+    """Baseline replay, dynamic columns (one batched replay) and kinematic columns of every axis.
+
+    ``channel_scales``: offer the scale error of each current channel (:func:`.library.channel_scale_variant`,
+    the baseline's current as its column) to the selection, except where the current flat-tops below the
+    model's limit (a saturation candidate).
+    """
     variants = {a: candidate_variants(a, lead_mm[a], a in vertical) for a in prep.axes}
     dyn = {a: dynamic_columns(variants[a]) for a in prep.axes}
     members = _members(prep.axes, base, dyn)
@@ -198,6 +203,12 @@ def build(prep: Prepared, base: Model, lead_mm: dict[str, float], vertical: tupl
             for col in var.columns:
                 if col.kind == "kinematic" and col.key not in cols:
                     cols[col.key] = stacked(kinematic_fe(col, prep.t, motor, force), None)
+        if channel_scales and cur is not None and a not in saturation:
+            # (not next to a saturation candidate: the linearised clip leaves residuals a scale mops up, and
+            # the refit that drops such leftovers does not see the channel's scale)
+            scale = channel_scale_variant(a)
+            cols[scale.columns[0].key] = stacked(None, sim.current[a][:, 0])   # recorded = (1 + c) x replayed
+            variants[a].append(scale)
         artefacts = {f"{a}_mm offset": stacked(-np.ones_like(prep.t), None)}  # x_mm = true + o -> fe - o
         if cur is not None and a in ("x", "y"):
             artefacts[f"{a}_tcmd_A offset"] = stacked(None, np.ones_like(prep.t))

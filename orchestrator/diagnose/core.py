@@ -39,7 +39,7 @@ from .cutting_core import CuttingResult, diagnose_cutting
 from .cutting_merge import holdout_cutting, merge_cutting
 from .errors import DiagnosisError
 from .force_only import force_only_recording, needs_force_clock
-from .library import machine_keys
+from .library import CHANNEL_SCALE, machine_keys
 from .locate import Locator, residual_windows
 from .model import Model, Simulated, simulate
 from .prepare import Prepared, prepare, recorded_forces
@@ -241,14 +241,15 @@ def _replay_of(prep: Prepared, base: Model) -> Callable[[dict, int], Simulated]:
     return replay
 
 
-def _name_and_refit(prep: Prepared, base: Model, lead: dict[str, float], vertical: tuple[str, ...],
-                    machine: Machine, refit_scales: bool, say: Callable[[str], None], log: list[str]
-                    ) -> tuple[dict[str, AxisColumns], dict[str, Selection], dict[str, list[Choice]], RefitResult,
-                               Simulated]:
-    """Library columns, selection per axis, the joint refit (steps 2-4 of the pipeline) and the library's
-    replay (member 0: ``base``)."""
-    say("building the effect library (batched replay)")
-    cols, base_sim = build(prep, base, lead, vertical)
+#: A scale error of a current channel is taken only within these bounds (else the scale candidate is ignored).
+CHANNEL_SCALE_BOUNDS = (0.5, 2.0)
+
+
+def _library_and_selection(prep: Prepared, base: Model, lead: dict[str, float], vertical: tuple[str, ...],
+                           log: list[str], channel_scales: bool
+                           ) -> tuple[dict[str, AxisColumns], Simulated, dict[str, Selection]]:
+    """Library columns (held current of loaded holds left out) and the selection of every axis."""
+    cols, base_sim = build(prep, base, lead, vertical, channel_scales=channel_scales)
     stuck = leave_out_held_current(prep.t, cols, base_sim, prep.disturbance, machine=prep.machine,
                                    replay=_replay_of(prep, base))
     if stuck:
@@ -258,6 +259,39 @@ def _name_and_refit(prep: Prepared, base: Model, lead: dict[str, float], vertica
     for a, c in cols.items():
         selections[a] = select(c.y, c.artefacts, c.variants, c.columns, rows=c.y.size + c.rows_left_out)
         log += [f"[{a}] {line}" for line in selections[a].log]
+    return cols, base_sim, selections
+
+
+def _channel_scales(selections: dict[str, Selection]) -> dict[str, float]:
+    """Axis -> scale error of its current channel, where the selection took the scale candidate."""
+    out = {}
+    for a, sel in selections.items():
+        for ch in sel.choices:
+            if ch.variant.effect == CHANNEL_SCALE:
+                value = 1.0 + ch.coefficients["scale_minus_1"]
+                if CHANNEL_SCALE_BOUNDS[0] < value < CHANNEL_SCALE_BOUNDS[1]:
+                    out[a] = value
+    return out
+
+
+def _name_and_refit(prep: Prepared, base: Model, lead: dict[str, float], vertical: tuple[str, ...],
+                    machine: Machine, refit_scales: bool, say: Callable[[str], None], log: list[str]
+                    ) -> tuple[dict[str, AxisColumns], dict[str, Selection], dict[str, list[Choice]], RefitResult,
+                               Simulated]:
+    """Library columns, selection per axis, the joint refit (steps 2-4 of the pipeline) and the library's
+    replay (member 0: ``base``)."""
+    say("building the effect library (batched replay)")
+    cols, base_sim, selections = _library_and_selection(prep, base, lead, vertical, log, channel_scales=True)
+    scales = _channel_scales(selections)
+    if scales:
+        # alignment before physics: a current logged with a scale error is corrected, then the effects are
+        # selected again on the corrected current (without the scale candidates)
+        for a, value in scales.items():
+            prep.correct_current_scale(a, value)
+        log.append("current channel scale errors (recording artefacts, corrected before naming effects): "
+                   + ", ".join(f"{a}_tcmd_A x{v:.5g}" for a, v in scales.items()))
+        say("rebuilding the effect library on the corrected current")
+        cols, base_sim, selections = _library_and_selection(prep, base, lead, vertical, log, channel_scales=False)
     choices = {a: s.choices for a, s in selections.items()}
     start, free = _start_model(choices)
     for a in prep.axes:
@@ -553,6 +587,9 @@ def _diagnose_drives(case: Case, prep: Prepared, base_machine: Machine, holdout,
         hcase = as_case(holdout)
         hrec = _read(hcase)
         hprep = prepare(hcase, _cnc_rows(hrec), base_machine, [a for a in prep.axes], disturbance=recorded_forces(hrec))
+        for a, value in prep.current_scale.items():   # the same logger: the same channel scale
+            if hprep.current.get(a) is not None:
+                hprep.correct_current_scale(a, value)
         hres = _evaluate_case(Path(hcase.folder).name, hprep, {a: {} for a in hprep.axes},
                               {a: final.get(a, {}) for a in hprep.axes}, lead)
         results.append(hres)
@@ -585,7 +622,10 @@ def _alignment(prep: Prepared, cols: dict[str, AxisColumns], art: dict[str, dict
             channels[f"{a}_ref_mm"] = {"scale": 1.0, "offset": _r(prep.ref_offset_mm.get(a, 0.0), 6)}
         channels[f"{a}_mm"] = {"scale": 1.0, "offset": _r(art[a].get(f"{a}_mm offset", 0.0) * 1e-3, 6)}
         if prep.current[a] is not None:
-            channels[f"{a}_tcmd_A"] = {"scale": 1.0, "offset": _r(art[a].get(f"{a}_tcmd_A offset", 0.0), 6)}
+            # recorded = scale x (true + offset): the offset was fitted on the current divided by the scale
+            scale = prep.current_scale.get(a, 1.0)
+            channels[f"{a}_tcmd_A"] = {"scale": _r(scale, 6),
+                                       "offset": _r(art[a].get(f"{a}_tcmd_A offset", 0.0) * scale, 6)}
     return {"time_offset_s": _r(offset, 7), "channels": channels}
 
 

@@ -104,6 +104,17 @@ def _col(effect: str, parameter: str, kind: str, unit: float = 1.0, **fixed: flo
                   tuple(fixed.items()), kind, unit)
 
 
+#: Not an effect: a current channel logged with a scale error (spec: a recording artefact, estimated and
+#: corrected before the effects, reported under ``alignment``). Offered to the selection next to the
+#: effects, so that it is taken only when it explains the current better than any physics does.
+CHANNEL_SCALE = "channel_scale"
+
+
+def channel_scale_variant(axis: str) -> Variant:
+    """The scale error of ``{axis}_tcmd_A``: its column is the replayed current (coefficient: scale - 1)."""
+    return Variant(CHANNEL_SCALE, (Column(f"{axis}_tcmd_A scale", CHANNEL_SCALE, "scale_minus_1", (), "artefact"),))
+
+
 def candidate_variants(axis: str, lead_mm: float, vertical: bool) -> list[Variant]:
     """The candidate variants of one axis.
 

@@ -69,6 +69,9 @@ class Prepared:
         (:func:`predicted_forces`), since the machine's drives carried a cutting load all the same.
     forces_source : str
         Where ``disturbance`` comes from: ``"recorded"``, ``"predicted"`` or ``"none"``.
+    current_scale : dict axis -> float
+        Scale error of a current channel found by the diagnosis (a logger artefact); ``current`` is
+        already divided by it.
     """
 
     recording: Recording
@@ -90,6 +93,12 @@ class Prepared:
     phase_from_commands: bool = False
     disturbance: dict | None = None
     forces_source: str = "none"
+    current_scale: dict[str, float] = field(default_factory=dict)
+
+    def correct_current_scale(self, axis: str, scale: float) -> None:
+        """Divide the measured current of ``axis`` by a scale error of its channel (accumulated)."""
+        self.current[axis] = self.current[axis] / scale
+        self.current_scale[axis] = self.current_scale.get(axis, 1.0) * scale
 
     def twin_commands(self) -> dict[str, Callable[[np.ndarray, float], np.ndarray]]:
         """Axis -> ``f(q, s)``: the twin's command [m] at replay-clock times ``q``, taken ``s`` seconds later.
