@@ -150,8 +150,9 @@ def select(y: np.ndarray, artefacts: dict[str, np.ndarray], variants: list[Varia
         gain = rss - r
         excess = rss - n
         ok = (b < b_now - BIC_MARGIN) and gain >= MIN_GAIN * n and gain >= MIN_SHARE * max(excess, 0.0)
+        share = f"{gain / excess:.2f}" if excess > 1e-6 * n else "- (no excess over the noise)"
         log.append(f"best next {v.label}: dBIC {b - b_now:.1f}, gain {gain / n:.3f} n, "
-                   f"share {gain / max(excess, 1e-9):.2f} -> {'accept' if ok else 'stop'}")
+                   f"share {share} -> {'accept' if ok else 'stop'}")
         if not ok:
             break
         chosen.append(v)
