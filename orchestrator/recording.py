@@ -292,7 +292,11 @@ class Recording:
             raise RecordingError(f"{path}:1: empty file; expected a header row with column names, 't_s' first")
         header = [cell.strip() for cell in rows[0]]
         if "t_s" not in header:
-            raise RecordingError(f"{path}:1: no 't_s' column; header is {header}")
+            separator = next((name for sep, name in (("\t", "tabs"), (";", "';'"), ("|", "'|'"))
+                              if len(header) == 1 and sep in header[0]), None)
+            hint = (f": its columns are separated by {separator}; recording.md asks for ',' (and '.' as the "
+                    "decimal point)") if separator else ""
+            raise RecordingError(f"{path}:1: no 't_s' column; header is {header}{hint}")
         counts = Counter(header)
         for name in header:
             if name in SPEC_COLUMNS and counts[name] > 1:

@@ -82,6 +82,8 @@ def test_numbers_are_plain_decimals_with_optional_exponent(tmp_path):
         ("t_s,x_mm\n0,-inf\n", "empty cell"),
         ("t_s,x_mm,fc_N,fc_N\n0,1,2,3\n", "'fc_N' appears twice"),
         ("x_mm\n1\n", "no 't_s' column"),
+        ("t_s\tx_mm\n0.0\t1.0\n", "separated by tabs; recording.md asks for ','"),        # a spreadsheet's TSV
+        ("t_s;x_mm\n0,0;1,0\n", "separated by ';'; recording.md asks for ','"),           # a German locale
         ("t_s,x_mm,x_mm\n0,1,2\n", "appears twice"),
         ("t_s,x_mm\n0,1\n0.001,abc\n", r":3: column 'x_mm': 'abc'"),
         ("t_s,x_mm\n0,1\n0.002,1\n0.001,1\n", r":4: t_s goes back"),
