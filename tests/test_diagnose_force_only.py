@@ -4,7 +4,7 @@ The twin's own run of a short cutting program (a 1.5 mm deep slot, a step over, 
 stock, 6 mm 2-flute tool, 6000 rpm), reduced to its forces with seeded 0.5 N noise and shifted by a known
 1.7373 s (not a whole sample: the refinement must go below the 1 ms grid). The clock must come back from the
 cutting load alone, within 0.5 ms. Without an effect nothing is named; with a 10 µm runout injected through
-the machine file's ``[cutting.effects]`` the runout is named with its eccentricity (within 20 %, see there).
+the machine file's ``[cutting.effects]`` the runout is named with its eccentricity (within 2 %, see there).
 """
 from __future__ import annotations
 
@@ -18,7 +18,6 @@ from orchestrator.case import load_case
 from orchestrator.diagnose import diagnose
 from orchestrator.diagnose.align import load_envelope
 from orchestrator.diagnose.force_only import force_only_recording, needs_force_clock
-from orchestrator.machine import load_machine
 from orchestrator.recording import Recording
 from orchestrator.simulate import simulate
 from tests.test_diagnose_logger import PAPER_PART, PROGRAM  # the short part with X slots and a Y move
@@ -78,11 +77,15 @@ def test_runout_in_a_force_only_recording_is_named(tmp_path):
     d = diagnose(folder)
     assert d.alignment["time_offset_s"] == pytest.approx(SHIFT_S, abs=0.5e-3)
     assert [e["effect"] for e in d.effects] == ["runout"], d.log
-    # two flutes fix the radial offset e cos(phase) of tooth 0 against tooth 1 only (phase 0: all of e). On the
-    # twin's 1 ms force samples the cutting refit stops at 8.3 um, with the measured path as with the twin's
-    # (8.33 um on the same recording with line, positions and spindle speed added): 20 %, and inside its CI
+    # two flutes fix the radial offset e cos(phase) of tooth 0 against tooth 1 only (phase 0: all of e), and the
+    # refit holds the phase (cutting_refit.fixed_by_flutes). The runout moves the two chips by +-2 e: with
+    # Kt = 1.23e9 N/m2, Ke = 0.5 and 1.5 mm depth a tooth's force changes by Kt a sqrt(1 + Ke^2) 2 e = 4.1 N/um.
+    # The replay leaves sqrt(rms_after^2 - noise^2) <= sqrt(1.1^2 - 1) 0.5 N = 0.23 N rms of the twin's own
+    # recording unexplained (its 1 ms drive-loaded Z-map run against the replay of its logged path): were all of
+    # it along the runout signature, e would move by 0.23 / 4.1 = 0.06 um: 2 % covers it (found: 9.93 um). The
+    # 90 % interval (+-0.005 um from the 0.5 N noise) does not cover that mismatch and is not asserted.
     found = d.effects[0]
-    assert found["parameters"]["eccentricity_um"] == pytest.approx(10.0, rel=0.2)
-    assert found["ci90"]["eccentricity_um"][0] <= 10.0 <= found["ci90"]["eccentricity_um"][1]
-    # the runout carries most of the force residual (the 17 % left of it is ~3 N rms, not yet noise)
-    assert d.rms_after["fy_N"] < d.rms_before["fy_N"] / 5
+    assert found["parameters"]["eccentricity_um"] == pytest.approx(10.0, rel=0.02)
+    # the runout carries the force residual: what is left is the dynamometer noise
+    for c in ("fx_N", "fy_N"):
+        assert d.rms_after[c] <= 1.1 * NOISE_N, (c, d.rms_after, d.log)

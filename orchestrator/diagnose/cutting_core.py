@@ -18,8 +18,8 @@ from fmus_src.cutting.component import CuttingError
 
 from ..case import Case
 from ..recording import Recording
-from .cutting import (CuttingColumns, CuttingData, CuttingModel, cutting_columns, prepare_cutting, select_cutting,
-                      start_model)
+from .cutting import (PHASE_EPS, CuttingColumns, CuttingData, CuttingModel, cutting_columns, helix_lead,
+                      prepare_cutting, select_cutting, start_model)
 from .cutting_chatter import ChatterFit, refit_chatter
 from .cutting_library import CUTTING_CHANNELS, CUTTING_EFFECT_PARAMETERS, CUTTING_EVENTS, machine_keys
 from .cutting_locate import ChatterPeak, chatter_peaks, force_unexplained, harmonic_ratio, windows_where
@@ -147,9 +147,24 @@ def diagnose_cutting(case: Case, recording: Recording, spindle_command: Callable
     data.chatter_cuts = sorted({p.cut for p in chatter})
     cols = cutting_columns(data, say=say)
     sel = select_cutting(cols)
-    log += [f"[cutting] {line}" for line in sel.log]
     start = start_model(sel, data, cols)
     fit = refit_cutting(data, cols, start, say=say)
+    # the spindle angle the refit moved to, less the delay of the force pulse a helix explains (helix_lead)
+    moved = fit.model.get("alignment", {}).get("spindle_phase_deg", 0.0) - math.degrees(
+        helix_lead(data, fit.model.get("helix_angle", {}).get("helix_deg", 0.0)))
+    if abs(moved) > math.degrees(PHASE_EPS):
+        # the refit moved the spindle angle beyond the band of samples left out at tooth entries and exits (set
+        # at the scan's angle): those bands are redrawn at the refitted angle, and the columns, the selection and
+        # the refit done again from there (at 1 kHz a 2-flute tool is sampled at 10 angles per revolution, and
+        # the scan may land 10 deg off: samples 0.1 deg inside an exit then cut in the truth, not in the twin)
+        log.append(f"cutting: the refit moved the spindle angle by {moved:.2f} deg from the phase scan's; "
+                   "entries and exits redrawn there, effects selected and refitted again")
+        data.theta0 += math.radians(moved)
+        cols = cutting_columns(data, say=say)
+        sel = select_cutting(cols)
+        start = start_model(sel, data, cols)
+        fit = refit_cutting(data, cols, start, say=say)
+    log += [f"[cutting] {line}" for line in sel.log]
     log += fit.log
     final = fit.model
     proj = projector(cols)

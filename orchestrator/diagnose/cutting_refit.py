@@ -65,6 +65,19 @@ class CuttingRefit:
     log: list[str] = field(default_factory=list)
 
 
+def fixed_by_flutes(flutes: int) -> tuple[tuple[str, str], ...]:
+    """Effect parameters the forces of a ``flutes``-tooth tool cannot tell apart, held at their start value.
+
+    Two teeth sit half a turn apart: runout ``rho`` at phase ``lambda`` moves them by ``+-rho cos(lambda)``, so
+    the chips change by ``+-2 rho cos(lambda)`` and nothing else (:func:`.cutting_library.cutting_variants`
+    fits that one column). Refitting the phase too leaves a Jacobian column ``-rho sin(lambda)`` that is zero at
+    the selection's start (phase 0 or 180 deg): the Gauss-Newton step along it is unbounded and the refit
+    rejected every step (a 10 um runout stayed at the linear start, 8.9 um). The phase is held and ``rho`` is
+    refitted as ``rho cos(lambda)``.
+    """
+    return (("runout", "phase_deg"),) if flutes == 2 else ()
+
+
 def projector(cols: CuttingColumns) -> np.ndarray | None:
     """Force-row part of the projected artefact columns (offsets, spindle-phase drift)."""
     n = 2 * cols.rows.size
@@ -96,7 +109,7 @@ def refit_cutting(data: CuttingData, cols: CuttingColumns, start: CuttingModel,
     for e, params in start.items():
         if e in ("coefficients", "alignment", "spindle_droop", "chatter"):
             continue
-        free += [(e, k) for k in params if (e, k) in STEPS]
+        free += [(e, k) for k in params if (e, k) in STEPS and (e, k) not in fixed_by_flutes(data.flutes)]
     proj = projector(cols)
     theta = np.array([_get(start, p) for p in free])
     bounds = np.array([STEPS[p][1:3] for p in free])

@@ -190,6 +190,9 @@ def main() -> None:  # pragma: no cover - a study, run by hand
                         help="with --cutting: diagnose the feed drives too (drive effects found count as false)")
     parser.add_argument("--only", default=None,
                         help="with --cutting: comma-separated scenarios to run (e.g. chatter,clean)")
+    parser.add_argument("--flutes", type=int, default=3, help="with --cutting: teeth of the 6 mm end mill")
+    parser.add_argument("--force-period-ms", type=float, default=0.2,
+                        help="with --cutting: dynamometer sample period, ms")
     args = parser.parse_args()
     from ..cli import emit  # the command line's one output point
 
@@ -197,7 +200,8 @@ def main() -> None:  # pragma: no cover - a study, run by hand
         from .scorecard_cutting import score_cutting
 
         only = [s.strip() for s in args.only.split(",") if s.strip()] if args.only else None
-        rows = score_cutting(Path(args.out), args.seeds, args.clean_seeds, drives=args.drives, only=only)
+        rows = score_cutting(Path(args.out), args.seeds, args.clean_seeds, drives=args.drives, only=only,
+                             flutes=args.flutes, force_period_s=args.force_period_ms * 1e-3)
     else:
         rows = score(Path(args.out), args.seeds, args.clean_seeds)
     emit(json.dumps(rows, indent=2))

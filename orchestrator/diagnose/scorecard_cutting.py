@@ -1,8 +1,9 @@
 """Scorecard of the cutting diagnosis on recordings with concealed cutting effects (seeded, reproducible).
 
-``python -m orchestrator.diagnose.scorecard OUT_DIR --cutting [--seeds N] [--clean-seeds M]`` writes a
-case per scenario and seed with :func:`.cutting_case.write_cutting_case` (the short program: two slots at
-1 and 2 mm and a 1 mm side pass 3 mm deep, 6 mm 3-flute end mill, about 2.4 s of cutting), diagnoses its
+``python -m orchestrator.diagnose.scorecard OUT_DIR --cutting [--seeds N] [--clean-seeds M] [--flutes F]
+[--force-period-ms P]`` writes a case per scenario and seed with :func:`.cutting_case.write_cutting_case`
+(the short program: two slots at 1 and 2 mm and a 1 mm side pass 3 mm deep, 6 mm end mill with 3 flutes
+or ``F``, dynamometer at 5 kHz or every ``P`` ms, about 2.4 s of cutting), diagnoses its
 cutting process (``drives=False``; with ``--drives`` the feed drives too, as ``diagnose`` does by
 default, and any drive effect found counts as false: the recordings hide none) and tabulates per
 scenario: detection rate (every hidden effect found), false effects per run, median relative parameter
@@ -11,7 +12,9 @@ error, and the share of the residual power above the noise floor that the diagno
 
 Parameter errors: runout by its eccentricity and by the direction of the eccentricity in the spindle
 frame (``spindle_angle_deg + phase_deg`` against the truth's, which does not depend on which tooth is
-called tooth 0), chatter by the frequency against the tool mode's natural frequency.
+called tooth 0), chatter by the frequency against the tool mode's natural frequency. A 2-flute tool's
+forces see only the runout's projection on the line of its teeth (:func:`observable_runout`): it is
+scored against that.
 """
 from __future__ import annotations
 
@@ -24,7 +27,7 @@ import numpy as np
 
 from ..atomic import atomic_write_json, atomic_write_text
 from .core import diagnose
-from .cutting_case import SHORT_PROGRAM, write_cutting_case
+from .cutting_case import CASE_TOML, SHORT_PROGRAM, write_cutting_case
 from .errors import DiagnosisError
 from .scorecard import rms_gap_closed
 from .truth_cutting import Dynamometer
@@ -50,9 +53,25 @@ COMPARED = {"runout": ("eccentricity_um",), "helix_angle": ("helix_deg",),
             "tool_wear": ("rate_percent_per_min",), "spindle_droop": ("rpm_per_Nm",), "chatter": ("frequency_Hz",)}
 
 
-def parameter_errors(found: dict, truth_effects: dict, spindle_deg: float, truth_angle_deg: float) -> list[float]:
+def observable_runout(runout: dict[str, float], flutes: int) -> dict[str, float]:
+    """The part of a runout (spec units) that a ``flutes``-tooth tool's forces can show.
+
+    Two teeth half a turn apart stand out by ``+-rho cos(lambda)``: only the eccentricity's projection on
+    the line of the teeth changes the chips, so a 2-flute tool shows ``rho |cos(lambda)|`` at phase 0
+    (180 deg when ``cos(lambda) < 0``). Three or more teeth show all of it.
+    """
+    if flutes != 2:
+        return dict(runout)
+    c = math.cos(math.radians(runout["phase_deg"]))
+    return {"eccentricity_um": runout["eccentricity_um"] * abs(c), "phase_deg": 0.0 if c >= 0.0 else 180.0}
+
+
+def parameter_errors(found: dict, truth_effects: dict, spindle_deg: float, truth_angle_deg: float,
+                     flutes: int = 3) -> list[float]:
     """Relative parameter errors of the found effects against the hidden ones (runout phase as an angle / 360)."""
     errors = []
+    if "runout" in truth_effects:
+        truth_effects = {**truth_effects, "runout": observable_runout(truth_effects["runout"], flutes)}
     for e in found:
         name = e["effect"]
         if name not in truth_effects:
@@ -67,7 +86,7 @@ def parameter_errors(found: dict, truth_effects: dict, spindle_deg: float, truth
 
 
 def score_cutting(out: Path, seeds: int = 3, clean_seeds: int = 10, drives: bool = False,
-                  only: Sequence[str] | None = None) -> dict:
+                  only: Sequence[str] | None = None, flutes: int = 3, force_period_s: float = 0.2e-3) -> dict:
     """Run the cutting scorecard; returns the table as a dict (also written to ``out``).
 
     Parameters
@@ -80,12 +99,21 @@ def score_cutting(out: Path, seeds: int = 3, clean_seeds: int = 10, drives: bool
         Diagnose the feed drives as well (the recordings hide no drive effect: any found is false).
     only : sequence of str, optional
         Run only these scenarios (names or their folder slugs, e.g. ``("chatter", "clean")``).
+    flutes : int
+        Teeth of the 6 mm end mill (the paper's is a 2-flute).
+    force_period_s : float
+        Dynamometer sample period, s (instantaneous samples).
 
     Raises
     ------
     DiagnosisError
-        An ``only`` entry that names no scenario.
+        An ``only`` entry that names no scenario, or fewer than 2 flutes.
     """
+    if int(flutes) != flutes or flutes < 2:
+        raise DiagnosisError(f"scorecard flutes: {flutes!r}; expected a whole number of teeth >= 2")
+    if not force_period_s > 0.0:
+        raise DiagnosisError(f"scorecard force_period_s: {force_period_s!r}; expected a positive period in s")
+    case_toml = CASE_TOML.replace("flutes = 3", f"flutes = {int(flutes)}")
     rows = {}
     scenarios = {"clean": {}, **CUTTING_SCENARIOS, "50 Hz hum (outside the table)": {}}
     if only:
@@ -101,7 +129,8 @@ def score_cutting(out: Path, seeds: int = 3, clean_seeds: int = 10, drives: bool
         for seed in range(n):
             hum = 5.0 if "hum" in name else 0.0
             folder = write_cutting_case(out / f"{_slug(name)}_{seed}", effects, seed + 100, program=SHORT_PROGRAM,
-                                        dynamometer=Dynamometer(hum_N=hum))
+                                        dynamometer=Dynamometer(period_s=force_period_s, hum_N=hum),
+                                        case_toml=case_toml)
             d = diagnose(folder, drives=drives)
             truth = json.loads((folder / "truth.json").read_text())
             names = {e["effect"] for e in d.effects}
@@ -110,7 +139,7 @@ def score_cutting(out: Path, seeds: int = 3, clean_seeds: int = 10, drives: bool
             false_pos += len(names - set(effects))
             unexplained += bool(d.unexplained)
             errors += parameter_errors(d.effects, effects, d.alignment.get("spindle_angle_deg", 0.0),
-                                       math.degrees(truth["spindle_angle_at_first_force_sample_rad"]))
+                                       math.degrees(truth["spindle_angle_at_first_force_sample_rad"]), int(flutes))
             fit = d.cutting.chatter_fit if d.cutting is not None else None
             if fit is not None:
                 modes.append({"damping_ratio": fit.damping_ratio, "stiffness_N_per_um": fit.stiffness_N_per_um,

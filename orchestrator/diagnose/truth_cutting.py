@@ -71,6 +71,7 @@ import numpy as np
 from fmus_src.cutting import path_kernel as pk
 from fmus_src.cutting.table import EngagementTable
 from fmus_src.jit import njit
+from fmus_src.jit_cache import guard_cache
 
 from ..machine import Machine
 from ..recording import Recording
@@ -357,6 +358,11 @@ def _cut_kernel(pos: np.ndarray, omega_cmd: np.ndarray, dt: float, q: np.ndarray
         out[k, 4] = theta
         out[k, 5] = 1.0 if cutting else 0.0
         out[k, 6] = looked
+
+
+# the cached kernel links path_kernel's locate and table_at: recompile it when that module changes (numba keys
+# its cache on this file only; a stale table_at opened a face's engagement 2 um before the tool touched it)
+guard_cache(_cut_kernel, pk)
 
 
 def cutting_parameters_packed(machine: Machine, material: str, diameter_m: float, flutes: int,
