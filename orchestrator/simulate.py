@@ -6,6 +6,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
+import numpy as np
+
 from fmus_src.nck.blocks import ToolChange
 
 from .atomic import atomic_write_json
@@ -32,7 +34,8 @@ class SimulationResult:
     success : bool
         The program reached its end.
     message : str
-        Why the run ended.
+        Why the run ended; a failed run's message starts with ``program:line:``,
+        the program line executing when it failed (:func:`failure_message`).
     files : dict[str, Path]
         Files written (when ``out`` was given).
     """
@@ -46,6 +49,33 @@ class SimulationResult:
     def to_pandas(self):  # -> pandas.DataFrame
         """The recording as a pandas DataFrame."""
         return self.recording.to_pandas()
+
+
+def failure_message(message: str, recording: Recording, program: str | Path) -> str:
+    """``message`` of a failed run prefixed ``program:line:`` with the line executing when it failed.
+
+    Parameters
+    ----------
+    message : str
+        The master's message (e.g. ``"simulation failed at t = ... s: cutting: ..."``).
+    recording : Recording
+        The recording up to the failure; its last sample with a source line
+        (``line`` > 0, spec ``recording.md``) names the line.
+    program : str or Path
+        The program file, as the user gave it.
+
+    Returns
+    -------
+    str
+        ``"<program>:<line>: <message>"``, or ``message`` unchanged when no line is known.
+    """
+    if "line" not in recording or len(recording) == 0:
+        return message
+    lines = np.asarray(recording["line"], dtype=np.float64).reshape(len(recording), -1)[:, 0]
+    known = np.flatnonzero(np.isfinite(lines) & (lines > 0))
+    if known.size == 0:
+        return message
+    return f"{program}:{int(lines[known[-1]])}: {message}"
 
 
 def resolve_case(
@@ -119,6 +149,10 @@ def simulate(
     )
     run = Master(twin.system, settings, twin.probes, progress=progress).run()
     recording = run.recording
+    message = run.message
+    if not run.success:  # name the program line executing at the failure (file:line, as parse errors)
+        message = failure_message(message, recording, resolved.program)
+        recording.message = message
     stop = run.stopped_at[0] if run.stopped_at.size else math.nan
     cycle_time = float(stop - settings.t0) if math.isfinite(stop) else float(run.t_end - settings.t0)
     summary = summarize(recording, cycle_time, CostModel.from_machine(resolved.machine), resolved.tool.diameter_mm)
@@ -129,7 +163,7 @@ def simulate(
                                                 resolved.tool.flutes)
     if notes:
         summary["notes"] = notes
-    result = SimulationResult(recording, summary, run.success, run.message)
+    result = SimulationResult(recording, summary, run.success, message)
     if out is not None:
         out = Path(out)
         result.files["recording"] = recording.write_csv(out / "recording.csv")

@@ -295,10 +295,13 @@ def test_reset_gives_a_fresh_stock():
     assert f2 == pytest.approx(f1, rel=1e-12)
 
 
-def test_feeding_into_material_with_stopped_spindle_is_a_crash_sized_load():
+def test_feeding_into_material_with_stopped_spindle_is_a_crash():
     comp = make(initial_spindle_angle=math.pi / 2)  # tooth 0 faces the feed direction
     comp.set("x_position", -R - 0.1e-3)
     comp.set("z_position", -1e-3)
     comp.setup(0.0)
-    res = drive(comp, -R - 0.1e-3 + 1e-5 * np.arange(1, 30)[:, None], 0.0, -1e-3, omega=0.0)
-    assert res["fc_peak"].max() > 1e5  # no finite chip: the twin flags it far above any load limit
+    # 10 um per 1 ms step: the rim reaches the stock face x = 0 when the centre is at -R, after 10 steps
+    expected = (r"cut: the tool feeds into the stock with the spindle stopped \(0 rpm\) at t = 0\.010000 s, "
+                r"tool at X-3\.000 Y0\.000 Z-1\.000 mm: a crash")
+    with pytest.raises(CuttingError, match=expected):  # no finite chip: a crash, not a force
+        drive(comp, -R - 0.1e-3 + 1e-5 * np.arange(1, 30)[:, None], 0.0, -1e-3, omega=0.0)

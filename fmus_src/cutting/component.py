@@ -32,6 +32,18 @@ Time discretisation of one communication step ``[t, t + h]``
 * ``fc_peak`` is the largest ``Fc`` over the substep instants of the step and
   over the entry/exit instants so located.
 
+Feeding into material with the spindle stopped (a crash)
+--------------------------------------------------------
+The chip per tooth of a tool that does not turn is unbounded. A member whose
+step feeds the tool into material (a tooth with a chip and an axial depth)
+while its spindle is below 1 rpm (:func:`.kernel.stalled_cut`; M4 counts as
+stopped, the end mill cuts clockwise) fails
+(:meth:`~fmus_src.component.Component.fail_members`, a single run raises
+:class:`CuttingError`) with a message naming the time, the tool position in
+mm and the spindle speed in rpm (:meth:`CuttingLoad.stalled_reason`); its
+step's force is not passed on. A stopped spindle in the air, or a tool at
+rest in material, is fine.
+
 Effect terms (diagnosis, issue 8)
 ---------------------------------
 Runout, helix, edge force, static tool deflection, tool wear, spindle droop
@@ -56,10 +68,11 @@ from ..errors import CncTwinError
 from ..jit import NUMBA_AVAILABLE
 from .effect_model import CHATTER_SUBSTEPS_PER_PERIOD, EffectParameters, EffectState
 from .engagement import NearField, SweptPath
-from .kernel import StepResult, cut_step
+from .kernel import StepResult, cut_step, stalled_cuts
 from .kernel_effects import cut_step_effects
 from .stock import ZMapStock
-from .zmap_numba import IO_ROWS, ZMapArrays, commit, cut_step_compiled, zmap_component_step
+from .zmap_numba import (ERR_STALLED, ERR_SUBSTEPS, IO_ROWS, ZMapArrays, commit, cut_step_compiled,
+                         zmap_component_step)
 
 #: Refuse steps needing more substeps than this (spindle speed or jump far too large).
 MAX_SUBSTEPS = 100_000
@@ -277,6 +290,32 @@ class CuttingLoad(Component):
                   "and a tool move per step within that (one is far too large)")
         self.fail_members(bad, reason, CuttingError)
 
+    def stalled_reason(self, m: int, h: float) -> str:
+        """Why member ``m`` fails when its step ``[t, t + h]`` fed into material with a stalled spindle.
+
+        Names the component, the time ``t + h`` (s), the tool-tip position there
+        (work coordinates, mm) and the spindle speed input (rpm); the same text
+        whichever kernel or master loop stepped the member.
+        """
+        v = self.values
+        speed = float(np.asarray(v["spindle_speed"])[m])
+        rpm = speed * 60.0 / (2.0 * math.pi)
+        x, y, z = (float(np.asarray(v[f"{a}_position"])[m]) * 1e3 for a in "xyz")
+        if speed < 0.0:
+            how = f"with the spindle turning backwards ({rpm:.4g} rpm, M4; the case's end mill cuts clockwise)"
+        else:
+            how = f"with the spindle stopped ({abs(rpm):.3g} rpm)"
+        return (f"{self.name}: the tool feeds into the stock {how} at t = {self._t_step + h:.6f} s, tool at "
+                f"X{x:.3f} Y{y:.3f} Z{z:.3f} mm: a crash; start the spindle (M3) before the cut")
+
+    def _fail_stalled(self, bad: np.ndarray, h: float) -> None:
+        """Fail the members ``bad`` (shape (B,) bool) that fed into material with a stalled spindle, each with
+        its own :meth:`stalled_reason` (raises when none is left)."""
+        for m in np.flatnonzero(bad):
+            mask = np.zeros(self.batch, dtype=bool)
+            mask[m] = True
+            self.fail_members(mask, self.stalled_reason(int(m), h), CuttingError)
+
     def _step_inputs(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Tool position (B, 3) m, actual spindle speed (B,) rad/s and the members with non-finite inputs.
 
@@ -330,10 +369,19 @@ class CuttingLoad(Component):
                 self._kernel_diag, int(MAX_SUBSTEPS))
 
     def fail_kernel_substeps(self, h: float) -> None:
-        """Fail the members :func:`.zmap_numba.zmap_component_step` reported (too many substeps); clear them."""
-        bad = self._kernel_status != 0
-        self._kernel_status[...] = 0
-        self._fail_substeps(bad, self._kernel_diag[0].copy(), self._kernel_diag[1].copy(), h)
+        """Fail the members :func:`.zmap_numba.zmap_component_step` reported; clear them.
+
+        First those needing too many substeps (``ERR_SUBSTEPS``, held by the kernel), then those that fed
+        into material with a stalled spindle (``ERR_STALLED``), as :meth:`_do_step` does.
+        """
+        status = self._kernel_status
+        over = status == ERR_SUBSTEPS
+        stalled = status == ERR_STALLED
+        status[...] = 0
+        if over.any():
+            self._fail_substeps(over, self._kernel_diag[0].copy(), self._kernel_diag[1].copy(), h)
+        if stalled.any():
+            self._fail_stalled(stalled, h)
 
     def _do_step(self, t: float, h: float) -> None:
         if self._whole_step_compiled:
@@ -377,6 +425,9 @@ class CuttingLoad(Component):
         self._commit(p_new)
         if held.any():
             self._blank(held)
+        stalled = ~held & stalled_cuts(omega, r.fc_peak, r.mean[:, 0], r.mean[:, 1])
+        if stalled.any():
+            self._fail_stalled(stalled, h)
 
     def _do_step_compiled(self, h: float) -> None:
         """:meth:`_do_step` with every effect term off, in one compiled call (the same numbers)."""

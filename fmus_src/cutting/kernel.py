@@ -12,12 +12,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import CncTwinError
+from ..jit import njit
 from .engagement import NearField, tooth_depth
 from .force import chip_thickness, interval_mean_quantities, tooth_quantities
 from .stock import ZMapStock
 
-#: Spindle speed below which the tooth period is taken at this speed, rad/s.
-#: Feeding into material with a stopped spindle then gives a huge force (a crash).
+#: Spindle speed below which the tooth period is taken at this speed, rad/s (keeps the kernels finite;
+#: a step that cuts with the spindle stopped is refused as a crash, :func:`stalled_cut`).
 OMEGA_FLOOR = 1e-3
 #: Entry/exit location inside a substep: rounds of equal sections (16**3 = 4096 parts).
 SECTIONS = 16
@@ -48,6 +49,46 @@ class StepResult:
     axial_depth: np.ndarray
     chip_thickness: np.ndarray
     engaged_teeth: np.ndarray
+
+
+#: Spindle speed below which the spindle counts as stopped, rad/s (1 rpm). A tooth of a 2 to 4 flute
+#: tool then passes every 15 to 30 s, so any feed of 1 mm/min or more gives at least 0.25 mm per tooth,
+#: above any end mill's chip load (0.01 to 0.2 mm): the tool cannot cut, it pushes (a crash). The
+#: spindle ramp (default 4000 rpm/s) crosses 0 .. 1 rpm in 0.25 ms, less than a step.
+OMEGA_STOPPED = 2.0 * math.pi / 60.0
+
+
+@njit
+def stalled_cut(omega: float, peak: float, mean_fx: float, mean_fy: float) -> bool:
+    """The tool feeds into material with the spindle stopped: a crash (one member, one step).
+
+    Both are needed: the spindle speed of the step is below :data:`OMEGA_STOPPED`,
+    and the tool is in the material, some tooth with a positive chip (an XY
+    feed) and a positive axial depth at an evaluated instant or over a
+    substep, i.e. a non-zero peak or step-mean force (any ``Kt > 0``). The
+    kernels compute such a step with the tooth period of :data:`OMEGA_FLOOR`
+    (the chip per tooth of a tool that does not turn is unbounded); the
+    components fail the member instead of passing its force on. A stopped
+    spindle in the air, a tool at rest in material, or a plunge straight down
+    (no chip in this model) is not a stalled cut.
+
+    Parameters
+    ----------
+    omega : float
+        Spindle speed over the step, rad/s (>= 0; a reversed spindle, M4, counts as 0).
+    peak, mean_fx, mean_fy : float
+        Peak cutting load and step-mean force of the step, N.
+
+    Returns
+    -------
+    bool
+    """
+    return omega < OMEGA_STOPPED and (peak > 0.0 or mean_fx != 0.0 or mean_fy != 0.0)
+
+
+def stalled_cuts(omega: np.ndarray, peak: np.ndarray, mean_fx: np.ndarray, mean_fy: np.ndarray) -> np.ndarray:
+    """:func:`stalled_cut` of every member, shape (B,) bool; arguments of shape (B,)."""
+    return (omega < OMEGA_STOPPED) & ((peak > 0.0) | (mean_fx != 0.0) | (mean_fy != 0.0))
 
 
 def substep_counts(n: int | np.ndarray, batch: int) -> np.ndarray:

@@ -196,6 +196,10 @@ class PathCuttingLoad(CuttingLoad):
         status = self._status
         for kind in np.unique(status[status != 0]):
             members = status == kind
+            if kind == pk.ERR_STALLED:  # a crash: each member with its own time, position and speed
+                status[members] = 0
+                self._fail_stalled(members, h)
+                continue
             m = int(np.flatnonzero(members)[0])
             p = self._inp[:3, m].tolist()
             more = "" if members.sum() == 1 else f" (and {int(members.sum()) - 1} more)"

@@ -33,13 +33,13 @@ import numpy as np
 
 from ..jit import njit
 from ..jit_cache import guard_cache
-from . import chip, effect_model, path_kernel
+from . import chip, effect_model, kernel, path_kernel
 from .chip import add_piece, add_piece_point, build_forms, chip_now, deflection_factors, edge_force_on_tool, \
     effect_workspace, history_push, mode_advance, regenerative_displacements
 from .effect_model import CHATTER_SUBSTEPS_PER_PERIOD, E_KC, E_STIFF, E_TANH, E_WN, E_ZETA, MAX_PASSES, helix_bands
-from .kernel import OMEGA_FLOOR
+from .kernel import OMEGA_FLOOR, stalled_cut
 from .path_kernel import (
-    ERR_OFF_PATH, ERR_SUBSTEPS, INCLUSIVE_TOL, PAR_FLUTES, PAR_RADIUS, PAR_STEPS, ST_THETA, blank_member,
+    ERR_OFF_PATH, ERR_STALLED, ERR_SUBSTEPS, INCLUSIVE_TOL, PAR_FLUTES, PAR_RADIUS, PAR_STEPS, ST_THETA, blank_member,
     fail_member, interval_buffers, member_motion, substeps, table_at, write_member,
 )
 
@@ -449,6 +449,9 @@ max_substeps
         if any_material and dist > tolerance:
             bad += fail_member(status, out, engaged, m, ERR_OFF_PATH)  # this member fails; the others go on
             continue
+        if stalled_cut(om, peak, acc[0], acc[1]):
+            bad += fail_member(status, out, engaged, m, ERR_STALLED)  # a crash: this member fails
+            continue
         write_member(out, st, engaged, m, f_end_x, f_end_y, peak, acc, n, om, d_end, h_end, n_end, theta0, h,
                      x1, y1, z1, s1, seg, dist)
         mode[m, 0], mode[m, 1], mode[m, 2], mode[m, 3] = qx, qy, vx, vy
@@ -456,4 +459,4 @@ max_substeps
 
 
 # the cached step links the shared kernels' code: recompile it when their modules change
-guard_cache(path_step_effects, path_kernel, chip, effect_model)
+guard_cache(path_step_effects, path_kernel, kernel, chip, effect_model)

@@ -44,7 +44,9 @@ import math
 import numpy as np
 
 from ..jit import njit, njit_inline
-from .kernel import OMEGA_FLOOR
+from ..jit_cache import guard_cache
+from . import kernel
+from .kernel import OMEGA_FLOOR, stalled_cut
 
 TWO_PI = 2.0 * math.pi
 #: An immersion angle within this of an interval end counts as inside, rad.
@@ -65,8 +67,9 @@ TANGENT_CENTRE = 0.25
 #: Distance margin below which two projection candidates tie (smallest s wins), m.
 TIE_TOL = 1e-9
 
-#: Per-member error kinds written to ``status`` by :func:`path_step`.
-ERR_SUBSTEPS, ERR_OFF_PATH = 2, 3
+#: Per-member error kinds written to ``status`` by :func:`path_step`: too many substeps, off the table's
+#: path, fed into material with a stalled spindle (:func:`.kernel.stalled_cut`, a crash).
+ERR_SUBSTEPS, ERR_OFF_PATH, ERR_STALLED = 2, 3, 4
 
 #: Rows of the output array of :func:`path_step`.
 OUT_FX, OUT_FY, OUT_FC, OUT_PEAK, OUT_FX_MEAN, OUT_FY_MEAN, OUT_TORQUE, OUT_POWER, OUT_MRR, OUT_ANGLE, \
@@ -644,8 +647,9 @@ def path_step(
 
     status : ndarray of int64, shape (B,)
         Set to the error kind (``ERR_*``) of each member that fails in this
-        step (too many substeps, off the table's path); that member's outputs
-        are blanked (:func:`blank_member`) and the others are advanced.
+        step (too many substeps, off the table's path, fed into material with
+        a stalled spindle); that member's outputs are blanked
+        (:func:`blank_member`) and the others are advanced.
 
     Returns
     -------
@@ -778,6 +782,13 @@ def path_step(
         if any_material and dist > tolerance:
             bad += fail_member(status, out, engaged, m, ERR_OFF_PATH)  # this member fails; the others go on
             continue
+        if stalled_cut(om, peak, acc[0], acc[1]):
+            bad += fail_member(status, out, engaged, m, ERR_STALLED)  # a crash: this member fails
+            continue
         write_member(out, st, engaged, m, f_end_x, f_end_y, peak, acc, n, om, d_end, h_end, n_end, theta0, h,
                      x1, y1, z1, s1, seg, dist)
     return bad
+
+
+# the cached step calls kernel.stalled_cut: recompile it when that module changes
+guard_cache(path_step, kernel)

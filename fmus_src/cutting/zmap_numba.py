@@ -36,7 +36,7 @@ from ..jit import njit
 from ..jit_cache import guard_cache
 from . import engagement, kernel, stock
 from .engagement import RIM_TOL, SweptPath
-from .kernel import OMEGA_FLOOR, SECTION_ROUNDS, SECTIONS, StepResult, substep_counts
+from .kernel import OMEGA_FLOOR, SECTION_ROUNDS, SECTIONS, StepResult, stalled_cut, substep_counts
 from .stock import StockError, ZMapStock, sweep_cover_z
 
 #: Columns of the per-member float parameters of :func:`zmap_step`.
@@ -525,6 +525,9 @@ IO_ROWS = ("x_position", "y_position", "z_position", "spindle_speed", "fx", "fy"
  IO_DEPTH, IO_CHIP, IO_TEETH, IO_ACTUAL, IO_VIBX, IO_VIBY, IO_TIME) = range(len(IO_ROWS))
 #: ``status`` of :func:`zmap_component_step`: the member needs more than ``max_substeps`` substeps.
 ERR_SUBSTEPS = 1
+#: ``status`` of :func:`zmap_component_step`: the member fed into material with a stalled spindle
+#: (:func:`.kernel.stalled_cut`; a crash: its step is computed, then the component fails it).
+ERR_STALLED = 2
 
 
 @njit
@@ -545,7 +548,9 @@ def zmap_component_step(
     or needing more than ``max_substeps`` substeps are held (not cut, spindle
     stopped) and their outputs blanked; the last ones are reported in ``status``
     (``ERR_SUBSTEPS``, with their spindle speed and XY move in ``diag``) for the
-    component to fail them (``CuttingLoad._fail_substeps``).
+    component to fail them (``CuttingLoad._fail_substeps``). Members that fed into
+    material with a stalled spindle (:func:`.kernel.stalled_cut`) are stepped, then
+    reported as ``ERR_STALLED`` (``CuttingLoad._fail_stalled`` fails them).
 
     Parameters
     ----------
@@ -569,7 +574,8 @@ def zmap_component_step(
     cutting_time, torque, angle : ndarray, shape (B,)
         Effect-state clocks (:class:`.effect_model.EffectState`): s, N.m, rad (advanced).
     status : ndarray of int64, shape (B,)
-        Set to ``ERR_SUBSTEPS`` for the members needing too many substeps (others untouched).
+        Set to ``ERR_SUBSTEPS`` for the members needing too many substeps, ``ERR_STALLED`` for those
+        that fed into material with a stalled spindle (others untouched).
     diag : ndarray, shape (2, B)
         Spindle speed (rad/s) and XY tool move (m) of those members.
     max_substeps : int
@@ -578,7 +584,7 @@ def zmap_component_step(
     Returns
     -------
     int
-        Number of members newly over ``max_substeps``.
+        Number of members newly reported in ``status``.
     """
     B = io.shape[1]
     two_pi = 2.0 * math.pi
@@ -641,6 +647,9 @@ def zmap_component_step(
             f0, f1, peak = out[0, OUT_FX], out[0, OUT_FY], out[0, OUT_PEAK]
             m0, m1, m2, m3 = out[0, OUT_MFX], out[0, OUT_MFY], out[0, OUT_TORQUE], out[0, OUT_MRR]
             depth, chip, teeth = out[0, OUT_DEPTH], out[0, OUT_CHIP], out[0, OUT_TEETH]
+            if stalled_cut(omega, peak, m0, m1):
+                status[b] = ERR_STALLED
+                n_bad += 1
         io[IO_FX, b] = -f0
         io[IO_FY, b] = -f1
         io[IO_FC, b] = math.hypot(f0, f1)
