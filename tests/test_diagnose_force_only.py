@@ -17,6 +17,7 @@ import pytest
 from orchestrator.case import load_case
 from orchestrator.diagnose import diagnose
 from orchestrator.diagnose.align import load_envelope
+from orchestrator.diagnose.errors import DiagnosisError
 from orchestrator.diagnose.force_only import force_only_recording, needs_force_clock
 from orchestrator.recording import Recording
 from orchestrator.simulate import simulate
@@ -89,3 +90,22 @@ def test_runout_in_a_force_only_recording_is_named(tmp_path):
     # the runout carries the force residual: what is left is the dynamometer noise
     for c in ("fx_N", "fy_N"):
         assert d.rms_after[c] <= 1.1 * NOISE_N, (c, d.rms_after, d.log)
+
+
+def test_a_force_only_holdout_is_aligned_by_its_cutting_load(tmp_path):
+    # the held-out dynamometer file is on its own clock too: it gets the same force clock as the case
+    case = _dynamometer_case(tmp_path / "case", {}, seed=7)
+    hold = _dynamometer_case(tmp_path / "hold", {}, seed=9)
+    d = diagnose(case, holdout=hold)
+    assert d.effects == []
+    # the twin is the truth here: before = after = the noise on the held-out file
+    for c in ("fx_N", "fy_N"):
+        assert d.holdout["rms_before"][c] <= 1.1 * NOISE_N
+        assert d.holdout["rms_after"][c] <= 1.1 * NOISE_N
+
+
+def test_a_force_only_recording_without_the_cutting_diagnosis_says_why(tmp_path):
+    folder = _dynamometer_case(tmp_path / "clean", {}, seed=7)
+    with pytest.raises(DiagnosisError, match=r"recording.csv: the recording has no line and no moving position "
+                                             r"or command, so the feed drives cannot be diagnosed"):
+        diagnose(folder, cutting=False)

@@ -433,6 +433,10 @@ def diagnose(
         raise DiagnosisError(f"{case.recording}: a cutting diagnosis needs 'fx_N' and 'fy_N' (at least 100 samples) "
                              f"and a [stock] in {case.source or case.folder}")
     clock, notes = None, []
+    if not do_cut and needs_force_clock(recording):
+        raise DiagnosisError(f"{case.recording}: the recording has no line and no moving position or command, so "
+                             "the feed drives cannot be diagnosed; "
+                             "diagnose its cutting process (cutting=True, a [stock] in the case)")
     if do_cut and needs_force_clock(recording):
         # a dynamometer on its own clock (forces only): aligned by its cutting load, the twin's path added
         say("aligning the dynamometer's clock by the cutting load")
@@ -469,6 +473,8 @@ def diagnose(
             hcase = as_case(holdout)
             hrec = _read(hcase)
             if has_forces(hrec, hcase):
+                if needs_force_clock(hrec):   # a dynamometer on its own clock: aligned by its cutting load
+                    hrec = force_only_recording(replace(hcase, machine=base_machine), hrec, base_machine).recording
                 hold = holdout_cutting(replace(hcase, machine=base_machine), hrec, cres.model)
                 if d.holdout is None:
                     d.holdout = {"case": str(hcase.folder), "rms_before": {}, "rms_after": {}}
