@@ -83,7 +83,7 @@ def test_runout_in_a_force_only_recording_is_named(tmp_path):
     # Kt = 1.23e9 N/m2, Ke = 0.5 and 1.5 mm depth a tooth's force changes by Kt a sqrt(1 + Ke^2) 2 e = 4.1 N/um.
     # The replay leaves sqrt(rms_after^2 - noise^2) <= sqrt(1.1^2 - 1) 0.5 N = 0.23 N rms of the twin's own
     # recording unexplained (its 1 ms drive-loaded Z-map run against the replay of its logged path): were all of
-    # it along the runout signature, e would move by 0.23 / 4.1 = 0.06 um: 2 % covers it (found: 9.93 um). The
+    # it along the runout signature, e would move by 0.23 / 4.1 = 0.06 um: 2 % covers it (found: 10.02 um since the twin's own chip is the tooth-period chord; 9.93 um before). The
     # 90 % interval (+-0.005 um from the 0.5 N noise) does not cover that mismatch and is not asserted.
     found = d.effects[0]
     assert found["parameters"]["eccentricity_um"] == pytest.approx(10.0, rel=0.02)

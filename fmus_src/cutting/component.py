@@ -11,6 +11,12 @@ Time discretisation of one communication step ``[t, t + h]``
   this delays the force by one step but does not change its magnitude.)
 * The spindle speed input is held over the step; the spindle angle integrates
   it (``theta += omega h``, wrapped to ``[0, 2 pi)``).
+* The chip of a step is the tool-centre displacement over the last tooth
+  period, ``c(t + h) - c(t + h - T)`` (what the previous tooth left; Sim & Lee
+  2023 Eq. 10-11, :func:`.kernel.chord_feed`), read from the member's record of
+  its last :data:`.kernel.CHIP_HISTORY_STEPS` steps (the tool moves linearly
+  within each); the step velocity times ``T`` when ``T <= h``, at the start, after
+  the spindle starts and while the record is younger than ``T``.
 * The step is cut into ``n`` substeps so that the spindle turns at most
   ``pitch / angle_steps_per_tooth`` and the tool moves at most ``R / 20`` per
   substep (with chatter on, also at least 32 substeps per period of the tool
@@ -68,7 +74,7 @@ from ..errors import CncTwinError
 from ..jit import NUMBA_AVAILABLE
 from .effect_model import CHATTER_SUBSTEPS_PER_PERIOD, EffectParameters, EffectState
 from .engagement import NearField, SweptPath
-from .kernel import StepResult, cut_step, stalled_cuts
+from .kernel import CHIP_HISTORY_WIDTH, StepResult, chord_advance_all, chord_feeds, cut_step, stalled_cuts
 from .kernel_effects import cut_step_effects
 from .stock import ZMapStock
 from .zmap_numba import (ERR_STALLED, ERR_SUBSTEPS, IO_ROWS, ZMapArrays, commit, cut_step_compiled,
@@ -178,7 +184,9 @@ class CuttingLoad(Component):
         lag = self._radius + 2.0 * np.maximum(self.stock.dx, self.stock.dy)
         capacity = int(np.ceil(np.max(lag / spacing))) + 4
         self.path = SweptPath(position, spacing, lag, capacity)
-        self._p_prev = position
+        # motion state per member: the tool tip at the start of the step, then its chip history (kernel.chord_feed)
+        self._motion = np.zeros((self.batch, 3 + CHIP_HISTORY_WIDTH))
+        self._motion[:, :3] = position
         self._theta = np.mod(np.asarray(v["initial_spindle_angle"], dtype=np.float64), 2.0 * math.pi)
         self._setup_effects(self._theta)
         # the whole step compiled (zmap_component_step) when no effect term is on
@@ -249,6 +257,11 @@ class CuttingLoad(Component):
                 raise CuttingError(
                     f"{self.name}.{name}: member {int(bad[0])} has {values[bad[0]]!r}; expected {expected}"
                 )
+
+    @property
+    def _p_prev(self) -> np.ndarray:
+        """Tool-tip position at the start of the step, shape (B, 3), m (a view of the motion state)."""
+        return self._motion[:, :3]
 
     def _position(self) -> np.ndarray:
         v = self.values
@@ -352,9 +365,10 @@ class CuttingLoad(Component):
     def compiled_step_arrays(self) -> tuple:
         """The arrays :func:`.zmap_numba.zmap_component_step` steps, after ``io``, without ``failed``.
 
-        The component's own arrays (stock heights, path ring buffer, start position, spindle angle,
-        effect clocks, failure status) are returned, not copies, so the compiled master loop can
-        step them in place; ``spacing``, ``lag`` and the coefficients are fresh arrays.
+        The component's own arrays (stock heights, path ring buffer, motion state (start position and
+        chip history), spindle angle, effect clocks, failure status) are returned, not copies, so the
+        compiled master loop can step them in place; ``spacing``, ``lag`` and the coefficients are fresh
+        arrays.
         """
         v = self.values
         z = self._zmap
@@ -362,7 +376,7 @@ class CuttingLoad(Component):
         st = self._effect_state
         return (z.heights, z.grid, z.cells, z.rho, path.points, path.arc, path.head, path.count,
                 np.ascontiguousarray(path.spacing, dtype=np.float64), np.ascontiguousarray(path.lag, dtype=np.float64),
-                self._p_prev, self._theta, np.ascontiguousarray(self._radius, dtype=np.float64),
+                self._motion, self._theta, np.ascontiguousarray(self._radius, dtype=np.float64),
                 np.ascontiguousarray(self._flutes, dtype=np.int64),
                 np.array(v["angle_steps_per_tooth"], dtype=np.float64), np.array(v["kt"], dtype=np.float64),
                 np.array(v["ke"], dtype=np.float64), st.cutting_time, st.torque, st.angle, self._kernel_status,
@@ -405,7 +419,8 @@ class CuttingLoad(Component):
             actual = np.where(too_many, 0.0, actual)
             omega = np.where(too_many, 0.0, omega)
             held = held | too_many
-        r = self._cut(p_new, omega, h, n, held)
+        feed = chord_feeds(self._motion[:, 3:], dp, h, omega, self._flutes)
+        r = self._cut(p_new, omega, h, n, held, feed)
         v["fx"][...] = -r.force[:, 0]
         v["fy"][...] = -r.force[:, 1]
         v["fc"][...] = np.hypot(r.force[:, 0], r.force[:, 1])
@@ -421,7 +436,8 @@ class CuttingLoad(Component):
         self._theta = np.mod(self._theta + omega * h, 2.0 * math.pi)
         v["spindle_angle"][...] = self._theta
         self._finish_effects(h, omega, actual)
-        self._p_prev = p_new
+        chord_advance_all(self._motion[:, 3:], h, dp, omega, held)
+        self._motion[:, :3] = p_new
         self._commit(p_new)
         if held.any():
             self._blank(held)
@@ -442,7 +458,8 @@ class CuttingLoad(Component):
         if n_bad:
             self.fail_kernel_substeps(h)
 
-    def _cut(self, p_new: np.ndarray, omega: np.ndarray, h: float, n: np.ndarray, held: np.ndarray) -> StepResult:
+    def _cut(self, p_new: np.ndarray, omega: np.ndarray, h: float, n: np.ndarray, held: np.ndarray,
+             feed: np.ndarray) -> StepResult:
         """Kernel results of one step for every member.
 
         Parameters
@@ -457,6 +474,8 @@ class CuttingLoad(Component):
             Substeps per member (:meth:`_substeps`).
         held : ndarray of bool, shape (B,)
             Members not computed (lost or failed): zero results.
+        feed : ndarray, shape (B, 2)
+            Feed per tooth vector (the tooth-period chord, :func:`.kernel.chord_feeds`), m.
 
         Returns
         -------
@@ -471,7 +490,7 @@ class CuttingLoad(Component):
         near = self.path.near_field() if (geometric.any() or not self.use_compiled) else None
         live = ~held
         if live.all() and (geometric.all() or not geometric.any()):
-            return self._cut_rows(None, near, p_new, omega, h, n, bool(geometric[0]))
+            return self._cut_rows(None, near, p_new, omega, h, n, bool(geometric[0]), feed)
         B = self.batch
         force, mean = np.zeros((B, 2)), np.zeros((B, 4))
         peak, axial, chip = np.zeros(B), np.zeros(B), np.zeros(B)
@@ -480,15 +499,15 @@ class CuttingLoad(Component):
             rows = np.flatnonzero(live & (geometric == kind))
             if rows.size == 0:
                 continue
-            r = self._cut_rows(rows, near, p_new, omega, h, n, kind)
+            r = self._cut_rows(rows, near, p_new, omega, h, n, kind, feed)
             force[rows], mean[rows], peak[rows] = r.force, r.mean, r.fc_peak
             axial[rows], chip[rows], engaged[rows] = r.axial_depth, r.chip_thickness, r.engaged_teeth
         return StepResult(force=force, fc_peak=peak, mean=mean, axial_depth=axial, chip_thickness=chip,
                           engaged_teeth=engaged)
 
     def _cut_rows(self, rows: np.ndarray | None, near: NearField | None, p_new: np.ndarray, omega: np.ndarray,
-                  h: float, n: np.ndarray, geometric: bool) -> StepResult:
-        """One kernel call for the members ``rows`` (``None``: all); ``n`` of shape (B,) as :meth:`_cut`.
+                  h: float, n: np.ndarray, geometric: bool, feed: np.ndarray) -> StepResult:
+        """One kernel call for the members ``rows`` (``None``: all); ``n``, ``feed`` as :meth:`_cut`.
 
         ``near`` is the path's near field (``None`` only with :attr:`use_compiled` and no effect terms).
         """
@@ -503,14 +522,15 @@ class CuttingLoad(Component):
                 self.stock, near, self._p_prev[sel], p_new[sel], self._theta[sel], omega[sel], h, n[sel],
                 self._radius[sel], self._flutes[sel],
                 np.asarray(v["angle_steps_per_tooth"], dtype=np.float64)[sel], coefficients, self._eff,
-                self._effect_state, np.asarray(v["stock_z_max"], dtype=np.float64)[sel], rows,
+                self._effect_state, np.asarray(v["stock_z_max"], dtype=np.float64)[sel], rows, feed[sel],
             )
         if self.use_compiled:
             return cut_step_compiled(self._zmap, self.path, self._p_prev[sel], p_new[sel], self._theta[sel],
-                                     omega[sel], h, n[sel], self._radius[sel], self._flutes[sel], kt, ke, rows)
+                                     omega[sel], h, n[sel], self._radius[sel], self._flutes[sel], kt, ke, rows,
+                                     feed[sel])
         near = self.path.near_field() if near is None else near
         return cut_step(self.stock, near, self._p_prev[sel], p_new[sel], self._theta[sel], omega[sel], h, n[sel],
-                        self._radius[sel], self._flutes[sel], kt, ke, rows)
+                        self._radius[sel], self._flutes[sel], kt, ke, rows, feed[sel])
 
     def _commit(self, position: np.ndarray) -> None:
         """Store the new tool position and move old path segments into the Z-map."""

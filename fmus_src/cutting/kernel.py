@@ -86,6 +86,114 @@ def stalled_cut(omega: float, peak: float, mean_fx: float, mean_fy: float) -> bo
     return omega < OMEGA_STOPPED and (peak > 0.0 or mean_fx != 0.0 or mean_fy != 0.0)
 
 
+#: Steps kept per member for the tooth-period chip (:func:`chord_feed`): 256 steps of the twin's 1 ms cover a
+#: tooth period of 0.256 s, i.e. a 2-flute tool from 117 rpm up (1 flute: 235 rpm); a longer period (or a
+#: history younger than it) falls back to the step velocity times the period.
+CHIP_HISTORY_STEPS = 256
+#: Layout of one member's chip history (a 1-D float array of :data:`CHIP_HISTORY_WIDTH`): the ring's newest
+#: record, the number of records, then per record the step length (s) and its x, y tool move (m).
+H_HEAD, H_COUNT, H_RECORDS = 0, 1, 2
+CHIP_HISTORY_WIDTH = H_RECORDS + 3 * CHIP_HISTORY_STEPS
+
+
+@njit
+def chord_feed(hist: np.ndarray, dpx: float, dpy: float, h: float, omega: float, flutes: int
+               ) -> tuple[float, float]:
+    """Feed per tooth of a step: the tool-centre displacement over the last tooth period, ``c(t+h) - c(t+h-T)``.
+
+    A tooth cuts what the previous one left (Altintas ch. 2; Sim & Lee 2023, Eq. 10-11: the change in the
+    tool-centre position over one tooth period ``T = 2 pi / (flutes omega)``). The tool moves linearly
+    within each step (the kernels' motion), so the chord is the step's own move plus the moves of the
+    previous steps back to ``t + h - T``, the oldest one in part. At a constant feed it is the step
+    velocity times ``T`` (to rounding); where the feed changes within ``T`` (a deceleration at the end of a
+    cut, an acceleration out of a corner) it differs from it by ``a T (T - h) / 2``.
+
+    Parameters
+    ----------
+    hist : ndarray, shape (CHIP_HISTORY_WIDTH,)
+        The member's history of the previous steps (:func:`chord_advance`).
+    dpx, dpy : float
+        Tool move over this step, m.
+    h : float
+        Step length, s.
+    omega : float
+        Spindle speed of the step, rad/s (>= 0; below :data:`OMEGA_FLOOR` the period at that speed).
+    flutes : int
+        Teeth.
+
+    Returns
+    -------
+    fx, fy : float
+        Feed per tooth vector, m: the step velocity times ``T`` (``dp / h * T``, the same operations as
+        :func:`step_kinematics`) when ``T <= h`` (the chord lies within the step: the same thing), when
+        there is no history, or when the history does not reach back ``T``.
+    """
+    period = 2.0 * math.pi / (np.float64(flutes) * max(omega, OMEGA_FLOOR))
+    fx = dpx / h * period
+    fy = dpy / h * period
+    rem = period - h
+    if not rem > 0.0:
+        return fx, fy
+    cap = (hist.shape[0] - H_RECORDS) // 3
+    idx = int(hist[H_HEAD])
+    cx = dpx
+    cy = dpy
+    for _ in range(int(hist[H_COUNT])):
+        r = H_RECORDS + 3 * idx
+        hj = hist[r]
+        if rem <= hj:
+            f = rem / hj
+            return cx + hist[r + 1] * f, cy + hist[r + 2] * f
+        cx += hist[r + 1]
+        cy += hist[r + 2]
+        rem -= hj
+        idx = idx - 1 if idx > 0 else cap - 1
+    return fx, fy
+
+
+@njit
+def chord_advance(hist: np.ndarray, h: float, dpx: float, dpy: float, omega: float) -> None:
+    """Record a step that was cut (length ``h`` s, move ``dpx, dpy`` m) in a member's history, in place.
+
+    A step with the spindle below :data:`OMEGA_STOPPED` clears the history instead: after the spindle
+    starts, the chip is the step velocity times the period until the history spans a tooth period.
+    """
+    if not omega >= OMEGA_STOPPED:
+        hist[H_COUNT] = 0.0
+        return
+    cap = (hist.shape[0] - H_RECORDS) // 3
+    idx = int(hist[H_HEAD]) + 1
+    if idx >= cap:
+        idx = 0
+    hist[H_HEAD] = idx
+    r = H_RECORDS + 3 * idx
+    hist[r] = h
+    hist[r + 1] = dpx
+    hist[r + 2] = dpy
+    if hist[H_COUNT] < cap:
+        hist[H_COUNT] += 1.0
+
+
+@njit
+def chord_feeds(hist: np.ndarray, dp: np.ndarray, h: float, omega: np.ndarray, flutes: np.ndarray) -> np.ndarray:
+    """:func:`chord_feed` of every member: ``hist`` (B, CHIP_HISTORY_WIDTH), ``dp`` (B, >= 2) m, ``omega``,
+    ``flutes`` (B,); returns the feed per tooth, shape (B, 2), m."""
+    feed = np.empty((dp.shape[0], 2))
+    for b in range(dp.shape[0]):
+        feed[b, 0], feed[b, 1] = chord_feed(hist[b], dp[b, 0], dp[b, 1], h, omega[b], flutes[b])
+    return feed
+
+
+@njit
+def chord_advance_all(hist: np.ndarray, h: float, dp: np.ndarray, omega: np.ndarray, held: np.ndarray) -> None:
+    """:func:`chord_advance` of every member; the members ``held`` (not cut this step) have their history cleared."""
+    for b in range(dp.shape[0]):
+        if held[b]:
+            hist[b, H_COUNT] = 0.0
+        else:
+            chord_advance(hist[b], h, dp[b, 0], dp[b, 1], omega[b])
+
+
 def stalled_cuts(omega: np.ndarray, peak: np.ndarray, mean_fx: np.ndarray, mean_fy: np.ndarray) -> np.ndarray:
     """:func:`stalled_cut` of every member, shape (B,) bool; arguments of shape (B,)."""
     return (omega < OMEGA_STOPPED) & ((peak > 0.0) | (mean_fx != 0.0) | (mean_fy != 0.0))
@@ -101,7 +209,7 @@ def substep_counts(n: int | np.ndarray, batch: int) -> np.ndarray:
 
 def step_kinematics(
     p_old: np.ndarray, p_new: np.ndarray, theta0: np.ndarray, omega: np.ndarray, h: float, n: np.ndarray,
-    flutes: np.ndarray,
+    flutes: np.ndarray, feed: np.ndarray | None = None,
 ) -> tuple[np.ndarray, int, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Tool motion over a step of ``n`` substeps (linear move, constant spindle speed); arguments as :func:`cut_step`.
 
@@ -122,7 +230,8 @@ def step_kinematics(
     theta : ndarray, shape (B, K + 1)
         Spindle angle (tooth 0) at those instants, rad.
     feed : ndarray, shape (B, 2)
-        Feed per tooth vector from the tool-centre velocity over the step, m.
+        Feed per tooth vector, m: the argument ``feed`` when given (the tooth-period chord,
+        :func:`chord_feeds`), else the tool-centre velocity over the step times the tooth period.
     """
     dp = p_new - p_old
     nmax = int(flutes.max())
@@ -131,15 +240,16 @@ def step_kinematics(
     frac = np.minimum(k[None, :], n[:, None]) / n[:, None]  # (B, K+1)
     centre = p_old[:, None, :] + frac[:, :, None] * dp[:, None, :]  # (B, K+1, 3)
     theta = theta0[:, None] + (omega * h)[:, None] * frac  # (B, K+1)
-    period = 2.0 * math.pi / (flutes * np.maximum(omega, OMEGA_FLOOR))
-    feed = dp[:, :2] / h * period[:, None]  # (B, 2)
+    if feed is None:
+        period = 2.0 * math.pi / (flutes * np.maximum(omega, OMEGA_FLOOR))
+        feed = dp[:, :2] / h * period[:, None]  # (B, 2)
     return dp, nmax, pitch, centre, theta, feed
 
 
 def cut_step(
     stock: ZMapStock, near: NearField, p_old: np.ndarray, p_new: np.ndarray, theta0: np.ndarray,
     omega: np.ndarray, h: float, n: int | np.ndarray, radius: np.ndarray, flutes: np.ndarray, kt: np.ndarray,
-    ke: np.ndarray, rows: np.ndarray | None = None,
+    ke: np.ndarray, rows: np.ndarray | None = None, feed: np.ndarray | None = None,
 ) -> StepResult:
     """Cutting forces while the tool moves linearly from ``p_old`` to ``p_new`` in ``h`` seconds.
 
@@ -173,6 +283,9 @@ def cut_step(
         ``near`` hold (e.g. the members without effect terms);
         ``None``: all of them, in order. A member's figures do not depend on
         the other members passed with it.
+    feed : ndarray, shape (B, 2), optional
+        Feed per tooth vector of each member, m (the components pass the tooth-period chord,
+        :func:`chord_feeds`); default: the step velocity times the tooth period.
 
     Returns
     -------
@@ -183,7 +296,7 @@ def cut_step(
     R = radius
     rows = np.arange(B) if rows is None else np.asarray(rows, dtype=np.int64)
     ns = substep_counts(n, B)
-    dp, nmax, pitch, centre, theta, feed = step_kinematics(p_old, p_new, theta0, omega, h, ns, flutes)
+    dp, nmax, pitch, centre, theta, feed = step_kinematics(p_old, p_new, theta0, omega, h, ns, flutes, feed)
     K = theta.shape[1] - 1
     # instants and substeps of each member (beyond its own count: not evaluated, no contribution)
     inst_ok = np.arange(K + 1)[None, :] <= ns[:, None]  # (B, K+1)

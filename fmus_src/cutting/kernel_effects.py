@@ -100,7 +100,7 @@ def cut_step_effects(
     stock: ZMapStock, near: NearField, p_old: np.ndarray, p_new: np.ndarray, theta0: np.ndarray,
     omega: np.ndarray, h: float, n: int | np.ndarray, radius: np.ndarray, flutes: np.ndarray, steps: np.ndarray,
     coefficients: np.ndarray, eff: EffectParameters, state: EffectState, stock_top: np.ndarray,
-    rows: np.ndarray | None = None,
+    rows: np.ndarray | None = None, feed: np.ndarray | None = None,
 ) -> StepResult:
     """Cutting forces with the effect terms while the tool moves linearly from ``p_old`` to ``p_new``.
 
@@ -127,6 +127,8 @@ def cut_step_effects(
         batch (e.g. the members with an effect term on); ``None``:
         all members, in order. A member's figures do not depend on the other
         members passed with it.
+    feed : ndarray, shape (B, 2), optional
+        Nominal feed per tooth vector, m, as :func:`.kernel.cut_step` (the tooth-period chord).
 
     Returns
     -------
@@ -141,7 +143,7 @@ def cut_step_effects(
         rows = np.asarray(rows, dtype=np.int64)
         eff = _members(eff, rows)
     ns = substep_counts(n, B)
-    dp, nmax, pitch, centre, theta, feed = step_kinematics(p_old, p_new, theta0, omega, h, ns, flutes)
+    dp, nmax, pitch, centre, theta, feed = step_kinematics(p_old, p_new, theta0, omega, h, ns, flutes, feed)
     K = theta.shape[1] - 1
     # instants and substeps of each member (beyond its own count: not evaluated, no contribution)
     inst_ok = np.arange(K + 1)[None, :] <= ns[:, None]  # (B, K+1)

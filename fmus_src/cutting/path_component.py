@@ -132,7 +132,7 @@ class PathCuttingLoad(CuttingLoad):
             np.asarray(v["ke"], dtype=np.float64),
             np.asarray(v["angle_steps_per_tooth"], dtype=np.float64),
         ])
-        self._st = np.zeros((7, self.batch))
+        self._st = np.zeros((pk.ST_ROWS, self.batch))  # state rows ST_*, the chip history empty
         self._status = np.zeros(self.batch, dtype=np.int64)  # per-member error kind of the last step
         theta = np.mod(np.asarray(v["initial_spindle_angle"], dtype=np.float64), 2.0 * math.pi)
         self._st[pk.ST_THETA] = theta

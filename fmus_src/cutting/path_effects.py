@@ -37,10 +37,10 @@ from . import chip, effect_model, kernel, path_kernel
 from .chip import add_piece, add_piece_point, build_forms, chip_now, deflection_factors, edge_force_on_tool, \
     effect_workspace, history_push, mode_advance, regenerative_displacements
 from .effect_model import CHATTER_SUBSTEPS_PER_PERIOD, E_KC, E_STIFF, E_TANH, E_WN, E_ZETA, MAX_PASSES, helix_bands
-from .kernel import OMEGA_FLOOR, stalled_cut
+from .kernel import chord_feed, stalled_cut
 from .path_kernel import (
-    ERR_OFF_PATH, ERR_STALLED, ERR_SUBSTEPS, INCLUSIVE_TOL, PAR_FLUTES, PAR_RADIUS, PAR_STEPS, ST_THETA, blank_member,
-    fail_member, interval_buffers, member_motion, substeps, table_at, write_member,
+    ERR_OFF_PATH, ERR_STALLED, ERR_SUBSTEPS, INCLUSIVE_TOL, PAR_FLUTES, PAR_RADIUS, PAR_STEPS, ST_HISTORY, ST_THETA,
+    blank_member, drop_history, fail_member, interval_buffers, member_motion, substeps, table_at, write_member,
 )
 
 TWO_PI = 2.0 * math.pi
@@ -302,6 +302,7 @@ max_substeps
         om = max(inp[3, m], 0.0)
         if not (math.isfinite(x1) and math.isfinite(y1) and math.isfinite(z1) and math.isfinite(om)):
             blank_member(out, engaged, m)  # an upstream failure: this member is out, the others go on
+            drop_history(st, m)
             continue
         radius = par[PAR_RADIUS, m]
         flutes = int(par[PAR_FLUTES, m])
@@ -317,10 +318,9 @@ max_substeps
         n = int(max(substeps(om, h, pitch, steps, move, radius), n_mode))
         if n > max_substeps:
             bad += fail_member(status, out, engaged, m, ERR_SUBSTEPS)  # this member fails; the others go on
+            drop_history(st, m)
             continue
-        period = TWO_PI / (flutes * max(om, OMEGA_FLOOR))
-        fxt = ddx / h * period
-        fyt = ddy / h * period
+        fxt, fyt = chord_feed(st[ST_HISTORY:, m], ddx, ddy, h, om, flutes)  # the tooth-period chord
         theta0 = st[ST_THETA, m]
         span = om * h / n
         dt = h / n
@@ -448,9 +448,11 @@ max_substeps
                 f_end_x, f_end_y, d_end, h_end, n_end = fx, fy, dm, hm, ne
         if any_material and dist > tolerance:
             bad += fail_member(status, out, engaged, m, ERR_OFF_PATH)  # this member fails; the others go on
+            drop_history(st, m)
             continue
         if stalled_cut(om, peak, acc[0], acc[1]):
             bad += fail_member(status, out, engaged, m, ERR_STALLED)  # a crash: this member fails
+            drop_history(st, m)
             continue
         write_member(out, st, engaged, m, f_end_x, f_end_y, peak, acc, n, om, d_end, h_end, n_end, theta0, h,
                      x1, y1, z1, s1, seg, dist)

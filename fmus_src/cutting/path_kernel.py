@@ -11,6 +11,8 @@ Per member and step ``[t, t + h]``:
    and arc length ``s``) over an arc-length window ``2 |dp| + margin``;
    ``s`` never decreases (a reversal on the same line is not mistaken for the
    way back), among equally near candidates the smallest ``s`` wins.
+   The chip is the tool-centre displacement over the last tooth period (the
+   member's chip history in its state rows, :func:`.kernel.chord_feed`).
 2. **Substeps** — as the Z-map mode, per member: the spindle turns at most
    ``pitch / angle_steps_per_tooth`` (and at most ``pi / 2``) and the tool
    moves at most ``R / 20`` per substep; ``s`` and the tip height are linear
@@ -46,7 +48,7 @@ import numpy as np
 from ..jit import njit, njit_inline
 from ..jit_cache import guard_cache
 from . import kernel
-from .kernel import OMEGA_FLOOR, stalled_cut
+from .kernel import CHIP_HISTORY_WIDTH, H_COUNT, chord_advance, chord_feed, stalled_cut
 
 TWO_PI = 2.0 * math.pi
 #: An immersion angle within this of an interval end counts as inside, rad.
@@ -74,8 +76,10 @@ ERR_SUBSTEPS, ERR_OFF_PATH, ERR_STALLED = 2, 3, 4
 #: Rows of the output array of :func:`path_step`.
 OUT_FX, OUT_FY, OUT_FC, OUT_PEAK, OUT_FX_MEAN, OUT_FY_MEAN, OUT_TORQUE, OUT_POWER, OUT_MRR, OUT_ANGLE, \
     OUT_DEPTH, OUT_CHIP = range(12)
-#: Rows of the state array: spindle angle, previous position (3), arc length, segment, last distance to path.
-ST_THETA, ST_X, ST_Y, ST_Z, ST_S, ST_SEG, ST_DIST = range(7)
+#: Rows of the state array: spindle angle, previous position (3), arc length, segment, last distance to path,
+#: then from ``ST_HISTORY`` the chip history (:func:`.kernel.chord_advance`), :data:`ST_ROWS` rows in all.
+ST_THETA, ST_X, ST_Y, ST_Z, ST_S, ST_SEG, ST_DIST, ST_HISTORY = range(8)
+ST_ROWS = ST_HISTORY + CHIP_HISTORY_WIDTH
 #: Rows of the parameter array.
 PAR_RADIUS, PAR_FLUTES, PAR_KT, PAR_KE, PAR_STEPS = range(5)
 
@@ -498,6 +502,12 @@ def interval_buffers(kmax: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.
     return np.empty(kmax), np.empty(kmax), np.empty(kmax), np.empty(kmax), np.empty(kmax), np.empty(kmax)
 
 
+@njit_inline
+def drop_history(st: np.ndarray, m: int) -> None:
+    """Clear member ``m``'s chip history (a step not cut: its next chips fall back to the step velocity)."""
+    st[ST_HISTORY + H_COUNT, m] = 0.0
+
+
 @njit
 def fail_member(status: np.ndarray, out: np.ndarray, engaged: np.ndarray, m: int, kind: int) -> int:
     """Member ``m`` fails in this step with error ``kind`` (``ERR_*``): status set, outputs blanked; returns 1."""
@@ -551,7 +561,8 @@ def write_member(
 
     ``f_end_*`` [N] is the force on the tool at ``t + h``, ``acc`` the substep sums of
     (Fx, Fy, torque, MRR) over ``n`` substeps, ``d_end``, ``h_end`` [m] and ``n_end`` the depth, chip
-    and engaged teeth at ``t + h``; the spindle angle advances by ``om h`` [rad].
+    and engaged teeth at ``t + h``; the spindle angle advances by ``om h`` [rad]; the step's move is
+    recorded in the chip history (:func:`.kernel.chord_advance`).
     """
     out[OUT_FX, m] = -f_end_x
     out[OUT_FY, m] = -f_end_y
@@ -568,6 +579,7 @@ def write_member(
     theta = (theta0 + om * h) % TWO_PI
     out[OUT_ANGLE, m] = theta
     st[ST_THETA, m] = theta
+    chord_advance(st[ST_HISTORY:, m], h, x1 - st[ST_X, m], y1 - st[ST_Y, m], om)
     st[ST_X, m] = x1
     st[ST_Y, m] = y1
     st[ST_Z, m] = z1
@@ -630,8 +642,8 @@ def path_step(
         Tool-tip x, y, z at ``t + h`` (m) and spindle speed (rad/s).
     par : ndarray, shape (5, B)
         Radius (m), flutes, Kt (N/m2), Ke, angle steps per tooth.
-    st : ndarray, shape (7, B)
-        State (rows ``ST_*``), updated.
+    st : ndarray, shape (ST_ROWS, B)
+        State (rows ``ST_*``), updated; a member that is blanked or fails has its chip history cleared.
     out : ndarray, shape (12, B)
         Outputs (rows ``OUT_*``; forces on the **workpiece**), written.
     engaged : ndarray of int64, shape (B,)
@@ -669,6 +681,7 @@ def path_step(
         om = max(inp[3, m], 0.0)
         if not (math.isfinite(x1) and math.isfinite(y1) and math.isfinite(z1) and math.isfinite(om)):
             blank_member(out, engaged, m)  # an upstream failure: this member is out, the others go on
+            drop_history(st, m)
             continue
         radius = par[PAR_RADIUS, m]
         flutes = int(par[PAR_FLUTES, m])
@@ -680,13 +693,12 @@ def path_step(
         n = int(substeps(om, h, pitch, steps, move, radius))
         if n > max_substeps:
             bad += fail_member(status, out, engaged, m, ERR_SUBSTEPS)  # this member fails; the others go on
+            drop_history(st, m)
             continue
         if flutes != rot_flutes:  # tooth-to-tooth rotations, shared by members with the same flute count
             rot_c, rot_s = tooth_rotations(flutes, pitch)
             rot_flutes = flutes
-        period = TWO_PI / (flutes * max(om, OMEGA_FLOOR))
-        fxt = ddx / h * period
-        fyt = ddy / h * period
+        fxt, fyt = chord_feed(st[ST_HISTORY:, m], ddx, ddy, h, om, flutes)  # the tooth-period chord
         psi = math.atan2(fyt, fxt)
         theta0 = st[ST_THETA, m]
         span = om * h / n
@@ -781,9 +793,11 @@ def path_step(
                 f_end_x, f_end_y, d_end, h_end, n_end = fx, fy, dm, hm, ne
         if any_material and dist > tolerance:
             bad += fail_member(status, out, engaged, m, ERR_OFF_PATH)  # this member fails; the others go on
+            drop_history(st, m)
             continue
         if stalled_cut(om, peak, acc[0], acc[1]):
             bad += fail_member(status, out, engaged, m, ERR_STALLED)  # a crash: this member fails
+            drop_history(st, m)
             continue
         write_member(out, st, engaged, m, f_end_x, f_end_y, peak, acc, n, om, d_end, h_end, n_end, theta0, h,
                      x1, y1, z1, s1, seg, dist)

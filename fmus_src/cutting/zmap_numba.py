@@ -36,11 +36,12 @@ from ..jit import njit
 from ..jit_cache import guard_cache
 from . import engagement, kernel, stock
 from .engagement import RIM_TOL, SweptPath
-from .kernel import OMEGA_FLOOR, SECTION_ROUNDS, SECTIONS, StepResult, stalled_cut, substep_counts
+from .kernel import (H_COUNT, OMEGA_FLOOR, SECTION_ROUNDS, SECTIONS, StepResult, chord_advance, chord_feed,
+                     stalled_cut, substep_counts)
 from .stock import StockError, ZMapStock, sweep_cover_z
 
 #: Columns of the per-member float parameters of :func:`zmap_step`.
-MP_X0, MP_Y0, MP_Z0, MP_X1, MP_Y1, MP_Z1, MP_THETA, MP_OMEGA, MP_RADIUS, MP_KT, MP_KE = range(11)
+MP_X0, MP_Y0, MP_Z0, MP_X1, MP_Y1, MP_Z1, MP_THETA, MP_OMEGA, MP_RADIUS, MP_KT, MP_KE, MP_FX, MP_FY = range(13)
 #: Columns of the per-member integer parameters: row in stock / near field, substeps, teeth.
 MI_ROW, MI_SUBSTEPS, MI_FLUTES = range(3)
 #: Columns of the stock grid: block lower corner (x, y, z), cell size dx, dy, m.
@@ -169,9 +170,10 @@ def zmap_step(heights: np.ndarray, grid: np.ndarray, cells: np.ndarray, points: 
         Stored tool-tip path per stock row (ring buffer of :class:`.engagement.SweptPath`), m.
     head, count : ndarray of int64, shape (S,)
         First stored point and number of stored points per row.
-    mp : ndarray, shape (B, 11)
+    mp : ndarray, shape (B, 13)
         Per member: position at the start and end of the step (m), spindle angle (rad), spindle
-        speed (rad/s), tool radius (m), Kt (N/m2), Ke (1) (``MP_*`` columns).
+        speed (rad/s), tool radius (m), Kt (N/m2), Ke (1), feed per tooth vector (m, the
+        tooth-period chord, :func:`.kernel.chord_feed`) (``MP_*`` columns).
     mi : ndarray of int64, shape (B, 3)
         Per member: stock / near-field row, substeps (>= 1), teeth (``MI_*`` columns).
     h : float
@@ -196,9 +198,8 @@ def zmap_step(heights: np.ndarray, grid: np.ndarray, cells: np.ndarray, points: 
         # step_kinematics
         pitch = 2.0 * math.pi / np.float64(nt)
         wh = omega * h
-        period = 2.0 * math.pi / (np.float64(nt) * np.maximum(omega, OMEGA_FLOOR))
-        fx_t = dpx / h * period
-        fy_t = dpy / h * period
+        fx_t = mp[b, MP_FX]
+        fy_t = mp[b, MP_FY]
         phi = np.empty((n + 1, nt))
         hc = np.empty((n + 1, nt))
         depth = np.empty((n + 1, nt))
@@ -349,7 +350,7 @@ def _ring(path: SweptPath) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 def cut_step_compiled(
     zmap: ZMapArrays, path: SweptPath, p_old: np.ndarray, p_new: np.ndarray, theta0: np.ndarray,
     omega: np.ndarray, h: float, n: int | np.ndarray, radius: np.ndarray, flutes: np.ndarray, kt: np.ndarray,
-    ke: np.ndarray, rows: np.ndarray | None = None,
+    ke: np.ndarray, rows: np.ndarray | None = None, feed: np.ndarray | None = None,
 ) -> StepResult:
     """:func:`.kernel.cut_step` through the compiled :func:`zmap_step` (same results).
 
@@ -359,9 +360,9 @@ def cut_step_compiled(
         Arrays of the committed stock (:meth:`ZMapArrays.of`).
     path : SweptPath
         Recent tool path (its near field is that of :meth:`.engagement.SweptPath.near_field`).
-    p_old, p_new, theta0, omega, h, n, radius, flutes, kt, ke, rows
+    p_old, p_new, theta0, omega, h, n, radius, flutes, kt, ke, rows, feed
         As :func:`.kernel.cut_step` (positions m, angles rad, speeds rad/s,
-        ``kt`` N/m2; shapes (B, 3) and (B,)); ``rows`` index ``zmap`` and ``path``.
+        ``kt`` N/m2; shapes (B, 3) and (B,), ``feed`` (B, 2) m); ``rows`` index ``zmap`` and ``path``.
 
     Returns
     -------
@@ -373,7 +374,11 @@ def cut_step_compiled(
     ns = n if isinstance(n, np.ndarray) and n.dtype == np.int64 and n.shape == (B,) else substep_counts(n, B)
     if B and ns.min() < 1:
         raise CncTwinError(f"compiled cutting kernel: substep counts must be integers >= 1, got {ns.min()}")
-    mp = np.empty((B, 11))
+    if feed is None:  # kernel.step_kinematics' default: the step velocity times the tooth period
+        period = 2.0 * math.pi / (flutes * np.maximum(omega, OMEGA_FLOOR))
+        feed = (p_new - p_old)[:, :2] / h * period[:, None]
+    mp = np.empty((B, 13))
+    mp[:, MP_FX:MP_FY + 1] = feed
     mp[:, MP_X0:MP_Z0 + 1] = p_old
     mp[:, MP_X1:MP_Z1 + 1] = p_new
     mp[:, MP_THETA] = theta0
@@ -457,8 +462,8 @@ def commit_rows(heights: np.ndarray, grid: np.ndarray, cells: np.ndarray, rho: n
         Ring buffer start and fill (modified).
     spacing, lag : ndarray, shape (B,)
         Minimum XY distance between stored points and near-field length, m.
-    position : ndarray, shape (B, 3)
-        Tool-tip position at the end of the step, m.
+    position : ndarray, shape (B, >= 3)
+        Tool-tip position at the end of the step (first three columns), m.
     radius : ndarray, shape (B,)
         Tool radius, m.
     """
@@ -563,8 +568,10 @@ def zmap_component_step(
         As :class:`ZMapArrays` (``heights`` modified).
     points, arc, head, count, spacing, lag
         Ring buffer of the :class:`.engagement.SweptPath` (first four modified), as :func:`commit_rows`.
-    p_prev : ndarray, shape (B, 3)
-        Tool-tip position at the start of the step, m (set to the end position).
+    p_prev : ndarray, shape (B, 3 + CHIP_HISTORY_WIDTH)
+        Motion state (``CuttingLoad._motion``): tool-tip position at the start of the step, m (set to
+        the end position), then the chip history (:func:`.kernel.chord_advance`; cleared for held
+        members).
     theta : ndarray, shape (B,)
         Spindle angle of tooth 0 in ``[0, 2 pi)``, rad (advanced).
     radius, flutes, steps, kt, ke : ndarray, shape (B,)
@@ -588,7 +595,7 @@ def zmap_component_step(
     """
     B = io.shape[1]
     two_pi = 2.0 * math.pi
-    mp = np.empty((1, 11))
+    mp = np.empty((1, 13))
     mi = np.empty((1, 3), dtype=np.int64)
     out = np.empty((1, 10))
     n_bad = 0
@@ -640,6 +647,8 @@ def zmap_component_step(
             mp[0, MP_RADIUS] = radius[b]
             mp[0, MP_KT] = kt[b]
             mp[0, MP_KE] = ke[b]
+            mp[0, MP_FX], mp[0, MP_FY] = chord_feed(p_prev[b, 3:], px - p_prev[b, 0], py - p_prev[b, 1], h, omega,
+                                                    flutes[b])
             mi[0, MI_ROW] = b
             mi[0, MI_SUBSTEPS] = n
             mi[0, MI_FLUTES] = flutes[b]
@@ -672,6 +681,10 @@ def zmap_component_step(
         io[IO_VIBX, b] = 0.0
         io[IO_VIBY, b] = 0.0
         io[IO_TIME, b] = cutting_time[b]
+        if hold:  # chip history: CuttingLoad._do_step's chord_advance_all
+            p_prev[b, 3 + H_COUNT] = 0.0
+        else:
+            chord_advance(p_prev[b, 3:], h, px - p_prev[b, 0], py - p_prev[b, 1], omega)
         p_prev[b, 0] = px
         p_prev[b, 1] = py
         p_prev[b, 2] = pz

@@ -371,7 +371,7 @@ class Layout:
         c = self._zmap_comp
         st = c._effect_state  # noqa: SLF001
         own = (c._zmap.heights, c.path.points, c.path.arc, c.path.head, c.path.count,  # noqa: SLF001
-               c._p_prev, c._theta, st.cutting_time, st.torque, st.angle)  # noqa: SLF001
+               c._motion, c._theta, st.cutting_time, st.torque, st.angle)  # noqa: SLF001
         shared = tuple(self.zmap[i] for i in (0, 4, 5, 6, 7, 10, 11, 17, 18, 19))
         if any(a is not b for a, b in zip(own, shared)):
             raise CncTwinError(f"compiled loop: {c.name} replaced an array the loop shares with it "

@@ -20,12 +20,15 @@ are not mistaken for cutting physics.
 * **Chip over one tooth period**: a tooth cuts what the previous tooth left,
   so the feed per tooth at the instant ``t`` is the tool-centre displacement
   ``c(t) - c(t - T)`` over the last tooth period ``T`` (Altintas ch. 2; the
-  independent truth's definition). The component takes it as its step's
+  independent truth's definition). The component took it as its step's
   velocity times ``T``, which is the same at a constant feed but not where
   the feed changes within ``T``: a cut that stops in the material (the
   deceleration at the end of a slot, blended into the retract) loses
   ``a T (T - h) / 2`` of chip, 6-10 % of the force over the last 30 ms of a
-  2-flute (T = 5 ms) side pass at 1 ms samples. Each sample step is therefore
+  2-flute (T = 5 ms) side pass at 1 ms samples. The component now walks back
+  ``T`` through its own step history (:func:`fmus_src.cutting.kernel.chord_feed`)
+  and gives the same chip; the split below, made before that, is kept (it
+  changes nothing measurable). Each sample step is
   split (:data:`CHIP_STEP_FRACTION`): the component is stepped to just before
   the sample, then over a last short step whose displacement is the
   tooth-period chord scaled to that step, so the force at the sample (an
@@ -231,7 +234,8 @@ def run_force_replay(case: Case, table: EngagementTable, inputs: ForceInputs,
         spindle by ``step_omega[k] (t[k+1] - t[k])`` over step ``k``.
     tooth_period_chip : bool
         Split each step so that the force at the sample has the chip of the last tooth period (module
-        docstring); False: the component's own chip, its step velocity times the tooth period.
+        docstring); False: the component's own chip (the chord over its step history, the same up to
+        round-off).
     """
     batch = len(members)
     params = cutting_parameters(case)
