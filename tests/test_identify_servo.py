@@ -203,3 +203,28 @@ def test_a_log_taken_while_cutting_replays_the_twins_drive_load(tmp_path):
     # its path and so its load a little (measured: Spp +0.06 %, Svp -0.7 %, Svi +1.2 %)
     assert fit.scales_["x"] == pytest.approx({"Spp": 1.2, "Svp": 0.8, "Svi": 1.1}, rel=0.02)
     assert fit.rms_["x"]["current_A"] < 1.2 * CURRENT_NOISE_A
+
+
+def test_a_stock_the_program_never_cuts_needs_no_alignment(servo_case, tmp_path, monkeypatch):
+    """An air run (the servo experiment) in a case with a [stock] far from its path: the drives carried no load,
+    so a log the diagnosis's alignment cannot place is identified as before, not refused."""
+    import shutil
+
+    import orchestrator.diagnose.prepare as prepare_module
+    from orchestrator.diagnose.errors import DiagnosisError
+
+    folder, clean, _ = servo_case
+    air = tmp_path / "air"
+    shutil.copytree(folder, air)
+    degrade(clean, Imperfections(), seed=21).write_csv(air / "recording.csv")
+    (air / "case.toml").write_text((air / "case.toml").read_text()
+                                   + "\n[stock]\nmin = [0.0, 0.0, -600.0]\nmax = [10.0, 10.0, -590.0]\n")
+
+    def cannot_align(*args, **kwargs):
+        raise DiagnosisError("cannot align")
+
+    monkeypatch.setattr(prepare_module, "prepare", cannot_align)
+    fit = identify_servo([air], machine=known_machine())
+    assert fit.commands_ == {"air": "recorded"}
+    for key, value in TRUE_SCALES.items():
+        assert fit.scales_["x"][SYMBOL[key]] == pytest.approx(value, rel=0.05), fit.scales_

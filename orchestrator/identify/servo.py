@@ -229,8 +229,8 @@ def _cutting_load(d: CaseData, machine: Machine, axes: list[str]) -> tuple[dict 
     ``f(t)`` takes logger-clock times [s] and gives the force on the workpiece [N].
     """
     from ..diagnose.errors import DiagnosisError  # local: only cutting logs need the diagnosis's alignment
+    from ..diagnose.prepare import predicted_forces, recorded_forces
     from ..diagnose.prepare import prepare as align_with_twin
-    from ..diagnose.prepare import recorded_forces
 
     recorded = recorded_forces(d.recording)
     if recorded is not None:
@@ -240,6 +240,8 @@ def _cutting_load(d: CaseData, machine: Machine, axes: list[str]) -> tuple[dict 
     try:
         prep = align_with_twin(d.case, d.recording, machine, axes=list(axes))
     except DiagnosisError as exc:
+        if predicted_forces(d.case, machine, lambda: 0.0) is None:
+            return None, "none"          # the program never cuts the stock: an air run, nothing to place
         raise IdentificationError(
             f"{d.source}: the case has a [stock], so the drives carried the cutting load of {d.case.program}; "
             f"the log cannot be aligned with the twin's run to place the predicted forces: {exc}; record "
