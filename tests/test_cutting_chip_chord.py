@@ -10,8 +10,8 @@ step velocity times ``T`` by ``a T (T - h) / 2``. Checked:
 * the Z-map component's force on a decelerating full slot against the closed form ``Kt a h_chord sin(phi)
   sqrt(1 + Ke^2)`` (one tooth of two in the slot), with the numpy and the compiled kernels bit-identical
   and a member's figures those of its solo run;
-* the path-mode component (driven along the motion without the diagnosis replay's step split) against the
-  independent truth (:mod:`orchestrator.diagnose.truth_cutting`) on a slot that stops in the material.
+* the path-mode component against the independent truth on a slot that stops in the material: in
+  ``tests/test_diagnose_cutting_two_flutes.py`` (the diagnosis replay without its step split).
 """
 from __future__ import annotations
 
@@ -23,11 +23,6 @@ import pytest
 from fmus_src.cutting import CuttingLoad
 from fmus_src.cutting.kernel import (CHIP_HISTORY_WIDTH, H_COUNT, chord_advance, chord_advance_all, chord_feed,
                                      chord_feeds)
-from fmus_src.cutting.table import build_engagement_table
-from orchestrator.case import load_case
-from orchestrator.diagnose.cutting_case import CASE_TOML, SHORT_PROGRAM
-from orchestrator.diagnose.cutting_replay import ForceInputs, run_force_replay
-from orchestrator.diagnose.truth_cutting import cutting_parameters_packed, simulate_cutting
 
 OMEGA = 6000 * 2 * math.pi / 60  # rad/s
 PERIOD = 2 * math.pi / (2 * OMEGA)  # 2 flutes: 5 ms
@@ -162,39 +157,3 @@ def test_zmap_chip_history_numpy_and_compiled_bit_identical_members_independent(
         np.testing.assert_array_equal(runs[compiled][..., 1], np.array(alone)[..., 0])
     np.testing.assert_array_equal(runs[False], runs[True])
     assert np.abs(runs[True][:, 0]).max() > 50.0  # it did cut
-
-
-def test_path_mode_force_at_a_stop_in_the_material_is_the_truths(tmp_path):
-    # the diagnosis replay's decelerating slot (tests/test_diagnose_cutting_two_flutes.py), driven without the
-    # replay's step split: the component's own chip is now the truth's (c(t) - c(t - T) on its 20 us grid)
-    two_flutes = CASE_TOML.replace("flutes = 3", "flutes = 2")
-    (tmp_path / "program.nc").write_text(SHORT_PROGRAM)
-    (tmp_path / "case.toml").write_text(two_flutes.replace('recording = "recording.csv"\n', ""))
-    case = load_case(tmp_path)
-    path = np.array([[-0.004, 0.01, -0.002], [0.012, 0.01, -0.002]])
-    table = build_engagement_table(path, 6e-3, [0.0, 0.0, -0.006], [0.016, 0.02, 0.0], 2e-5)
-    v, t_stop, x_stop = 7.5e-3, 0.04, 0.006
-    t_dec = 1.0 - t_stop
-    x0 = x_stop - v * t_dec - 0.5 * v * t_stop
-
-    def x_of(t):
-        a = v / t_stop
-        return np.where(t < t_dec, x0 + v * t, x0 + v * t_dec + v * (t - t_dec) - 0.5 * a * (t - t_dec) ** 2)
-
-    t_f = np.arange(0.0, 1.0, 20e-6)
-    pos = np.column_stack([x_of(t_f), np.full_like(t_f, 0.01), np.full_like(t_f, -0.002)])
-    packed = cutting_parameters_packed(case.machine, case.material, 6e-3, 2, None, 0.3)
-    run = simulate_cutting(table, t_f, pos, np.full(t_f.size, OMEGA), packed)
-    ts = np.arange(0.9, 1.0 + 1e-9, 1e-3)
-    inputs = ForceInputs(ts, np.column_stack([x_of(ts), np.full_like(ts, 0.01), np.full_like(ts, -0.002)]),
-                         np.full(ts.size, OMEGA), "spindle_rpm")
-    theta = float(np.interp(ts[0], t_f, run.theta)) % (2 * math.pi)
-    sim = run_force_replay(case, table, inputs, [{}], theta, tooth_period_chip=False)
-    fx, fy = np.interp(ts, t_f, run.fx), np.interp(ts, t_f, run.fy)
-    peak = float(np.hypot(fx, fy).max())
-    assert peak > 80.0
-    err = np.hypot(sim.fx[:, 0] - fx, sim.fy[:, 0] - fy)
-    # once the component's history spans T (from ts[0] + T): the deceleration, where v T would be 5-10 % low
-    dec = (ts > t_dec + PERIOD) & (ts < 1.0 - 1e-9)
-    assert dec.sum() > 30
-    assert np.abs(err[dec]).max() < 1e-6 * peak, err[dec]
