@@ -20,21 +20,9 @@ are not mistaken for cutting physics.
 * **Chip over one tooth period**: a tooth cuts what the previous tooth left,
   so the feed per tooth at the instant ``t`` is the tool-centre displacement
   ``c(t) - c(t - T)`` over the last tooth period ``T`` (Altintas ch. 2; the
-  independent truth's definition). The component took it as its step's
-  velocity times ``T``, which is the same at a constant feed but not where
-  the feed changes within ``T``: a cut that stops in the material (the
-  deceleration at the end of a slot, blended into the retract) loses
-  ``a T (T - h) / 2`` of chip, 6-10 % of the force over the last 30 ms of a
-  2-flute (T = 5 ms) side pass at 1 ms samples. The component now walks back
-  ``T`` through its own step history (:func:`fmus_src.cutting.kernel.chord_feed`)
-  and gives the same chip; the split below, made before that, is kept (it
-  changes nothing measurable). Each sample step is
-  split (:data:`CHIP_STEP_FRACTION`): the component is stepped to just before
-  the sample, then over a last short step whose displacement is the
-  tooth-period chord scaled to that step, so the force at the sample (an
-  instantaneous output) has the tooth-period chip while the spindle angle and
-  the tool position at the sample are unchanged; ``spindle_torque`` is the
-  time-weighted mean of both parts.
+  independent truth's definition). The component takes it so from its own
+  record of the steps (:func:`fmus_src.cutting.kernel.chord_feed`), also
+  where the feed changes within ``T`` (a cut that stops in the material).
 """
 from __future__ import annotations
 
@@ -60,10 +48,6 @@ from .replay import interpolate_command
 SMOOTH_S = 0.02
 #: Grid of the smoothing, s.
 SMOOTH_GRID_S = 1e-3
-#: Length of the last short step of each sample step (see the module docstring), relative to the step; its
-#: displacement (the tooth-period chord times this over ``T``, ~10 nm) is still far above the rounding of
-#: positions (~1e-18 m).
-CHIP_STEP_FRACTION = 1e-3
 #: Largest distance of the recorded tool path from the program's path where it cuts, m (the replay
 #: follows the recorded motion; a vibrating tool may leave the nominal path by more than the twin's default).
 PATH_TOLERANCE = 2e-3
@@ -177,45 +161,9 @@ def step_speeds(inputs: ForceInputs) -> np.ndarray:
     return 0.5 * (om[:-1] + om[1:])
 
 
-def tooth_period_chords(inputs: ForceInputs, step_omega: np.ndarray, flutes: int
-                        ) -> tuple[np.ndarray, np.ndarray]:
-    """Where each sample step is split, and the tool position at the start of its last short step.
-
-    Parameters
-    ----------
-    inputs : ForceInputs
-    step_omega : ndarray, shape (n - 1,)
-        Spindle speed of each step, rad/s.
-    flutes : int
-
-    Returns
-    -------
-    split : ndarray of bool, shape (n - 1,)
-        Steps whose sample has a tooth period ``T = 2 pi / (flutes omega)`` of recorded path behind it
-        (the first ``T`` of the recording and a standing spindle keep the plain step).
-    before : ndarray, shape (n - 1, 3)
-        Tool position at ``t_(k+1) - f h``: ``c(t_(k+1)) - (c(t_(k+1)) - c(t_(k+1) - T)) f h / T`` in x and y
-        (z linear over the step), ``f`` = :data:`CHIP_STEP_FRACTION`, m.
-    """
-    t, p = inputs.t, inputs.position
-    om = np.asarray(step_omega, float)
-    period = np.where(om > 1e-6, 2.0 * math.pi / (max(flutes, 1) * np.maximum(om, 1e-6)), np.inf)
-    t1 = t[1:]
-    back = t1 - period
-    split = np.isfinite(period) & (back >= t[0])
-    h = np.diff(t)
-    frac = np.where(split, CHIP_STEP_FRACTION * h / np.where(split, period, 1.0), 0.0)
-    before = p[1:].copy()
-    for i in range(2):
-        chord = p[1:, i] - np.interp(np.where(split, back, t1), t, p[:, i])
-        before[:, i] -= chord * frac
-    before[:, 2] -= (p[1:, 2] - p[:-1, 2]) * CHIP_STEP_FRACTION
-    return split, before
-
-
 def run_force_replay(case: Case, table: EngagementTable, inputs: ForceInputs,
                      members: Sequence[Mapping[str, float]], theta0: float | np.ndarray,
-                     step_omega: np.ndarray | None = None, tooth_period_chip: bool = True) -> ForceReplay:
+                     step_omega: np.ndarray | None = None) -> ForceReplay:
     """Step the twin's path-mode cutting load along the recorded motion, one member per parameter set.
 
     Parameters
@@ -232,10 +180,6 @@ def run_force_replay(case: Case, table: EngagementTable, inputs: ForceInputs,
     step_omega : ndarray, shape (n - 1,), optional
         Spindle speed input of each step (default :func:`step_speeds`); the component turns the
         spindle by ``step_omega[k] (t[k+1] - t[k])`` over step ``k``.
-    tooth_period_chip : bool
-        Split each step so that the force at the sample has the chip of the last tooth period (module
-        docstring); False: the component's own chip (the chord over its step history, the same up to
-        round-off).
     """
     batch = len(members)
     params = cutting_parameters(case)
@@ -263,28 +207,17 @@ def run_force_replay(case: Case, table: EngagementTable, inputs: ForceInputs,
     v = comp.values
     has_actual = "spindle_speed_actual" in v
     out["omega"][0] = inputs.omega[0]
-    split, before = tooth_period_chords(inputs, om, int(case.tool.flutes))
-    split &= tooth_period_chip
     for k in range(n - 1):
-        h = float(t[k + 1] - t[k])
+        for i, a in enumerate("xyz"):
+            v[f"{a}_position"][...] = p[k + 1, i]
+        v["spindle_speed"][...] = om[k]
         try:
-            v["spindle_speed"][...] = om[k]
-            torque_a = 0.0
-            h_b = h
-            if split[k]:  # to just before the sample; the last short step carries the tooth-period chip
-                h_b = CHIP_STEP_FRACTION * h
-                for i, a in enumerate("xyz"):
-                    v[f"{a}_position"][...] = before[k, i]
-                comp.do_step(float(t[k]), h - h_b)
-                torque_a = v["spindle_torque"] * ((h - h_b) / h)
-            for i, a in enumerate("xyz"):
-                v[f"{a}_position"][...] = p[k + 1, i]
-            comp.do_step(float(t[k + 1] - h_b), h_b)
+            comp.do_step(float(t[k]), float(t[k + 1] - t[k]))
         except CuttingError as exc:
             raise DiagnosisError(f"cutting replay at t = {t[k + 1]:.4f} s (logger clock): {exc}") from None
         out["fx"][k + 1] = v["fx"]
         out["fy"][k + 1] = v["fy"]
-        out["spindle_torque"][k + 1] = torque_a + v["spindle_torque"] * (h_b / h)
+        out["spindle_torque"][k + 1] = v["spindle_torque"]
         out["engaged_teeth"][k + 1] = v["engaged_teeth"]
         out["axial_depth"][k + 1] = v["axial_depth"]
         out["omega"][k + 1] = v["spindle_speed_actual"] if has_actual else om[k]
