@@ -8,24 +8,38 @@ from __future__ import annotations
 import json
 import os
 import tempfile
+from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO, Iterator
 
 
-def atomic_write_bytes(path: Path, data: bytes) -> Path:
-    """Write ``data`` to ``path`` atomically; create parent folders. Returns ``path``."""
+@contextmanager
+def atomic_writer(path: Path) -> Iterator[BinaryIO]:
+    """A binary handle whose content replaces ``path`` when the ``with`` block ends without an exception.
+
+    The content goes to a temporary file in the same folder (parent folders are created), is flushed and
+    fsync'ed, then renamed over ``path``; on any exception (or a kill) the temporary file is removed and
+    ``path`` is untouched. For content written in pieces, e.g. a large recording.
+    """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
         with os.fdopen(fd, "wb") as handle:
-            handle.write(data)
+            yield handle
             handle.flush()
             os.fsync(handle.fileno())
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+def atomic_write_bytes(path: Path, data: bytes) -> Path:
+    """Write ``data`` to ``path`` atomically; create parent folders. Returns ``path``."""
+    path = Path(path)
+    with atomic_writer(path) as handle:
+        handle.write(data)
     return path
 
 

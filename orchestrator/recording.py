@@ -11,12 +11,6 @@ recording.
 """
 from __future__ import annotations
 
-import csv
-import io
-import logging
-import math
-import re
-from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Iterable, Mapping
@@ -25,8 +19,8 @@ import numpy as np
 
 from fmus_src.units import split_unit_suffix
 
-from .atomic import atomic_write_text
 from .errors import CncTwinError
+from .recording_csv import RecordingError, read_table, table_text, write_table
 
 #: Columns defined by the recording contract, with their units.
 SPEC_COLUMNS: dict[str, str] = {
@@ -40,27 +34,6 @@ SPEC_COLUMNS: dict[str, str] = {
     **{f"f{a}_N": "N" for a in "xyz"},
     "fc_N": "N",
 }
-
-
-_log = logging.getLogger(__name__)
-#: A plain decimal number: sign, digits with ``.`` as the decimal point, optional exponent (as written by
-#: loggers and by :meth:`Recording.to_csv_text`); no thousands separators, underscores, hex, NaN or infinity.
-_DECIMAL = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?")
-
-
-def _cell_problem(cell: str) -> str | None:
-    """Why a stripped, non-empty CSV cell is not a plain finite decimal number (None when it is one)."""
-    if _DECIMAL.fullmatch(cell) is None:
-        if cell.lower().lstrip("+-") in ("nan", "inf", "infinity"):
-            return "; write an empty cell for 'not measured'"
-        return " is not a plain decimal number"
-    if not math.isfinite(float(cell)):
-        return " is beyond the floating-point range; write an empty cell for 'not measured'"
-    return None
-
-
-class RecordingError(CncTwinError):
-    """A recording file or object does not follow the recording contract."""
 
 
 def unit_of_column(name: str) -> str:
@@ -229,27 +202,18 @@ class Recording:
 
     # ------------------------------------------------------------------ CSV
     def to_csv_text(self) -> str:
-        """CSV text per the recording contract (empty cell for NaN)."""
-        if self.batch != 1 or any(self.data.dtype[n].shape for n in self.channels):
-            raise RecordingError("only a single-member recording can be written as CSV; use member(b)")
-        buffer = io.StringIO()
-        buffer.write(",".join(self.channels) + "\n")
-        columns = []
-        for name in self.channels:
-            col = self.data[name]
-            if name == "line":
-                cells = ["" if math.isnan(v) else str(int(v)) for v in col.tolist()]
-            else:
-                cells = ["" if math.isnan(v) else f"{v:.12g}" for v in col.tolist()]
-            columns.append(cells)
-        for row in zip(*columns):
-            buffer.write(",".join(row))
-            buffer.write("\n")
-        return buffer.getvalue()
+        """CSV text per the recording contract (empty cell for NaN, ``%.12g``, ``line`` as an integer)."""
+        self._check_single()
+        return table_text(self.channels, [self.data[n] for n in self.channels], integer=("line",))
 
     def write_csv(self, path: str | Path) -> Path:
-        """Write the recording as CSV atomically (temp file + rename)."""
-        return atomic_write_text(Path(path), self.to_csv_text())
+        """Write the recording as CSV atomically (temp file + rename), in chunks of text."""
+        self._check_single()
+        return write_table(Path(path), self.channels, [self.data[n] for n in self.channels], integer=("line",))
+
+    def _check_single(self) -> None:
+        if self.batch != 1 or any(self.data.dtype[n].shape for n in self.channels):
+            raise RecordingError("only a single-member recording can be written as CSV; use member(b)")
 
     @classmethod
     def read_csv(cls, path: str | Path, required: Iterable[str] = ()) -> "Recording":
@@ -281,55 +245,12 @@ class Recording:
         (a trailing comma) are not cells.
         """
         path = Path(path)
-        if not path.is_file():
-            raise RecordingError(f"{path}: recording file not found")
-        try:
-            text = path.read_text(encoding="utf-8-sig")
-        except UnicodeDecodeError as exc:
-            raise RecordingError(f"{path}: not a UTF-8 text file ({exc.reason} at byte {exc.start})") from None
-        rows = list(csv.reader(io.StringIO(text)))
-        if not rows or not any(cell.strip() for cell in rows[0]):
-            raise RecordingError(f"{path}:1: empty file; expected a header row with column names, 't_s' first")
-        header = [cell.strip() for cell in rows[0]]
-        if "t_s" not in header:
-            separator = next((name for sep, name in (("\t", "tabs"), (";", "';'"), ("|", "'|'"))
-                              if len(header) == 1 and sep in header[0]), None)
-            hint = (f": its columns are separated by {separator}; recording.md asks for ',' (and '.' as the "
-                    "decimal point)") if separator else ""
-            raise RecordingError(f"{path}:1: no 't_s' column; header is {header}{hint}")
-        counts = Counter(header)
-        for name in header:
-            if name in SPEC_COLUMNS and counts[name] > 1:
-                raise RecordingError(f"{path}:1: column {name!r} appears twice")
-        missing = [c for c in required if c not in header]
-        if missing:
-            raise RecordingError(f"{path}:1: missing column(s) {missing} needed here; header is {header}")
-        # Extra columns are kept when every cell is a number and ignored otherwise (recording.md); columns
-        # without a name (a trailing comma) and repeated unknown names are extra columns nobody can name.
-        ignored = {j for j, name in enumerate(header) if not name or counts[name] > 1}
-        body = [(i + 2, r) for i, r in enumerate(rows[1:]) if any(cell.strip() for cell in r)]
-        values = np.full((len(body), len(header)), np.nan)
-        for k, (lineno, row) in enumerate(body):
-            if len(row) > len(header) and not any(cell.strip() for cell in row[len(header):]):
-                row = row[: len(header)]  # empty cells after the last column (a trailing comma)
-            if len(row) != len(header):
-                raise RecordingError(f"{path}:{lineno}: {len(row)} cells, header has {len(header)} columns")
-            for j, cell in enumerate(row):
-                cell = cell.strip()
-                if not cell or j in ignored:
-                    continue
-                problem = _cell_problem(cell)
-                if problem is None:
-                    values[k, j] = float(cell)
-                elif header[j] in SPEC_COLUMNS:
-                    raise RecordingError(f"{path}:{lineno}: column {header[j]!r}: {cell!r}{problem}")
-                else:
-                    ignored.add(j)
-                    _log.info("%s:%d: extra column %r ignored: %r%s", path, lineno, header[j], cell, problem)
+        table = read_table(path, SPEC_COLUMNS, required)
+        header, values, ignored = table.header, table.values, table.ignored
         it = header.index("t_s")
         t = values[:, it]
         if np.isnan(t).any():
-            bad = body[int(np.flatnonzero(np.isnan(t))[0])][0]
+            bad = int(table.lines[int(np.flatnonzero(np.isnan(t))[0])])
             raise RecordingError(f"{path}:{bad}: empty t_s; every row needs a time")
         if len(t) > 1:
             steps = np.diff(t)
@@ -337,7 +258,7 @@ class Recording:
                 k = int(np.flatnonzero(steps <= 0)[0]) + 1
                 what = "repeats" if steps[k - 1] == 0 else "goes back"
                 raise RecordingError(
-                    f"{path}:{body[k][0]}: t_s {what} ({float(t[k - 1])!r} then {float(t[k])!r}); rows must be in strictly increasing time"
+                    f"{path}:{int(table.lines[k])}: t_s {what} ({float(t[k - 1])!r} then {float(t[k])!r}); rows must be in strictly increasing time"
                 )
         order = [it] + [j for j in range(len(header)) if j != it and j not in ignored]
         channels = {header[j]: values[:, j] for j in order}

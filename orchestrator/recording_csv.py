@@ -1,0 +1,346 @@
+"""Recording CSV files, read and written in chunks: memory bounded by the table, not by its text.
+
+A 1 kHz machine log of a 30 min program has 1.8 million rows. Reading it as one list of Python strings took
+about 13 bytes of memory per byte of file (a 114 MB recording: 1.4 GB and 17 s); this module reads and writes
+``CHUNK_BYTES`` of text at a time, so memory is the float table (8 bytes per cell) plus one chunk.
+
+Reading
+-------
+Every chunk of lines is first tried on the *fast path*: one regular expression per line checks that the line
+has exactly the header's cells (then, optionally, empty cells after the last column: a trailing comma), each a
+plain decimal number or empty, with ``t_s`` not empty, blanks and tabs allowed around a number. A chunk whose
+lines all match is converted by numpy in one call (empty cell -> NaN). Any other chunk (a quoted cell, a word in
+an extra column, a bad number, a blank line, a row with another number of cells) goes to the *strict path*:
+:mod:`csv` row by row, with the checks and messages of :meth:`Recording.read_csv`. Both paths accept and reject
+the same files and give the same numbers (``float`` of the cell: correctly rounded).
+
+Writing
+-------
+Rows are formatted with ``%.12g`` per cell (``line`` truncated to an integer) in chunks and streamed into the
+temporary file of :func:`orchestrator.atomic.atomic_writer`, so nothing half-written ever has the target's name.
+"""
+from __future__ import annotations
+
+import csv
+import logging
+import math
+import re
+from dataclasses import dataclass
+from operator import itemgetter
+from pathlib import Path
+from typing import IO, Iterable, Iterator, Sequence
+
+import numpy as np
+
+from .atomic import atomic_writer
+from .errors import CncTwinError
+
+_log = logging.getLogger(__name__)
+
+#: Text read or written per chunk, characters.
+CHUNK_BYTES = 4 << 20
+#: A plain decimal number: sign, digits with ``.`` as the decimal point, optional exponent (as written by
+#: loggers and by :func:`write_table`); no thousands separators, underscores, hex, NaN or infinity.
+DECIMAL = r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?"
+_DECIMAL_RE = re.compile(DECIMAL)
+_BLANKS = str.maketrans("", "", " \t")
+#: The characters of lines of plain numbers.
+_NUMBER_CHARACTERS = b"0123456789eE+-., \t\r\n"
+#: Blanks between two characters of numbers: one cell written as two numbers ('1 2').
+_BLANK_INSIDE = re.compile(r"[0-9.eE+\-][ \t]+[0-9.eE+\-]")
+
+
+def _fill_empty(text: str) -> str:
+    """Comma-separated cells without blanks, with 'nan' in every empty cell."""
+    text = text.replace(",,", ",nan,").replace(",,", ",nan,")
+    if text.startswith(","):
+        text = "nan" + text
+    if text.endswith(","):
+        text += "nan"
+    return text or "nan"
+
+
+class RecordingError(CncTwinError):
+    """A recording file or object does not follow the recording contract."""
+
+
+def cell_problem(cell: str) -> str | None:
+    """Why a stripped, non-empty CSV cell is not a plain finite decimal number (None when it is one)."""
+    if _DECIMAL_RE.fullmatch(cell) is None:
+        if cell.lower().lstrip("+-") in ("nan", "inf", "infinity"):
+            return "; write an empty cell for 'not measured'"
+        return " is not a plain decimal number"
+    if not math.isfinite(float(cell)):
+        return " is beyond the floating-point range; write an empty cell for 'not measured'"
+    return None
+
+
+@dataclass
+class Table:
+    """The body of a recording CSV.
+
+    Attributes
+    ----------
+    header : list of str
+        Column names, stripped, in file order.
+    values : ndarray (n, len(header))
+        Cell values; NaN for an empty cell and in ignored columns.
+    ignored : set of int
+        Columns that are not read (no name, an unknown name twice, or an extra column with a non-number).
+    lines : ndarray of int (n,)
+        File line number (1-based) of every row.
+    """
+
+    header: list[str]
+    values: np.ndarray
+    ignored: set[int]
+    lines: np.ndarray
+
+
+def read_table(path: Path, contract: Iterable[str], required: Iterable[str] = ()) -> Table:
+    """Read a recording CSV into a float table, checking the header and every cell.
+
+    Parameters
+    ----------
+    path : Path
+        The CSV file.
+    contract : iterable of str
+        Column names the recording contract defines (a bad cell there is an error; in another column it makes
+        the column ignored).
+    required : iterable of str
+        Columns the caller needs besides ``t_s``.
+
+    Raises
+    ------
+    RecordingError
+        As listed in :meth:`orchestrator.recording.Recording.read_csv`, naming the file, line and column.
+    """
+    contract = set(contract)
+    if not path.is_file():
+        raise RecordingError(f"{path}: recording file not found")
+    with open(path, encoding="utf-8-sig", newline="") as handle:
+        reader = _LineReader(path, handle)
+        first = reader.header_line()
+        header = [cell.strip() for cell in next(csv.reader([first]), [])]
+        _check_header(path, header, contract, required)
+        counts = {name: header.count(name) for name in header}
+        ignored = {j for j, name in enumerate(header) if not name or counts[name] > 1}
+        parser = _ChunkParser(path, header, contract, ignored)
+        chunks: list[np.ndarray] = []
+        line_numbers: list[np.ndarray] = []
+        for first_line, lines in reader.chunks():
+            values, numbers = parser.parse(first_line, lines)
+            chunks.append(values)
+            line_numbers.append(numbers)
+    values = np.concatenate(chunks) if chunks else np.empty((0, len(header)))
+    numbers = np.concatenate(line_numbers) if line_numbers else np.empty(0, dtype=np.int64)
+    return Table(header, values, parser.ignored, numbers)
+
+
+def _check_header(path: Path, header: list[str], contract: set[str], required: Iterable[str]) -> None:
+    """Raise RecordingError for an empty header, no ``t_s``, a contract column twice or a required one missing."""
+    if not any(header):
+        raise RecordingError(f"{path}:1: empty file; expected a header row with column names, 't_s' first")
+    if "t_s" not in header:
+        separator = next((name for sep, name in (("\t", "tabs"), (";", "';'"), ("|", "'|'"))
+                          if len(header) == 1 and sep in header[0]), None)
+        hint = (f": its columns are separated by {separator}; recording.md asks for ',' (and '.' as the "
+                "decimal point)") if separator else ""
+        raise RecordingError(f"{path}:1: no 't_s' column; header is {header}{hint}")
+    for name in header:
+        if name in contract and header.count(name) > 1:
+            raise RecordingError(f"{path}:1: column {name!r} appears twice")
+    missing = [c for c in required if c not in header]
+    if missing:
+        raise RecordingError(f"{path}:1: missing column(s) {missing} needed here; header is {header}")
+
+
+class _LineReader:
+    """The lines of an open CSV file: the header line, then chunks of about CHUNK_BYTES characters."""
+
+    def __init__(self, path: Path, handle: IO[str]) -> None:
+        self.path = path
+        self.handle = handle
+        self.count = 0  # lines read so far
+
+    def _read(self, hint: int) -> list[str]:
+        try:
+            lines = self.handle.readlines(hint) if hint else [self.handle.readline()]
+        except UnicodeDecodeError as exc:
+            raise RecordingError(f"{self.path}: not a UTF-8 text file ({exc.reason} after line "
+                                 f"{self.count})") from None
+        return [line for line in lines if line]
+
+    def header_line(self) -> str:
+        lines = self._read(0)
+        if not lines:
+            raise RecordingError(f"{self.path}:1: empty file; expected a header row with column names, 't_s' first")
+        self.count = 1
+        return lines[0]
+
+    def chunks(self) -> Iterable[tuple[int, list[str]]]:
+        """``(line number of the first line, lines)`` until the end of the file."""
+        while True:
+            lines = self._read(CHUNK_BYTES)
+            if not lines:
+                return
+            yield self.count + 1, lines
+            self.count += len(lines)
+
+
+class _ChunkParser:
+    """Turns chunks of lines into rows of floats (fast path, else the strict row-by-row path)."""
+
+    def __init__(self, path: Path, header: list[str], contract: set[str], ignored: set[int]) -> None:
+        self.path = path
+        self.header = header
+        self.contract = contract
+        self.ignored = ignored
+        self._compile()
+
+    def _compile(self) -> None:
+        blank = r"[ \t]*"
+        number = f"({DECIMAL})"
+        cells = []
+        for j, name in enumerate(self.header):
+            if j in self.ignored:
+                cells.append(r"([^,\"\r\n]*)")
+            elif name == "t_s":
+                cells.append(blank + number + blank)
+            else:
+                cells.append(blank + f"((?:{DECIMAL})?)" + blank)
+        self._line = re.compile("(" + ",".join(cells) + r")(?:,[ \t]*)*(?:\r\n|\r|\n)?")
+        kept = [j for j in range(len(self.header)) if j not in self.ignored]
+        self._kept = kept
+        self._time = kept.index(self.header.index("t_s"))
+        # groups: 1 = the header's cells; 2.. = one per cell
+        self._pick = itemgetter(*[j + 1 for j in kept]) if len(kept) > 1 else None
+
+    def parse(self, first_line: int, lines: list[str]) -> tuple[np.ndarray, np.ndarray]:
+        """Rows of one chunk and their file line numbers."""
+        fast = self._fast(lines)
+        if fast is not None:
+            return fast, np.arange(first_line, first_line + len(lines), dtype=np.int64)
+        return self._strict(first_line, lines)
+
+    def _fast(self, lines: list[str]) -> np.ndarray | None:
+        """The chunk's rows when every line is plain numbers in the header's cells; None otherwise."""
+        if self.ignored:
+            return self._fast_with_ignored(lines)
+        raw = "".join(lines)
+        try:
+            data = raw.encode("ascii")
+        except UnicodeEncodeError:
+            return None
+        if data.translate(None, _NUMBER_CHARACTERS):  # something else than numbers, commas, blanks, line ends
+            return None
+        if (b" " in data or b"\t" in data) and _BLANK_INSIDE.search(raw):
+            return None
+        commas = len(self.header) - 1
+        if any(line.count(",") != commas for line in lines):
+            return None
+        text = ",".join([line.rstrip("\r\n") for line in lines]).translate(_BLANKS)
+        return self._numbers(_fill_empty(text), len(lines))
+
+    def _fast_with_ignored(self, lines: list[str]) -> np.ndarray | None:
+        """The fast path for a file with ignored columns: a regular expression per line picks the kept cells."""
+        match = self._line.fullmatch
+        found = [match(line) for line in lines]
+        if not all(found):
+            return None
+        if len(self._kept) == 1:
+            text = ",".join(m.group(self._kept[0] + 2) for m in found)  # type: ignore[union-attr]
+        else:
+            pick = self._pick
+            text = ",".join(",".join(pick(m.groups())) for m in found)  # type: ignore[union-attr, misc]
+        values = self._numbers(_fill_empty(text.translate(_BLANKS)), len(lines))
+        if values is None:
+            return None
+        table = np.full((len(lines), len(self.header)), np.nan)
+        table[:, self._kept] = values
+        return table
+
+    def _numbers(self, text: str, n: int) -> np.ndarray | None:
+        """``n`` rows of the kept columns from comma-separated plain numbers ('nan' for empty cells)."""
+        try:
+            flat = np.fromstring(text, sep=",")  # C parser, correctly rounded as float()
+        except ValueError:  # e.g. '1-2', '1e': the strict path names the cell
+            return None
+        kept = len(self._kept)
+        if flat.size != n * kept or np.isinf(flat).any():
+            return None  # e.g. a number beyond the floating-point range: the strict path names it
+        values = flat.reshape(n, kept)
+        if np.isnan(values[:, self._time]).any():
+            return None  # a row without a time, or a blank row: the strict path skips or names it
+        return values
+
+    def _strict(self, first_line: int, lines: list[str]) -> tuple[np.ndarray, np.ndarray]:
+        header, width = self.header, len(self.header)
+        rows: list[tuple[int, list[str]]] = []
+        for row in csv.reader(lines):
+            lineno = first_line + len(rows)
+            rows.append((lineno, row))
+        body = [(lineno, row) for lineno, row in rows if any(cell.strip() for cell in row)]
+        values = np.full((len(body), width), np.nan)
+        before = set(self.ignored)
+        for k, (lineno, row) in enumerate(body):
+            if len(row) > width and not any(cell.strip() for cell in row[width:]):
+                row = row[:width]  # empty cells after the last column (a trailing comma)
+            if len(row) != width:
+                raise RecordingError(f"{self.path}:{lineno}: {len(row)} cells, header has {width} columns")
+            for j, cell in enumerate(row):
+                cell = cell.strip()
+                if not cell or j in self.ignored:
+                    continue
+                problem = cell_problem(cell)
+                if problem is None:
+                    values[k, j] = float(cell)
+                elif header[j] in self.contract:
+                    raise RecordingError(f"{self.path}:{lineno}: column {header[j]!r}: {cell!r}{problem}")
+                else:
+                    self.ignored.add(j)
+                    _log.info("%s:%d: extra column %r ignored: %r%s", self.path, lineno, header[j], cell, problem)
+        if self.ignored != before:
+            self._compile()
+        return values, np.array([lineno for lineno, _ in body], dtype=np.int64)
+
+
+def _text_chunks(names: Sequence[str], columns: Sequence[np.ndarray], integer: Iterable[str]) -> Iterator[str]:
+    """The CSV text of the columns in chunks of about CHUNK_BYTES characters, the header first."""
+    integer = set(integer)
+    fmt = ",".join(["%.12g"] * len(names))
+    yield ",".join(names) + "\n"
+    n = len(columns[0]) if len(columns) else 0
+    rows_per_chunk = max(1, CHUNK_BYTES // (14 * max(1, len(names))))
+    for start in range(0, n, rows_per_chunk):
+        stop = min(n, start + rows_per_chunk)
+        block = np.column_stack([np.trunc(c[start:stop]) if name in integer else np.asarray(c[start:stop], float)
+                                 for name, c in zip(names, columns)])
+        text = "\n".join([fmt % tuple(row) for row in block.tolist()]) + "\n"
+        yield text.replace("nan", "")
+
+
+def write_table(path: Path, names: Sequence[str], columns: Sequence[np.ndarray], integer: Iterable[str] = ()
+                ) -> Path:
+    """Write columns as a recording CSV atomically, in chunks.
+
+    Parameters
+    ----------
+    path : Path
+        Target file (replaced only when the whole file is written).
+    names : sequence of str
+        Column names, ``t_s`` first.
+    columns : sequence of ndarray (n,)
+        Values, ``%.12g``; NaN is written as an empty cell.
+    integer : iterable of str
+        Columns written as integers (truncated, as ``int()`` does).
+    """
+    with atomic_writer(path) as handle:
+        for text in _text_chunks(names, columns, integer):
+            handle.write(text.encode("utf-8"))
+    return path
+
+
+def table_text(names: Sequence[str], columns: Sequence[np.ndarray], integer: Iterable[str] = ()) -> str:
+    """The text :func:`write_table` writes, as one string."""
+    return "".join(_text_chunks(names, columns, integer))
