@@ -168,7 +168,15 @@ JUNK_WORDS = ["G1", "G2", "G3", "G0", "G4", "G91", "G20", "G41", "G43", "G95", "
               # work offsets, data input, look-ahead modes, feed per revolution
               "G54.1 P2", "G54 P48", "G54.1 P49", "G10 L2 P1 X5", "G10 L20 P3 Z-1", "G10 L2 P0 Y1", "G10 L10 P1 R5",
               "G10 L12 P1 R1", "G10 L13 P1 R-1", "G10 L3 P1", "G5.1 Q1", "G5.1 Q0", "G5.1 Q1 R5", "G08 P1",
-              "G5 P10000", "G5.1 Q3", "G94", "G95 F0.1", "S0", "M5", "M3 S1000"]
+              "G5 P10000", "G5.1 Q3", "G94", "G95 F0.1", "S0", "M5", "M3 S1000",
+              # coordinate shifts, optional chamfer / corner R
+              "G52", "G52 X1 Y-2", "G92", "G92 X0 Y0", "G92.1", "G92.1 X0", "G92.2", "G92.3", ",R2", ",C1", ",",
+              "G1 X10 ,C1", "G1 Y5 ,R2",
+              # Custom Macro B: variables, expressions, statements, G65 calls
+              "#", "[", "]", "#1", "#1=2", "#2 = #1 * [3 + #1]", "X#1", "X-#24", "Z[#26+1.]", "F#9", "G#10", "#[#1+100]",
+              "#0", "#34=1", "#3000=1 (ALARM)", "#5001", "IF [#1 EQ 0] GOTO 1", "IF [#1 LT 5] THEN #1 = #1 + 1",
+              "WHILE [#1 LT 3] DO1", "DO2", "END1", "END2", "GOTO 1", "GOTO #1", "N1", "SIN[30]", "ATAN[1]/[1]",
+              "SQRT[-1]", "1/0", "G65 P1001 A1 R2.", "G65 P1 L2 X#24", "E#1"]
 HUGE = ["1" + "0" * 300, "0." + "0" * 299 + "1", "99999999999", "-99999999999", "9" * 400, "1e300", "1e-300",
         "99999.999", "-99999.999", "100000", "0.000001", "."]
 NUMBER = st.one_of(st.sampled_from(HUGE), st.integers(-1000, 1000).map(str),

@@ -21,13 +21,16 @@ Conventions
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Sequence
+from typing import TYPE_CHECKING, Sequence
 
 from .codes import GWords, MWords, ValueWords
 from .errors import ErrorFactory, GCodeError
 from .subprograms import (
     MAX_NESTING, Call, Return, Subprogram, find_sequence, main_program_end, read_call, read_return,
 )
+
+if TYPE_CHECKING:
+    from .macro.calls import MacroCall
 
 
 def subprogram_words(gs: GWords, ms: MWords, vals: ValueWords, err: ErrorFactory) -> tuple[Call | None, Return]:
@@ -68,6 +71,7 @@ class Frame:
     call_line: int  # 1-based line of the M98 block
     return_pc: int  # 0-based index of the line after the M98 block
     remaining: int
+    macro: MacroCall | None = None  # a G65 macro call (its own local variables, see .macro), None for M98
 
 
 def return_target(sequence: int, lines: Sequence[str], stack: list[Frame], subs: dict[int, Subprogram] | None,
@@ -100,9 +104,10 @@ def return_target(sequence: int, lines: Sequence[str], stack: list[Frame], subs:
 
 
 def called_subprogram(call: Call, subs: dict[int, Subprogram], stack: list[Frame], line: int, text: str,
-                      file: str) -> Subprogram:
-    """The subprogram an M98 block calls, or a :class:`GCodeError` (missing program, nesting too deep)."""
-    word = f"M98 P{call.number}"
+                      file: str, code: str = "M98") -> Subprogram:
+    """The subprogram an M98 (or G65, ``code``) block calls, or a :class:`GCodeError` (missing program, nesting
+    too deep; M98 and G65 calls count together)."""
+    word = f"{code} P{call.number}"
     if call.number not in subs:
         have = ", ".join(f"O{n} (line {s.start + 1})" for n, s in sorted(subs.items())) or "none"
         raise GCodeError(file, line, word, f"one of the subprograms after the main program's M30: {have}",

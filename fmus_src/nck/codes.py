@@ -6,7 +6,8 @@ G50 (scaling cancel; a mill: G50 with X/Y/Z/S, the lathe meaning, is an
 error), G50.1 (programmable mirror image cancel), G69 (coordinate rotation
 cancel), G67 (macro modal call cancel), G13.1 (polar interpolation cancel).
 Rejected with a :class:`GCodeError`: the codes switching those features on
-(G16, G51, G51.1, G68, G66, G65, G12.1), what cutter compensation G41/G42 with a
+(G16, G51, G51.1, G68, G66, G12.1), G65 outside its own block (G65 calls: :mod:`.macro.calls`), what
+cutter compensation G41/G42 with a
 nonzero radius does not simulate (see :mod:`.compensation`), G88 (boring with a manual operation),
 G29, and every other G/M code or address.
 
@@ -37,6 +38,7 @@ G_GROUP: dict[int | float, str] = {
     0: "motion", 1: "motion", 2: "motion", 3: "motion",
     4: "non-modal", 28: "non-modal", 30: "non-modal", 53: "non-modal",
     10: "non-modal",
+    52: "non-modal", 92: "non-modal", 92.1: "non-modal", 92.2: "non-modal", 92.3: "non-modal",  # coordinate_shifts
     9: "exact stop",
     17: "plane", 18: "plane", 19: "plane",
     20: "units", 21: "units",
@@ -64,8 +66,9 @@ G_REJECT: dict[int | float, str] = {
     51: "scaling G51 is not supported (only its cancel G50)",
     51.1: "programmable mirror image G51.1 is not supported (only its cancel G50.1)",
     68: "coordinate rotation G68 is not supported (only its cancel G69)",
-    65: "macro call G65 is not supported",
-    66: "macro modal call G66 is not supported (only its cancel G67)",
+    65: "macro call G65 with other G codes or from a variable (write G65 P<n> <arguments> alone in its block)",
+    66: "macro modal call G66 is not supported (only its cancel G67): it would call the macro after every move "
+        "block until G67; write G65 P<n> <arguments> at each position instead",
     12.1: "polar coordinate interpolation G12.1 is not supported (only its cancel G13.1)",
     29: "return from the reference position G29 is not supported (program the move back with G0)",
 }
@@ -77,11 +80,11 @@ M_GROUP: dict[int, str] = {
     29: "rigid tapping",
 }
 SUPPORTED_G = ("G0 G1 G2 G3 G4 G5 G5.1 G8 G9 G10 G13.1 G15 G17 G18 G19 G20 G21 G28 G30 G40 G41 G42 G43 G44 G49 G50 "
-               "G50.1 G53 G54-G59 G54.1 G61 G64 G67 G69 G73 G74 G76 G80 G81 G82 G83 G84 G85 G86 G87 G89 G90 G90.1 G91 "
-               "G91.1 G94 G95 G98 G99")
+               "G50.1 G52 G53 G54-G59 G54.1 G61 G64 G67 G69 G73 G74 G76 G80 G81 G82 G83 G84 G85 G86 G87 G89 G90 "
+               "G90.1 G91 G91.1 G92 G92.1 G92.2 G92.3 G94 G95 G98 G99")
 SUPPORTED_M = "M0 M1 M2 M3 M4 M5 M6 M7 M8 M9 M19 M29 M30 M98 M99"
 #: Address letters of the dialect.
-LETTERS = set("GMXYZIJKRFSTHDPQNOL")
+LETTERS = set("GMXYZIJKRFSTHDPQNOL") | {",C", ",R"}  # ,C / ,R: optional chamfer / corner R (see .corners)
 
 
 def g_code(w: Word) -> int | float | None:

@@ -4,16 +4,19 @@ Supported: G0 G1 G2 G3 (arcs by R, negative R for > 180 deg, or by I/J/K incl.
 full circles), G4 (dwell), G9 (exact stop, one block), G17/G18/G19, G20/G21,
 G28/G30 (1st/2nd-4th reference position return), G40/G41/G42 with D (cutter radius
 compensation, see :mod:`.compensation` and :mod:`.radius_offset`), G43/G44/G49 with H, G53
-(machine coordinates), G54-G59, G54.1 P1-P48 (also written G54 Pn), G10
+(machine coordinates), G52 (local coordinate system), G92/G92.1/G92.2/G92.3 (workpiece coordinate
+system setting), G54-G59, G54.1 P1-P48 (also written G54 Pn), G10
 L2/L20/L10-L13 (programmable data input), G5.1 Q0/Q1, G8 P0/P1, G5
 P0/P10000 (look-ahead modes, accepted), G61/G64 (exact stop mode / cutting
 mode; LinuxCNC G64 P Q, see :mod:`.path_blending`), canned cycles G73 G74 G76 G81-G87 G89
 with G98/G99 and G80 (see :mod:`.cycles`; tapping and M29: :mod:`.tapping`), G90/G91,
 G90.1/G91.1 (arc centre I/J/K absolute/incremental), G94/G95; M0 M1 M2 M3 M4 M5 M6 M7 M8 M9
 M19 M29 M30; subprograms
-M98/M99 in the same file (see :mod:`.subprograms`); F S T H D P Q N O L words
+M98/M99 in the same file (see :mod:`.subprograms`); Custom Macro B variables, IF/WHILE/GOTO and
+G65 calls (see :mod:`.macro`); F S T H D P Q N O L words
 (K: arc centre, or repeat count in a canned cycle; L: repeat count of M98);
-``( )`` and ``;`` comments, ``%`` lines, block delete ``/``.
+``,C``/``,R`` optional chamfer and corner R between G1 blocks; ``( )`` and ``;`` comments, ``%`` lines,
+block delete ``/``.
 Accepted as no-ops and rejected codes: :mod:`.codes`.
 
 Conventions (each topic in the module that implements it)
@@ -30,8 +33,12 @@ Conventions (each topic in the module that implements it)
 * G5.1/G8/G5 look-ahead mode codes: :mod:`.lookahead_codes`.
 * G0-G3 motion, G61/G9 exact stop: :mod:`.motion`.
 * G28/G30 reference position return, G53 machine coordinates: :mod:`.machine_moves`.
+* G52 local coordinate system, G92/G92.1/G92.2/G92.3 workpiece coordinate system setting:
+  :mod:`.coordinate_shifts`.
+* ``,C``/``,R`` optional chamfer and corner R: :mod:`.corners`.
 * Canned cycles: the modal data :mod:`.cycle_mode`, the moves of a hole :mod:`.cycles`.
 * M98/M99 subprograms: run time :mod:`.call_stack`, the file's programs :mod:`.subprograms`.
+* Custom Macro B (variables, expressions, IF/WHILE/GOTO, G65 calls): :mod:`.macro`.
 
 Kept here, as the driver implements them:
 
@@ -58,13 +65,17 @@ from .blocks import Block, Program, ProgramEnd, ProgramStop
 from .call_stack import Frame, called_subprogram, return_target, subprogram_words
 from .codes import check_sequence_words, check_stray_words, group_words
 from .compensation import RADIUS_ZERO, check_compensation_move, cutter_compensation, tool_length_words
+from .coordinate_shifts import SHIFT_CODES, coordinate_shift
+from .corners import check_no_open_corner, close_corner, corner_word, open_corner
 from .cycle_mode import canned_cycle_block
 from .dwell import dwell_block
 from .errors import GCodeError
 from .feed import read_feed_words
 from .input_ranges import check_coordinates
-from .lexer import LexError, Word, lex_line, split_lines
+from .lexer import LexedLine, LexError, Word, lex_line, split_lines
 from .lookahead_codes import check_look_ahead
+from .macro.calls import MacroCall
+from .macro.runtime import Jump, MacroRuntime
 from .machine_moves import machine_move
 from .modal import ModalState
 from .motion import programmed_move
@@ -120,18 +131,23 @@ def interpret(text: str, file: str = "<text>", settings: InterpreterSettings | N
     seg_blocks: list[int] = []  # blocks of each run of segments
     seg_start = 1
     called_lines = 0
-    jumps: set[tuple] = set()  # control states at M99 P<seq> returns (a repeat is an endless loop)
+    macro = MacroRuntime(lines, file, settings.block_delete, st)  # Custom Macro B: variables, jumps, G65
     pc = 0  # 0-based index of the next line
 
     def done(number: int, end: ProgramEnd) -> Program:
         out.append(end)
         return finished(number)
 
+    run_total = 0  # blocks of the closed runs (a running sum: macro loops close millions of runs)
+
     def close_run(number: int) -> None:
+        nonlocal run_total
         segments.append((seg_start, number))
-        seg_blocks.append(len(out) - sum(seg_blocks))
+        seg_blocks.append(len(out) - run_total)
+        run_total = len(out)
 
     def finished(number: int) -> Program:
+        check_no_open_corner(st, file)
         close_run(number)
         blocks, runs = radius.apply(out, seg_blocks)
         return Program(file, tuple(blocks), tuple(settings.initial), tuple(segments),  # type: ignore[arg-type]
@@ -141,8 +157,9 @@ def interpret(text: str, file: str = "<text>", settings: InterpreterSettings | N
         number = pc + 1
         raw = lines[pc]
         pc += 1
+        statement = macro.parse(number)  # a Custom Macro B line, or None for a plain line (see .macro)
         try:
-            lexed = lex_line(raw)
+            lexed = lex_line(raw) if statement is None else statement.static
         except LexError as exc:
             raise GCodeError(file, number, exc.word, exc.expected, exc.problem, raw.strip()) from None
         if lexed.percent:  # never inside a subprogram: its M99 comes first (see index_subprograms)
@@ -150,7 +167,7 @@ def interpret(text: str, file: str = "<text>", settings: InterpreterSettings | N
                 return done(number, ProgramEnd(number, "%"))
             seen_percent = True
             continue
-        if not lexed.words or (lexed.block_delete and settings.block_delete):
+        if (not lexed.words and statement is None) or (lexed.block_delete and settings.block_delete):
             continue
         if stack:
             called_lines += 1
@@ -160,6 +177,24 @@ def interpret(text: str, file: str = "<text>", settings: InterpreterSettings | N
                                  "lines executed in subprograms (smaller repeat counts L)",
                                  f"the subprogram calls execute more than {MAX_CALLED_LINES} lines",
                                  lines[top.call_line - 1].strip())
+        macro.count(number)
+        step = macro.execute(number, statement, lexed, stack)
+        if not isinstance(step, LexedLine):  # a macro statement ran: nothing, a jump or a G65 call
+            if isinstance(step, Jump):
+                close_run(number)
+                pc = step.target
+                seg_start = pc + 1
+            elif isinstance(step, MacroCall):
+                if subs is None:
+                    subs = index_subprograms(lines, number - 1, file, settings.block_delete)
+                sub = called_subprogram(Call(step.number, step.repeats), subs, stack, number, lexed.text, file, "G65")
+                macro.enter(step, stack, number)
+                close_run(number)
+                stack.append(Frame(sub, number, pc, step.repeats, step))
+                pc = sub.start
+                seg_start = pc + 1
+            continue
+        lexed = step
         first = len(out)
         action = _block(st, lexed.words, number, lexed.text, file, out)
         radius.record(st, number, lexed.text, first)
@@ -190,12 +225,14 @@ def interpret(text: str, file: str = "<text>", settings: InterpreterSettings | N
             frame.remaining -= 1
             if frame.remaining > 0:
                 pc = frame.sub.start
+                macro.repeat(frame)
             else:
                 stack.pop()
+                macro.leave(frame)
                 pc = frame.return_pc
                 if isinstance(action, Return) and action.sequence is not None:
                     pc = return_target(action.sequence, lines, stack, subs, frame, number, lexed.text, file,
-                                       settings.block_delete, jumps)
+                                       settings.block_delete, macro.return_jumps())
         seg_start = pc + 1
     return done(len(lines), ProgramEnd(len(lines), "end of file"))
 
@@ -213,9 +250,13 @@ def _block(st: ModalState, words: tuple[Word, ...], line: int, text: str, file: 
         return GCodeError(file, line, word, expected, problem, text)
 
     gs, ms, vals = group_words(words, err)
+    begin = len(out)  # index of this block's first typed block
     if "look-ahead" in gs:
         check_look_ahead(gs["look-ahead"], words, err)
+        close_corner(st, out, begin, line, text, file)  # no move after a ,C/,R block: error
         return None
+    corner = corner_word(vals, err)  # ,C / ,R: optional chamfer / corner R (see .corners)
+    moved = False
     call, ret = subprogram_words(gs, ms, vals, err)
     check_stray_words(gs, vals, err)
 
@@ -271,6 +312,8 @@ def _block(st: ModalState, words: tuple[Word, ...], line: int, text: str, file: 
             if st.cycle is not None:
                 raise err("G10", f"G10 in canned-cycle mode G{st.cycle}", "G80 (or G0) before G10")
             program_data(st, gs, vals, err)
+        elif non_modal in SHIFT_CODES:
+            coordinate_shift(st, non_modal, gs, vals, err)
         elif non_modal is not None:
             if st.cycle is not None:
                 raise err(f"G{non_modal}", f"G{non_modal} in canned-cycle mode G{st.cycle}",
@@ -288,6 +331,10 @@ def _block(st: ModalState, words: tuple[Word, ...], line: int, text: str, file: 
                               "P only with G4 or a canned cycle, Q only with a canned cycle")
             check_compensation_move(st, vals, gs, err)
             programmed_move(st, vals, "exact stop" in gs, line, err, unit_name, out)
+            moved = True
+    # 8b. optional chamfer / corner R: the previous block's corner, then this block's (see .corners)
+    close_corner(st, out, begin, line, text, file)
+    open_corner(st, corner, moved, ms, out, begin, line, text, err)
     # 9. program stop (after the motion of the block, as FANUC); no operator wait, but the path stops
     if "stop" in ms:
         out.append(ProgramStop(line, f"M{ms['stop'][0]}"))

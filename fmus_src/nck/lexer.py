@@ -10,6 +10,9 @@ Rules (FANUC milling dialect):
 * A word is a letter (either case) followed by a number; blanks between the
   letter and the number are allowed. Numbers: optional sign, digits with an
   optional decimal point (``10``, ``10.``, ``-.5``).
+* Optional chamfer / corner R words (FANUC): a comma, ``C`` or ``R`` and a number (``,C1.``, ``, R 2``,
+  also right after a number: ``X10,C1``) are one word with the letter ``",C"`` / ``",R"``. A comma before
+  any other letter is an error; a comma before no letter is an unexpected character.
 * Lines end at LF, CRLF or CR only (form feed, U+2028 etc. stay in the line
   and are rejected as unexpected characters), so line numbers match editors.
 """
@@ -25,6 +28,10 @@ _TOKEN = re.compile(r"([A-Za-z])[ \t]*([^A-Za-z \t(;/]*)|([ \t]+)|(.)", re.ASCII
 _NUMBER = re.compile(r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)\Z", re.ASCII)
 #: Line endings of a program: LF, CRLF, CR (nothing else, unlike :meth:`str.splitlines`).
 _EOL = re.compile(r"\r\n|\r|\n")
+#: An optional chamfer / corner R word (FANUC ``,C1.``, ``,R2.``): comma, letter, number (checked later).
+_COMMA_WORD = re.compile(r",[ \t]*([A-Za-z])[ \t]*([^A-Za-z \t(;/,]*)", re.ASCII)
+#: Letters a comma word may have: chamfer C, corner R (:mod:`.corners`).
+COMMA_LETTERS = ("C", "R")
 #: Longest number accepted in a word, characters (FANUC accepts at most 8 digits plus sign and point).
 MAX_NUMBER_CHARS = 32
 
@@ -133,7 +140,7 @@ def lex_line(raw: str) -> LexedLine:
         block_delete = True
         col = len(code) - len(stripped)
         code = code[:col] + " " + code[col + 1 :]
-    words: list[Word] = []
+    code, words = _comma_words(code)
     for m in _TOKEN.finditer(code):
         letter = m.group(1)
         if letter is None:
@@ -151,7 +158,28 @@ def lex_line(raw: str) -> LexedLine:
             raise LexError(clip(letter.upper() + num), f"number in word {letter.upper()} has {len(num)} characters",
                            f"at most {MAX_NUMBER_CHARS} characters (FANUC accepts at most 8 digits)")
         words.append(Word(letter.upper(), num, float(num), m.start(), m.end(2)))
+    words.sort(key=lambda w: w.start)
     return LexedLine(tuple(words), False, block_delete, text)
+
+
+def _comma_words(code: str) -> tuple[str, list[Word]]:
+    """The ``,C``/``,R`` words of a line, and the line with them blanked (columns kept) for the other words."""
+    if "," not in code:
+        return code, []
+    words: list[Word] = []
+    for m in _COMMA_WORD.finditer(code):
+        name, num = "," + m.group(1).upper(), m.group(2)
+        if name[1] not in COMMA_LETTERS:
+            raise LexError(clip(name + num), f"comma word {name} is not supported",
+                           "',C' (chamfer) or ',R' (corner R) followed by a number")
+        if not num:
+            raise LexError(name, f"word {name!r} has no value", f"a number after {name}")
+        if not _NUMBER.match(num) or len(num) > MAX_NUMBER_CHARS:
+            word = clip(name + num)
+            raise LexError(word, f"malformed number {clip(num)!r} in word {word}",
+                           f"a number like 12, -3.5 or .25 of at most {MAX_NUMBER_CHARS} characters")
+        words.append(Word(name, num, float(num), m.start(), m.end(2)))
+    return _COMMA_WORD.sub(lambda m: " " * len(m.group(0)), code), words
 
 
 def split_lines(text: str, keepends: bool = False) -> list[str]:

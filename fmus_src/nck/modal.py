@@ -10,14 +10,19 @@ Conventions
   position display); a tool-length change is applied by the next Z move, also
   in G91 (as FANUC).
 * The modal state is one for the main program and its subprograms (see :mod:`.call_stack`).
+* The G52 local shift and the G92 shift (:mod:`.coordinate_shifts`) are added to every workpiece coordinate
+  system (G54-G59, G54.1 Pn); they start at zero (power-on, after a reference return).
 """
 from __future__ import annotations
 
-from typing import Sequence
+from typing import TYPE_CHECKING, Sequence
 
 from .blocks import Vec3
 from .cycles import LevelWord
 from .settings import EXTERNAL_OFFSET, MM, InterpreterSettings
+
+if TYPE_CHECKING:
+    from .corners import OpenCorner
 
 
 class ModalState:
@@ -51,6 +56,10 @@ class ModalState:
                                          for k, v in settings.work_offsets.items()}
         self.lengths = [[float(v), 0.0] for v in settings.tool_lengths]
         self.radii = [[float(v), 0.0] for v in settings.tool_radii]
+        self.local_shift = [0.0, 0.0, 0.0]  # G52 local coordinate system origin (m), see .coordinate_shifts
+        self.g92_shift = [0.0, 0.0, 0.0]  # G92 shift of every workpiece coordinate system (m)
+        self.suspended_shifts: tuple[Vec3, Vec3] | None = None  # (G52, G92) suspended by G92.2 (G92.3 restores)
+        self.corner: OpenCorner | None = None  # open ,C/,R corner of the previous block (see .corners)
         self.per_rev = False  # G95 (True) / G94
         self.feed_per_rev = False  # the modal F was given under G95 (m/rev) rather than G94 (m/s)
         off = self.work_offset()
@@ -76,7 +85,12 @@ class ModalState:
             self.prog[i] = self.machine[i] - off[i] - (self.applied_tool if i == 2 else 0.0)
 
     def work_offset(self) -> Vec3:
-        """Active work offset + external offset (m)."""
+        """Active work offset + external offset + G52 local shift + G92 shift (m)."""
+        base, loc, g92 = self.base_work_offset(), self.local_shift, self.g92_shift
+        return (base[0] + loc[0] + g92[0], base[1] + loc[1] + g92[1], base[2] + loc[2] + g92[2])
+
+    def base_work_offset(self) -> Vec3:
+        """Active work offset + external offset (m), without the G52/G92 shifts."""
         zero = (0.0, 0.0, 0.0)
         own, ext = self.offsets.get(self.work, zero), self.offsets.get(EXTERNAL_OFFSET, zero)
         return (own[0] + ext[0], own[1] + ext[1], own[2] + ext[2])

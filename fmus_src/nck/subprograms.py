@@ -7,7 +7,9 @@ M30, and then the subprograms, each ``O<n>`` ... ``M99``, before the closing ``%
 * The main program ends at its first M30/M2 (a block-deleted one is skipped when the switch is on) or at a
   ``%``. After it, every line starting with an ``O<n>`` word opens subprogram ``n`` (1..9999), which runs up to
   and including the first line holding M99 (a block-deleted ``/M99`` is skipped when the switch is on, as
-  in execution). Lines between such programs are not read (comments, stray text).
+  in execution), or the last such line before the next ``O`` line, ``%`` or the end of the file when there
+  are several (a macro returning early: ``IF [...] GOTO 9`` ... ``M99`` ... ``N9 M99``). Lines between such
+  programs are not read (comments, stray text).
   A ``%`` ends the file's programs.
 * Inside a subprogram every line must be well formed; an ``O`` line, ``%`` or the end of the file before its
   M99 is an error, and so is a program number defined twice.
@@ -24,6 +26,9 @@ M30, and then the subprograms, each ``O<n>`` ... ``M99``, before the closing ``%
   supported: the CAM posts the twin reads (Fusion 360's FANUC post, Mastercam) write the main program first
   and its subprograms after M30, and a file is executed from its first line, so such a file stops at the
   first subprogram's M99 with an error saying where the subprograms must go.
+* Custom Macro B lines (``#1 = 2``, ``IF [...] GOTO 5``, ``X#24``) are read by their plain words here
+  (:func:`.macro.statements.scan_line`): M99, M30 and N numbers written as plain numbers count; the same
+  O<n> programs are the macros of G65 calls.
 """
 from __future__ import annotations
 
@@ -31,7 +36,8 @@ from dataclasses import dataclass
 from typing import Callable, Sequence
 
 from .errors import GCodeError
-from .lexer import LexedLine, LexError, Word, lex_line
+from .lexer import LexedLine, LexError, Word
+from .macro.statements import scan_line
 
 #: Deepest nesting of subprogram calls (FANUC 31i-B: 10 levels).
 MAX_NESTING = 10
@@ -117,7 +123,7 @@ def index_subprograms(lines: Sequence[str], first: int, file: str, block_delete:
     found: dict[int, Subprogram] = {}
     while i < n:
         try:
-            lexed = lex_line(lines[i])
+            lexed = scan_line(lines[i])
         except LexError:  # a line outside any program is not read
             i += 1
             continue
@@ -144,8 +150,26 @@ def index_subprograms(lines: Sequence[str], first: int, file: str, block_delete:
             i += 1
             if _has_m(body.words, (99.0,)) and not (body.block_delete and block_delete):
                 break
-        found[number] = Subprogram(number, start, i - 1)
+        end = _last_return(lines, i - 1, block_delete)
+        found[number] = Subprogram(number, start, end)
+        i = end + 1
     return found
+
+
+def _last_return(lines: Sequence[str], first: int, block_delete: bool) -> int:
+    """0-based index of the last M99 line from ``first`` (an M99 line) up to the next ``O`` line, ``%`` or the end
+    of the file: a macro may return early (``IF [...] GOTO 9`` ... ``M99`` ... ``N9 M99``)."""
+    end = first
+    for j in range(first + 1, len(lines)):
+        try:
+            more = scan_line(lines[j])
+        except LexError:
+            continue
+        if more.percent or (more.words and more.words[0].letter == "O"):
+            break
+        if _has_m(more.words, (99.0,)) and not (more.block_delete and block_delete):
+            end = j
+    return end
 
 
 def main_program_end(lines: Sequence[str], first: int, file: str, block_delete: bool) -> int | None:
@@ -187,7 +211,7 @@ def next_program_start(lines: Sequence[str], first: int) -> int | None:
     were written before the main program."""
     for i in range(max(first, 0), len(lines)):
         try:
-            lexed = lex_line(lines[i])
+            lexed = scan_line(lines[i])
         except LexError:
             continue
         if lexed.percent or _has_m(lexed.words, (2.0, 30.0)):
@@ -204,7 +228,7 @@ def find_sequence(lines: Sequence[str], first: int, last: int, sequence: int) ->
     """
     for i in range(max(first, 0), min(last, len(lines) - 1) + 1):
         try:
-            lexed = lex_line(lines[i])
+            lexed = scan_line(lines[i])
         except LexError:
             continue
         if any(w.letter == "N" and not w.has_point and w.value == sequence for w in lexed.words):
@@ -230,7 +254,7 @@ def read_return(p: Word | None, err: Callable[[str, str, str], GCodeError]) -> R
 
 def _lex(raw: str, i: int, file: str) -> LexedLine:
     try:
-        return lex_line(raw)
+        return scan_line(raw)
     except LexError as exc:
         raise GCodeError(file, i + 1, exc.word, exc.expected, exc.problem, raw.strip()) from None
 

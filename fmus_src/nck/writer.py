@@ -3,7 +3,7 @@
 Rules
 -----
 * Only the number of an existing F (S) word changes (letter case, blanks
-  before the number and everything else on the line are kept).
+  before the number and everything else on the line, e.g. ``,C1.``/``,R2`` corner words, are kept).
 * A line without an F (S) word gets one appended right after its last word,
   separated by one blank, i.e. before any comment and trailing blanks.
 * Feeds are given in mm/min and written in the program's unit at that line
@@ -15,6 +15,11 @@ Rules
   an empty change set returns the input byte for byte.
 * A line that is not a block (empty, comment only, ``%``) cannot take a word:
   :class:`GCodeError`.
+* Custom Macro B (:mod:`.macro`): an F (S) word whose value is a variable or an expression (``F#9``,
+  ``F[#9*2]``) is replaced by the plain number (the optimiser gives one value per line, as a per-line override
+  does for every run of the line). Macro statements (``#1 = ...``, IF, WHILE, GOTO) and G65 calls (whose F
+  and S are the macro's arguments #9 and #19) cannot take a word: :class:`GCodeError`. G20/G95 written with
+  a variable (``G#10``) are not seen by the writer's unit and feed-mode scan.
 * An F word under G95 (feed per revolution, mm/rev or in/rev) is not
   rewritten from a feed in mm/min: :class:`GCodeError` naming the line
   (the optimiser refuses G95 cutting lines for the same reason). S words on
@@ -27,6 +32,7 @@ from typing import Mapping
 
 from .errors import GCodeError
 from .lexer import LexError, LexedLine, Word, lex_line, split_lines
+from .macro.statements import parse_line, scan_line
 
 
 #: Decimals of a written F word: mm/min under G21, in/min under G20.
@@ -114,7 +120,7 @@ def rewrite_program(text: str, feed_by_line: Mapping[int, float] | None = None,
         full = lines[number - 1]
         body = full.rstrip("\r\n")
         eol = full[len(body):]
-        lexed = _lex(body, number, file)
+        lexed = _block_words(body, number, file)
         if not lexed.words:
             raise GCodeError(file, number, body.strip(), "a line holding a block",
                              "cannot put an F or S word on a line without a block", body.strip())
@@ -147,13 +153,37 @@ def _check(value: float, number: int, letter: str, file: str, body: str, allow_z
 
 def _lex(body: str, number: int, file: str) -> LexedLine:
     try:
-        return lex_line(body)
+        return scan_line(body)  # a Custom Macro B line: its words with plain numbers (see .macro.statements)
     except LexError as exc:
         raise GCodeError(file, number, exc.word, exc.expected, exc.problem, body.strip()) from None
 
 
+def _block_words(body: str, number: int, file: str) -> LexedLine:
+    """The words of a line to rewrite; a word whose value is a macro expression (``F#9``) has the value NaN and
+    the expression as its text. Macro statements and G65 calls cannot take an F or S word."""
+    try:
+        parsed = parse_line(body)
+        lexed = lex_line(body) if parsed is None else parsed.static
+    except LexError as exc:
+        raise GCodeError(file, number, exc.word, exc.expected, exc.problem, body.strip()) from None
+    if parsed is not None and not parsed.is_block:
+        raise GCodeError(file, number, body.strip(), "a line holding an NC block (G1 X... F...)",
+                         "cannot put an F or S word on a macro statement (#i = ..., IF, WHILE, GOTO, DO, END)",
+                         body.strip())
+    if any(w.letter == "G" and w.value == 65.0 for w in lexed.words):
+        raise GCodeError(file, number, "G65", "F and S words of move or spindle blocks",
+                         "the line is a G65 macro call: its F and S words are the macro's arguments #9 and #19, "
+                         "not the feed or speed of this line, so no number for them can be written", body.strip())
+    if parsed is None:
+        return lexed
+    values = tuple(Word(v.letter.upper(), v.source[1:].lstrip(" \t"), math.nan, v.start, v.end)
+                   for v in parsed.statement.values)  # type: ignore[union-attr]
+    return LexedLine(tuple(sorted(lexed.words + values, key=lambda w: w.start)), False, lexed.block_delete,
+                     lexed.text)
+
+
 def _set_word(body: str, letter: str, value: float, decimals: int, keep_point: bool, number: int, file: str) -> str:
-    lexed = _lex(body, number, file)
+    lexed = _block_words(body, number, file)
     words = [w for w in lexed.words if w.letter == letter]
     if len(words) > 1:
         raise GCodeError(file, number, letter, f"at most one {letter} word", f"word {letter} appears twice",
