@@ -359,7 +359,7 @@ def reference_path(case: Case, options: TwinOptions | None = None, program_text:
     if program_text is not None:
         nck.set_program_text(program_text, str(case.program))
     nck.setup(0.0)
-    samples = nck.plan_.position[0]
+    samples = nck.plan_.member(0).position
     keep = [0]
     for k in range(1, len(samples)):
         if np.linalg.norm(samples[k] - samples[keep[-1]]) > 1e-6:

@@ -1,8 +1,10 @@
 """``NCKernel``: the NC kernel as a batch-capable co-simulation component.
 
-The whole program is planned at ``setup`` (see :mod:`.planner`); ``do_step(t,
-h)`` reads the planned samples at ``t + h`` (linear interpolation between
-interpolation periods for Real outputs when ``t + h`` is not on the grid).
+The whole program is planned at ``setup`` (see :mod:`.planner`) into a ragged
+batch plan (:mod:`.batch_plan`: memory grows with the sum of the members'
+lengths); ``do_step(t, h)`` reads the planned samples at ``t + h`` with
+:func:`.sampling.read_plan` (linear interpolation between interpolation
+periods for Real outputs when ``t + h`` is not on the grid).
 
 The program comes from the String parameter ``program_file`` or, in Python,
 from the ``program_text`` keyword of the constructor / :meth:`NCKernel.set_program_text`
@@ -23,7 +25,7 @@ from .interpreter import interpret
 from .overrides import apply_overrides
 from .params import NCParams
 from .planner import BatchPlan, build_schedule, plan_batch
-from .sampling import sample_position
+from .sampling import read_plan
 from .settings import DEFAULT_REFERENCE, InterpreterSettings
 from .source import read_program
 
@@ -142,7 +144,8 @@ class NCKernel(Component):
     duration_ : ndarray (B,)
         Planned program time until done (s).
     plan_ : BatchPlan
-        The sampled references of all members.
+        The sampled references of all members, stored ragged (:mod:`.batch_plan`; its ``position``,
+        ``feed`` … properties rebuild padded (B, K) copies for inspection).
     """
 
     variables: ClassVar[tuple[Variable, ...]] = _variables()
@@ -234,31 +237,13 @@ class NCKernel(Component):
         schedule = build_schedule(blocks, settings.initial, file)
         self.plan_: BatchPlan = plan_batch(schedule, params, feeds, speeds)
         self.duration_ = self.plan_.duration.astype(float)
-        self._rows = np.arange(self.batch)
         self._write(0.0)
 
     def _write(self, kf: float) -> None:
         plan = self.plan_
-        k0, k1, frac = sample_position(float(kf), plan.feed.shape[1])
-        r = self._rows
-        pos = plan.position[:, k0]
-        feed = plan.feed[:, k0]
-        sref = plan.spindle_ref[:, k0]
-        sact = plan.spindle_speed[:, k0]
-        if frac > 0.0:
-            pos = pos + frac * (plan.position[:, k1] - pos)
-            feed = feed + frac * (plan.feed[:, k1] - feed)
-            sact = sact + frac * (plan.spindle_speed[:, k1] - sact)
         v = self.values
-        v["x_ref"][r] = pos[:, 0]  # type: ignore[index]
-        v["y_ref"][r] = pos[:, 1]  # type: ignore[index]
-        v["z_ref"][r] = pos[:, 2]  # type: ignore[index]
-        v["feed_ref"][r] = feed  # type: ignore[index]
-        v["spindle_ref"][r] = sref  # type: ignore[index]
-        v["spindle_speed"][r] = sact  # type: ignore[index]
-        v["line"][r] = plan.line[:, k0]  # type: ignore[index]
-        v["tool"][r] = plan.tool[:, k0]  # type: ignore[index]
-        v["done"][r] = k0 >= plan.done_index  # type: ignore[index]
+        read_plan(float(kf), plan.n_samples, *plan.arrays(), v["x_ref"], v["y_ref"], v["z_ref"], v["feed_ref"],
+                  v["spindle_ref"], v["spindle_speed"], v["line"], v["tool"], v["done"])
 
     def _do_step(self, t: float, h: float) -> None:
         self._write((t + h - self.t0) / self.plan_.period)

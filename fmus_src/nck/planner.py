@@ -54,6 +54,7 @@ import numpy as np
 from .blocks import (
     Arc, Block, Coolant, Dwell, Linear, ProgramEnd, ProgramStop, Rapid, SpindleSpeed, SpindleStop, ToolChange,
 )
+from .batch_plan import BatchPlan, BatchPlanBuilder
 from .errors import GCodeError, NCParameterError
 from .filters import apply_fir, box_lengths, filter_extension
 from .geometry import ChainGeometry, chain_geometry
@@ -66,8 +67,9 @@ from .tapping import rigid_tap_accel, rigid_tap_stroke
 
 #: Feed blocks shorter than this are treated as zero-length (no motion, no time), m.
 MIN_LENGTH = 1e-12
-#: Most interpolation periods a plan may hold (the whole reference is kept in memory: about
-#: 100 bytes per period and member; 1e7 periods are 2.8 h of program at Ts = 1 ms).
+#: Most interpolation periods a plan may hold (the whole reference is kept in memory: 24 bytes of positions
+#: per period and member in a batch plan, about 200 bytes while one member is planned; 1e7 periods are
+#: 2.8 h of program at Ts = 1 ms).
 MAX_PLAN_SAMPLES = 10_000_000
 
 
@@ -480,37 +482,11 @@ def plan_member(schedule: Schedule, params: NCParams, feeds: np.ndarray, speeds:
     return MemberPlan(position, feed, line.astype(np.int64), tool.astype(np.int64), spindle_ref, spindle_speed, done)
 
 
-@dataclass
-class BatchPlan:
-    """Sampled references of B members padded to a common length K (values held after each member's end).
-
-    Attributes
-    ----------
-    position : ndarray (B, K, 3)
-    feed, spindle_ref, spindle_speed : ndarray (B, K)
-    line, tool : ndarray (B, K) of int
-    done_index : ndarray (B,) of int
-    period : float
-        Ts (s).
-    """
-
-    position: np.ndarray
-    feed: np.ndarray
-    line: np.ndarray
-    tool: np.ndarray
-    spindle_ref: np.ndarray
-    spindle_speed: np.ndarray
-    done_index: np.ndarray
-    period: float
-
-    @property
-    def duration(self) -> np.ndarray:
-        """Program time until done (s), shape (B,)."""
-        return self.done_index * self.period
-
-
 def plan_batch(schedule: Schedule, params: Sequence[NCParams], feeds: np.ndarray, speeds: np.ndarray) -> BatchPlan:
-    """Plan B members (identical members are planned once).
+    """Plan B members into a ragged :class:`~.batch_plan.BatchPlan` (identical members are planned and stored once).
+
+    Each member is planned, copied into the batch storage and released before the next one, so memory
+    grows with the sum of the distinct members' lengths (not B × the longest).
 
     Parameters
     ----------
@@ -520,25 +496,12 @@ def plan_batch(schedule: Schedule, params: Sequence[NCParams], feeds: np.ndarray
     feeds, speeds : ndarray (B, n_blocks)
         From :func:`fmus_src.nck.overrides.resolve_values`.
     """
-    cache: dict[tuple, MemberPlan] = {}
-    plans: list[MemberPlan] = []
+    builder = BatchPlanBuilder()
+    stored: dict[tuple, int] = {}
+    members: list[int] = []
     for b, p in enumerate(params):
         key = (p, feeds[b].tobytes(), speeds[b].tobytes())
-        if key not in cache:
-            cache[key] = plan_member(schedule, p, feeds[b], speeds[b])
-        plans.append(cache[key])
-    B = len(plans)
-    K = max(len(pl.feed) for pl in plans)
-
-    def pad(name: str, fill_zero: bool = False) -> np.ndarray:
-        first = getattr(plans[0], name)
-        out = np.empty((B, K) + first.shape[1:], dtype=first.dtype)
-        for i, pl in enumerate(plans):
-            a = getattr(pl, name)
-            out[i, : len(a)] = a
-            out[i, len(a):] = 0 if fill_zero else a[-1]
-        return out
-
-    return BatchPlan(pad("position"), pad("feed", True), pad("line"), pad("tool"), pad("spindle_ref"),
-                     pad("spindle_speed"), np.array([pl.done_index for pl in plans], dtype=np.int64),
-                     params[0].interpolation_period)
+        if key not in stored:
+            stored[key] = builder.add(plan_member(schedule, p, feeds[b], speeds[b]))
+        members.append(stored[key])
+    return builder.finish(members, params[0].interpolation_period)

@@ -57,7 +57,8 @@ _HAS_FAILED = "has_failed"  # per component, "some member failed": recomputed fo
 
 # Member axes of run_chunk's arguments (None: shared by all members). HEAD: max_steps ... probe_factor;
 # TAIL: real_ptr ... cut, zmap. The recording buffers (between them) and the stop flags are the blocks' own.
-_NCK = (_Members(0, copy=False),) * 7 + (None, None)  # plans (B, K, ...), done index; period, start
+# n_samples, positions (shared); offset, length (B,); runs (shared); done index (B,); period, start
+_NCK = (None, None) + (_Members(0, copy=False),) * 2 + (None,) * 6 + (_Members(0, copy=False), None, None)
 _MCU = (_Members(2), _Members(2), _Members(0), None, None, None, None, _COUNTER, _Members(0), _Members(2),
         _Members(0))
 _DRIVES = (_Members(2), _Members(1), _Members(1), _Members(1), _Members(1), None, _Members(1))

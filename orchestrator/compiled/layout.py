@@ -258,15 +258,12 @@ class Layout:
         if by_kind[KIND_NCK]:
             nck = by_kind[KIND_NCK][0]
             p = nck.plan_
-            self.nck = (np.ascontiguousarray(p.position, dtype=np.float64), np.ascontiguousarray(p.feed, dtype=np.float64),
-                        np.ascontiguousarray(p.spindle_ref, dtype=np.float64),
-                        np.ascontiguousarray(p.spindle_speed, dtype=np.float64),
-                        np.ascontiguousarray(p.line, dtype=np.int64), np.ascontiguousarray(p.tool, dtype=np.int64),
-                        np.ascontiguousarray(p.done_index, dtype=np.int64), float(p.period), float(nck.t0))
+            self.nck = (p.n_samples,) + tuple(np.ascontiguousarray(a) for a in p.arrays()) + (
+                float(p.period), float(nck.t0))
         else:
-            z2 = np.zeros((B, 1))
-            zi = np.zeros((B, 1), dtype=np.int64)
-            self.nck = (np.zeros((B, 1, 3)), z2, z2, z2, zi, zi, np.zeros(B, dtype=np.int64), 1.0, 0.0)
+            z = np.zeros(B, dtype=np.int64)
+            self.nck = (1, np.zeros((1, 3)), z, z, np.zeros(1, dtype=np.int64), np.zeros(1), np.zeros(1), np.zeros(1),
+                        np.zeros(1, dtype=np.int64), np.zeros(1, dtype=np.int64), z, 1.0, 0.0)
         # MCU
         if by_kind[KIND_MCU]:
             m = by_kind[KIND_MCU][0]

@@ -6,7 +6,8 @@ with every variable that crosses a component boundary held in one array
 ``V`` (rows = variables, columns = batch members) and every component step a
 call of the compiled kernel the component itself would call:
 
-* NC kernel: the planned samples (:class:`fmus_src.nck.planner.BatchPlan`), read as ``NCKernel._write`` reads them;
+* NC kernel: the planned samples (the ragged :class:`fmus_src.nck.batch_plan.BatchPlan`), read as
+  ``NCKernel._write`` reads them (:func:`fmus_src.nck.sampling.read_member`);
 * MCU: :func:`fmus_src.servo.control_numba.mcu_kernel`, member by member (its scalar
   :func:`~fmus_src.servo.control_numba.axis_member` / :func:`~fmus_src.servo.control_numba.axis_alarm`);
 * drive axes: :func:`fmus_src.servo.stick_slip_numba.advance_kernel` or, member by member,
@@ -36,7 +37,7 @@ from fmus_src.cutting import stock as cutting_stock
 from fmus_src.jit import njit, njit_nogil
 from fmus_src.jit_cache import guard_cache
 from fmus_src.nck import sampling
-from fmus_src.nck.sampling import sample_position
+from fmus_src.nck.sampling import read_member, sample_position
 from fmus_src.servo import control_numba, exponential_numba, stick_slip, stick_slip_numba
 from fmus_src.servo.control_numba import axis_alarm, axis_member
 from fmus_src.servo.exponential_numba import exponential_member
@@ -74,30 +75,22 @@ _OUT_MRR = 4 + CUT_OUTPUTS.index("mrr")
 
 
 @njit
-def _nck_step(kf: float, base: int, V: np.ndarray, position: np.ndarray, feed: np.ndarray, sref: np.ndarray,
-              sact: np.ndarray, line: np.ndarray, tool: np.ndarray, done_index: np.ndarray) -> None:
-    """``NCKernel._write(kf)`` for every member (same clamping, rounding and interpolation)."""
-    k0, k1, frac = sample_position(kf, feed.shape[1])
+def _nck_step(kf: float, base: int, V: np.ndarray, n_samples: int, position: np.ndarray, offset: np.ndarray,
+              length: np.ndarray, run_key: np.ndarray, run_feed: np.ndarray, run_sref: np.ndarray,
+              run_sact: np.ndarray, run_line: np.ndarray, run_tool: np.ndarray, done_index: np.ndarray) -> None:
+    """``NCKernel._write(kf)`` for every member: :func:`fmus_src.nck.sampling.read_plan`'s reading, into ``V``."""
+    k0, k1, frac = sample_position(kf, n_samples)
     for b in range(V.shape[1]):
-        px = position[b, k0, 0]
-        py = position[b, k0, 1]
-        pz = position[b, k0, 2]
-        fd = feed[b, k0]
-        sa = sact[b, k0]
-        if frac > 0.0:
-            px = px + frac * (position[b, k1, 0] - px)
-            py = py + frac * (position[b, k1, 1] - py)
-            pz = pz + frac * (position[b, k1, 2] - pz)
-            fd = fd + frac * (feed[b, k1] - fd)
-            sa = sa + frac * (sact[b, k1] - sa)
+        px, py, pz, fd, sr, sa, ln, tl = read_member(b, k0, k1, frac, position, offset, length, run_key, run_feed,
+                                                     run_sref, run_sact, run_line, run_tool)
         V[base, b] = px
         V[base + 1, b] = py
         V[base + 2, b] = pz
         V[base + 3, b] = fd
-        V[base + 4, b] = sref[b, k0]
+        V[base + 4, b] = sr
         V[base + 5, b] = sa
-        V[base + 6, b] = line[b, k0]
-        V[base + 7, b] = tool[b, k0]
+        V[base + 6, b] = ln
+        V[base + 7, b] = tl
         V[base + 8, b] = 1.0 if k0 >= done_index[b] else 0.0
 
 
@@ -192,7 +185,8 @@ def run_chunk(
         schedule. ``EV_FAIL`` returns right after the kernel call (state advanced), before the
         component's own failure handling.
     """
-    (n_pos, n_feed, n_sref, n_sact, n_line, n_tool, n_done, n_period, n_t0) = nck
+    (n_samples, n_pos, n_offset, n_length, n_key, n_feed, n_sref, n_sact, n_line, n_tool, n_done, n_period,
+     n_t0) = nck
     (m_gains, m_state, m_width, m_ratio, m_tp, m_tv, m_ticks, m_next, m_inpos, m_limits, m_alarm) = mcu
     (d_params, d_pos, d_vel, d_dir, d_step, d_integ, d_status) = drives
     (c_par, c_st, c_engaged, c_verts, c_vs, c_ds, c_count, c_alpha, c_beta, c_top, c_zfloor, c_margin, c_tol,
@@ -298,8 +292,8 @@ def run_chunk(
                     for b in range(B):
                         V[base + 6, b] = d_pos[i, b]
                 elif kind == KIND_NCK:
-                    _nck_step((t_tick + h_i - n_t0) / n_period, base, V, n_pos, n_feed, n_sref, n_sact, n_line,
-                              n_tool, n_done)
+                    _nck_step((t_tick + h_i - n_t0) / n_period, base, V, n_samples, n_pos, n_offset, n_length,
+                              n_key, n_feed, n_sref, n_sact, n_line, n_tool, n_done)
                 elif kind == KIND_ZMAP:  # CuttingLoad._do_step, effect terms off
                     n_bad = zmap_component_step(
                         h_i, V[base:base + n_zmap], z_heights, z_grid, z_cells, z_rho, z_points, z_arc, z_head,
