@@ -13,8 +13,8 @@ from .prepare import Prepared
 #: Backlash width of the kinematic column (the column is per µm), m.
 BACKLASH_PROBE_M = 10e-6
 #: Encoder and current resolutions assumed for the noise-floor floor (µm, A); 0 = not assumed.
-POSITION_QUANTUM_UM = 0.0
-CURRENT_QUANTUM_A = 0.0
+POSITION_QUANTUM_UM = 0.1
+CURRENT_QUANTUM_A = 0.01
 
 
 def column_model(col: Column) -> dict[str, dict[str, float]]:

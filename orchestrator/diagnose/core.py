@@ -454,6 +454,9 @@ def diagnose(
     log: list[str] = [f"time offset: {prep.offset:.6f} s ({prep.offset_method})", *notes]
     if prep.forces_source == "predicted":
         log.append("no fx_N/fy_N recorded: the replayed drives carry the twin's predicted cutting forces")
+    elif prep.forces_source == "corrected":
+        log.append("fx_N/fy_N sampled too coarsely for the tooth load: the replayed drives carry the twin's cutting "
+                   "load, corrected by the recorded forces averaged over whole spindle revolutions")
     if drives:
         d = _diagnose_drives(case, prep, base_machine, holdout, vertical, refit_scales, say, log)
     else:

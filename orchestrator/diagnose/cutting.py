@@ -54,6 +54,8 @@ DROOP_LAG_S = 1e-3
 EDGE_UNIT = 1e4
 #: Force channels compared.
 FORCE_CHANNELS = ("fx_N", "fy_N")
+#: Lowest force noise floor, N (see :func:`prepare_cutting`).
+FORCE_FLOOR_N = 0.5
 
 CuttingModel = dict[str, dict[str, float]]
 
@@ -211,6 +213,7 @@ def prepare_cutting(case: Case, recording: Recording, spindle_command=None, say=
     air = ~cuts.mask(inputs.t.size)
     sigma = noise_floor(np.concatenate([measured[air, 0], measured[air, 1]])) if air.sum() > 50 else \
         noise_floor(measured[:, 0])
+    sigma = max(sigma, FORCE_FLOOR_N)
     # spindle speed rows for droop: the commanded speed constant, the actual one near it
     t_all = np.asarray(recording.t, float)
     sp_rows = np.zeros(0, int)

@@ -68,7 +68,8 @@ class Prepared:
         Without recorded forces, a case with a ``[stock]`` takes the twin's predicted forces
         (:func:`predicted_forces`), since the machine's drives carried a cutting load all the same.
     forces_source : str
-        Where ``disturbance`` comes from: ``"recorded"``, ``"predicted"`` or ``"none"``.
+        Where ``disturbance`` comes from: ``"recorded"``, ``"predicted"``, ``"corrected"`` (recorded forces too
+        coarse for the tooth load: the twin's load corrected by them, :func:`corrected_forces`) or ``"none"``.
     current_scale : dict axis -> float
         Scale error of a current channel found by the diagnosis (a logger artefact); ``current`` is
         already divided by it.
@@ -142,7 +143,22 @@ def twin_commands(case: Case, machine: Machine) -> Recording:
     return result.recording
 
 
-def recorded_forces(recording: Recording) -> dict | None:
+@dataclass(frozen=True)
+class SampledForce:
+    """A force recorded at times ``t`` [s], linear between samples and 0 outside: ``f(q)`` [N]."""
+
+    t: np.ndarray
+    f: np.ndarray
+
+    def __call__(self, q: np.ndarray) -> np.ndarray:
+        return np.interp(q, self.t, self.f, left=0.0, right=0.0)
+
+    def samples_per_period(self, period_s: float) -> float:
+        """Median samples per ``period_s``."""
+        return period_s / float(np.median(np.diff(self.t))) if self.t.size > 2 else float("inf")
+
+
+def recorded_forces(recording: Recording) -> dict[str, SampledForce] | None:
     """``{axis: f(t)}`` from ``fx_N`` / ``fy_N`` (linear between samples, 0 outside), or None without forces."""
     out = {}
     t = np.asarray(recording.t, float)
@@ -152,7 +168,7 @@ def recorded_forces(recording: Recording) -> dict | None:
             f = np.asarray(recording[name], float)
             ok = np.isfinite(f)
             if ok.sum() > 10:
-                out[a] = (lambda q, tf=t[ok], ff=f[ok]: np.interp(q, tf, ff, left=0.0, right=0.0))
+                out[a] = SampledForce(t[ok], f[ok])
     return out or None
 
 
@@ -175,10 +191,51 @@ def predicted_forces(case: Case, machine: Machine, offset: Callable[[], float]) 
     identified X velocity gain by 3 %). ``offset()`` is read at every call (the servo-phase alignment
     refines it after this is built). None when the program does not cut the case's stock.
     """
+    loads = twin_loads(case, machine)
+    if loads is None:
+        return None
+    return {a: (lambda q, a=a: loads.carried(a, np.asarray(q, float) - offset())) for a in loads.mean}
+
+
+@dataclass
+class TwinLoads:
+    """The twin's cutting forces on the x and y drives, every communication step of its run with cutting.
+
+    Attributes
+    ----------
+    t0, h : float
+        Time of sample 0 and the step, s (program clock).
+    mean, instant : dict axis -> ndarray (n,)
+        Step mean of the force (what the drive carries) and its instantaneous value at the step end, N.
+    rate, stale : dict axis -> int
+        The drive's ticks per step, and how many of them run before the cutting component in a step.
+    """
+
+    t0: float
+    h: float
+    mean: dict[str, np.ndarray]
+    instant: dict[str, np.ndarray]
+    rate: dict[str, int]
+    stale: dict[str, int]
+
+    def carried(self, a: str, q: np.ndarray) -> np.ndarray:
+        """The load the twin's drive ``a`` carries at program times ``q`` [N]."""
+        return _carried_step_mean(q, self.t0, self.h, self.rate[a], self.stale[a], self.mean[a])
+
+    def instant_at(self, a: str, q: np.ndarray) -> np.ndarray:
+        """The instantaneous force at program times ``q`` (linear between step ends, 0 outside) [N]."""
+        grid = self.t0 + self.h * np.arange(self.instant[a].size)
+        return np.interp(q, grid, self.instant[a], left=0.0, right=0.0)
+
+
+def twin_loads(case: Case, machine: Machine) -> TwinLoads | None:
+    """Run the twin with cutting and keep the forces on its x and y drives; None when nothing is cut."""
     twin = build_twin(replace(case, machine=machine), batch=1)
     if twin.cutting is None:
         return None
+    cutting = DRIVE_LOADS["x"].split(".")[0]
     probes = [Probe(f"{a}_load_N", ref, "N") for a, ref in DRIVE_LOADS.items()]
+    probes += [Probe(f"{a}_force_N", f"{cutting}.f{a}", "N") for a in DRIVE_LOADS]
     settings = MasterSettings(step=twin.options.step, time_limit=TWIN_TIME_LIMIT_S, stop_when=twin.stop_when,
                               limits=twin.limits or {})
     master = Master(twin.system, settings, probes)
@@ -186,19 +243,70 @@ def predicted_forces(case: Case, machine: Machine, offset: Callable[[], float]) 
     if not run.success:
         raise DiagnosisError(f"{case.program}: the twin's run with cutting, for the load on the drives, failed: "
                              f"{run.message}")
-    t0, h = float(run.recording.t[0]), float(twin.options.step)
-    cutting = DRIVE_LOADS["x"].split(".")[0]
-    out = {}
+    loads = TwinLoads(float(run.recording.t[0]), float(twin.options.step), {}, {}, {}, {})
     for a in DRIVE_LOADS:
         drive = f"{a}_drive"
-        # the cutting component steps once a step (rate 1, the twin's), at the first fine tick: the drive's
-        # first tick runs before it when the drive comes first in the execution order
-        stale = 1 if master.order.index(drive) < master.order.index(cutting) else 0
-        load = np.asarray(run.recording[f"{a}_load_N"], float)
-        if np.any(load != 0.0):
-            out[a] = (lambda q, f=load, n=stale: _carried_step_mean(np.asarray(q, float) - offset(), t0, h,
-                                                                      twin.system.rates[drive], n, f))
-    return out or None
+        mean = np.asarray(run.recording[f"{a}_load_N"], float)
+        if np.any(mean != 0.0):
+            loads.mean[a] = mean
+            loads.instant[a] = np.asarray(run.recording[f"{a}_force_N"], float)
+            loads.rate[a] = int(twin.system.rates[drive])
+            # the cutting component steps once a step (rate 1, the twin's), at the first fine tick: the drive's
+            # first tick runs before it when the drive comes first in the execution order
+            loads.stale[a] = 1 if master.order.index(drive) < master.order.index(cutting) else 0
+    return loads if loads.mean else None
+
+
+#: Force samples per tooth period below which the recorded forces are too coarse to carry the drive load:
+#: interpolated, they are another force (see :func:`corrected_forces`).
+MIN_FORCE_SAMPLES_PER_TOOTH = 6.0
+#: Spindle revolutions over which the measured-minus-predicted force is averaged (:func:`corrected_forces`).
+CORRECTION_REVOLUTIONS = 2
+
+
+def corrected_forces(measured: dict[str, SampledForce], loads: TwinLoads, offset: Callable[[], float],
+                     revolution_s: float) -> dict:
+    """``{axis: f(t)}``: the twin's carried load plus the slow part of what the dynamometer measured beyond it.
+
+    A dynamometer sampled at fewer than :data:`MIN_FORCE_SAMPLES_PER_TOOTH` samples per tooth period aliases
+    the tooth load (1 ms samples of a 2-flute tool at 6000 rpm: 5 per tooth), and linear interpolation
+    between its samples is another force than the one the drive carried. The drives then carry the twin's
+    step-mean load, corrected by the measured-minus-predicted force averaged over
+    :data:`CORRECTION_REVOLUTIONS` spindle revolutions (the tooth phase cancels over whole revolutions): a
+    load that differs from the model's (wear, an edge force, another Kt) still loads the drives; the tooth
+    pattern within a revolution is the twin's. On the twin's own run the correction is 0 and the replay is the
+    twin's exactly. ``offset()`` is read at every call, as in :func:`predicted_forces`.
+    """
+    out = {}
+    for a in loads.mean:
+        if a not in measured:
+            continue
+        force = measured[a]
+        window = max(1, int(round(force.samples_per_period(CORRECTION_REVOLUTIONS * revolution_s))))
+
+        def load(q, a=a, force=force, window=window):
+            off = offset()
+            diff = force.f - loads.instant_at(a, force.t - off)
+            slow = np.convolve(diff, np.ones(window) / window, mode="same")
+            return loads.carried(a, np.asarray(q, float) - off) + np.interp(q, force.t, slow, left=0.0, right=0.0)
+
+        out[a] = load
+    return out
+
+
+def _coarse_forces(disturbance: dict | None, case: Case, nc: Recording) -> float | None:
+    """The spindle revolution [s] when ``disturbance`` holds recorded forces too coarse for the tooth load of
+    the case's tool (fewer than :data:`MIN_FORCE_SAMPLES_PER_TOOTH` per tooth), else None."""
+    if not disturbance or case.stock is None or not all(isinstance(f, SampledForce) for f in disturbance.values()):
+        return None
+    rpm = np.asarray(nc["spindle_rpm"], float)
+    if not np.any(rpm > 0):
+        return None
+    revolution = 60.0 / float(np.median(rpm[rpm > 0]))
+    tooth = revolution / max(1, int(case.tool.flutes))
+    if min(f.samples_per_period(tooth) for f in disturbance.values()) >= MIN_FORCE_SAMPLES_PER_TOOTH:
+        return None
+    return revolution
 
 
 def _carried_step_mean(q: np.ndarray, t0: float, h: float, rate: int, stale: int, mean: np.ndarray) -> np.ndarray:
@@ -326,7 +434,12 @@ def prepare(case: Case, recording: Recording, machine: Machine, axes: list[str] 
     prep = Prepared(recording, machine, t, float(offset), method, list(commands), commands, recorded, fe, cur,
                     valid, line, nc, nc_diff, ref_off, t_start,
                     disturbance=disturbance if disturbance is not None else recorded_forces(recording))
-    if prep.disturbance is not None:
+    revolution = _coarse_forces(prep.disturbance, case, nc)
+    loads = twin_loads(case, machine) if revolution is not None else None
+    if loads is not None:
+        prep.disturbance = corrected_forces(prep.disturbance, loads, lambda: prep.offset, revolution)
+        prep.forces_source = "corrected"
+    elif prep.disturbance is not None:
         prep.forces_source = "recorded"
     elif case.stock is not None:
         prep.disturbance = predicted_forces(case, machine, lambda: prep.offset)
