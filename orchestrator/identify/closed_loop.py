@@ -30,6 +30,7 @@ from typing import Callable, Mapping
 import numpy as np
 
 from fmus_src.servo import MCU, DriveAxis
+from fmus_src.servo.replay import COMPILED_OUTPUTS, compiled_ticks
 
 from ..machine import Machine
 from ..twin import drive_parameters, mcu_parameters
@@ -192,7 +193,18 @@ def run_servo_ticks(
     -------
     dict
         ``{output: {axis: ndarray (n_ticks + 1, B)}}`` with ``"current_cmd"`` (A) included.
+
+    Notes
+    -----
+    The ticks run in one compiled call per axis (:func:`fmus_src.servo.replay.compiled_ticks`) whenever
+    the components allow it (compiled kernels, exponential drives, outputs among
+    ``table_position``, ``position``, ``motor_force``); otherwise, or when a member fails on the
+    way, tick by tick here. The components are consumed: their state afterwards is not defined.
     """
+    if set(outputs) <= set(COMPILED_OUTPUTS):
+        compiled = compiled_ticks(mcu, drives, ref, t0, tv, n_ticks, disturbance)
+        if compiled is not None:
+            return {name: compiled[name] for name in (*outputs, "current_cmd")}
     axes = list(ref)
     batch = mcu.batch
     traces = {name: {a: np.empty((n_ticks + 1, batch)) for a in axes} for name in (*outputs, "current_cmd")}

@@ -1,0 +1,153 @@
+"""Compiled replay of a set-up MCU and its drives against given reference positions (identification, diagnosis).
+
+:func:`compiled_ticks` runs what a tick-by-tick loop of ``mcu.do_step`` and
+``drive.do_step`` would (see :func:`orchestrator.identify.closed_loop.run_servo_ticks`)
+in :func:`fmus_src.servo.replay_numba.replay_axis` from the blocks the
+components built at set-up: one call per axis and block of members, run in
+threads side by side (the kernel releases the GIL; members and axes never
+interact, so the numbers do not depend on the split). It returns ``None`` when the
+components are not in a state it covers (numba missing, the numpy
+reference selected, an RK4 drive, a member already failed, a tick grid other
+than the caller's) or when a member fails on the way (a stick/slip failure
+or an excess-error alarm): the caller then steps the components itself,
+which fail the member with their own message.
+"""
+from __future__ import annotations
+
+import os
+from concurrent.futures import ThreadPoolExecutor
+from typing import Mapping
+
+import numpy as np
+
+from ..jit import NUMBA_AVAILABLE
+from .drive import DriveAxis
+from .mcu import AXES, MCU
+from .replay_numba import DRIVE_EXTRA_ROWS, N_OUTPUT_ROWS, REPLAY_OK, replay_axis
+
+#: Outputs of :func:`compiled_ticks` (besides the MCU's ``current_cmd``).
+COMPILED_OUTPUTS = ("table_position", "position", "motor_force")
+
+#: Fewest members per thread's block (below this a thread costs more than it saves).
+MIN_MEMBERS_PER_BLOCK = 4
+
+#: Tolerance on the components' tick grid against the caller's ``t0``, ``tv`` (relative).
+GRID_RTOL = 1e-12
+
+
+def _covered(mcu: MCU, drives: Mapping[str, DriveAxis], t0: float, tv: float) -> bool:
+    """True when the compiled replay reproduces these set-up components exactly."""
+    if not (NUMBA_AVAILABLE and mcu.use_compiled and mcu.state == "initialized"):
+        return False
+    if mcu._next_tick != 0 or mcu.t0 != t0 or abs(mcu._tv - tv) > GRID_RTOL * tv or mcu.failed_members.any():
+        return False
+    for d in drives.values():
+        if not (d.use_compiled and d.state == "initialized" and str(d.values["integrator"]) == "exponential"):
+            return False
+        if d.t0 != t0 or d.failed_members.any() or not np.all(np.isfinite(d._state.position)):
+            return False
+    return True
+
+
+def _columns(values: np.ndarray) -> np.ndarray:
+    """A series of shape ``(n,)`` or ``(n, B)`` as a C-contiguous float array ``(n, 1)`` or ``(n, B)``.
+
+    A member axis broadcast from one column (stride 0) is kept as that one column, not copied ``B`` times.
+    """
+    arr = np.asarray(values, dtype=float)
+    if arr.ndim == 1:
+        arr = arr[:, None]
+    if arr.shape[1] > 1 and arr.strides[1] == 0:
+        arr = arr[:, :1]
+    return np.ascontiguousarray(arr)
+
+
+def _drive_block(drive: DriveAxis) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Packed parameters, switches and state block of a set-up drive (see :mod:`.replay_numba`)."""
+    v = drive.values
+    extra = [drive._step] + [v[name] for name in DRIVE_EXTRA_ROWS[1:]]
+    block = np.ascontiguousarray(np.vstack([drive._params] + [np.broadcast_to(np.asarray(r, dtype=float), (drive.batch,))
+                                                                for r in extra]))
+    switches = np.array([drive._load_on, drive._reversal_on, drive._table_on], dtype=np.int64)
+    s, table = drive._state, drive._table
+    state = np.vstack([s.position, s.velocity, s.direction.astype(float), table.table, table.travel,
+                       table.last_direction]).astype(float)
+    return block, switches, np.ascontiguousarray(state)
+
+
+def compiled_ticks(
+    mcu: MCU,
+    drives: Mapping[str, DriveAxis],
+    ref: Mapping[str, np.ndarray],
+    t0: float,
+    tv: float,
+    n_ticks: int,
+    disturbance: Mapping[str, np.ndarray] | None = None,
+) -> dict[str, dict[str, np.ndarray]] | None:
+    """Tick-by-tick traces of set-up components, or ``None`` when they must be stepped one tick at a time.
+
+    Parameters
+    ----------
+    mcu, drives : MCU and DriveAxis (one per axis in ``ref``), set up at ``t0`` and not yet stepped.
+        They are consumed: their state after the call is not defined.
+    ref : mapping axis -> ndarray, shape (n_ticks + 1,) or (n_ticks + 1, B)
+        Reference position at each velocity-loop tick [m].
+    t0, tv : float
+        Start time and velocity-loop period [s].
+    n_ticks : int
+        Ticks to run.
+    disturbance : mapping axis -> ndarray, shape (n_ticks,), optional
+        Disturbance force of the axis during each tick [N].
+
+    Returns
+    -------
+    dict or None
+        ``{output: {axis: ndarray (n_ticks + 1, B)}}`` for the outputs ``table_position``, ``position``,
+        ``motor_force`` and ``current_cmd`` (after each tick; row 0 the set-up values).
+    """
+    if not _covered(mcu, drives, t0, tv):
+        return None
+    batch = mcu.batch
+    names = (*COMPILED_OUTPUTS, "current_cmd")
+    line = mcu._delay_line
+    capacity = line.capacity if line is not None else 2
+    calls: dict[str, tuple] = {}
+    outs: dict[str, np.ndarray] = {}
+    for a, drive in drives.items():
+        i = AXES.index(a)
+        out = np.empty((N_OUTPUT_ROWS, n_ticks + 1, batch))
+        out[0, 0], out[1, 0] = drive.values["table_position"], drive.values["position"]
+        out[2, 0], out[3, 0] = drive.values["motor_force"], mcu.values[f"{a}_current_cmd"]
+        block, switches, state = _drive_block(drive)
+        held = np.asarray(drive.values["disturbance_force"], dtype=float).reshape(1, -1)
+        dist = _columns(disturbance[a]) if disturbance is not None and a in disturbance else held
+        calls[a] = (int(n_ticks), int(mcu._ratio), float(mcu._tp), float(mcu._tv), float(t0), i,
+                    np.ascontiguousarray(mcu._gain_block[:, i, :]), mcu._state.block[:, i, :].copy(),
+                    np.ascontiguousarray(mcu._limit_block[:, i, :]), np.ascontiguousarray(mcu._delay[i]),
+                    int(capacity), _columns(ref[a]), dist, block, switches, state, out)
+        outs[a] = out
+    items = [(a, b0, b1) for a in calls for b0, b1 in member_blocks(batch, len(calls))]
+    if len(items) == 1:
+        statuses = [replay_axis(items[0][1], items[0][2], *calls[items[0][0]])]
+    else:
+        with ThreadPoolExecutor(max_workers=min(len(items), usable_cores())) as pool:
+            statuses = list(pool.map(lambda item: replay_axis(item[1], item[2], *calls[item[0]]), items))
+    if any(status != REPLAY_OK for status, _, _ in statuses):
+        return None
+    return {name: {a: outs[a][r] for a in calls} for r, name in enumerate(names)}
+
+
+def usable_cores() -> int:
+    """Cores this process may run on."""
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+
+
+def member_blocks(batch: int, n_axes: int) -> list[tuple[int, int]]:
+    """Member ranges ``(b0, b1)`` so that ``n_axes`` axes times the blocks keep every core busy.
+
+    At least :data:`MIN_MEMBERS_PER_BLOCK` members per block; one block when the axes alone fill the cores.
+    """
+    wanted = -(-usable_cores() // max(n_axes, 1))
+    blocks = max(1, min(wanted, batch // MIN_MEMBERS_PER_BLOCK))
+    edges = np.linspace(0, batch, blocks + 1).round().astype(int)
+    return [(int(edges[j]), int(edges[j + 1])) for j in range(blocks)]
