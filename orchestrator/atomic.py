@@ -2,6 +2,10 @@
 
 Content goes to a temporary file in the same folder, is flushed and fsync'ed,
 then renamed over the target (``os.replace`` is atomic on POSIX and Windows).
+The file gets the permissions a plain ``open(path, "w")`` would give it: those
+of the file it replaces, else ``0o666`` less the process umask (a temporary
+file alone would be private to its owner, ``0o600``, and a shop's DNC server or
+a colleague could not read the optimised program).
 """
 from __future__ import annotations
 
@@ -11,6 +15,16 @@ import tempfile
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, BinaryIO, Iterator
+
+
+def _target_mode(path: Path) -> int:
+    """Permission bits for ``path``: those of the existing file, else ``0o666`` less the umask."""
+    try:
+        return path.stat().st_mode & 0o7777
+    except FileNotFoundError:
+        mask = os.umask(0)  # the only portable way to read the umask: set it and put it back at once
+        os.umask(mask)
+        return 0o666 & ~mask
 
 
 @contextmanager
@@ -26,6 +40,7 @@ def atomic_writer(path: Path) -> Iterator[BinaryIO]:
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
         with os.fdopen(fd, "wb") as handle:
+            os.chmod(tmp, _target_mode(path))
             yield handle
             handle.flush()
             os.fsync(handle.fileno())
