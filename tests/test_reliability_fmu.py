@@ -232,9 +232,9 @@ def test_bad_fmu_files_raise_before_any_process_starts(tmp_path, faulty, kind):
     (tmp_path / "text.fmu").write_text("not a zip")
     with pytest.raises(FMUError, match=r"text\.fmu: not an FMU \(not a zip archive\)"):
         kind(tmp_path / "text.fmu")
-    md = FAULTY_XML.replace('fmiVersion="2.0"', 'fmiVersion="3.0"')
-    with pytest.raises(FMUError, match=r"v3\.fmu: FMI version '3.0'"):
-        kind(_zip(tmp_path / "v3.fmu", {"modelDescription.xml": md}))
+    md = FAULTY_XML.replace('fmiVersion="2.0"', 'fmiVersion="1.0"')
+    with pytest.raises(FMUError, match=r"v1\.fmu: FMI version '1.0'"):
+        kind(_zip(tmp_path / "v1.fmu", {"modelDescription.xml": md}))
     md = FAULTY_XML.replace('<CoSimulation modelIdentifier="Faulty" canHandleVariableCommunicationStepSize="true"/>',
                             '<ModelExchange modelIdentifier="Faulty"/>')
     with pytest.raises(FMUError, match=r"me\.fmu: model-exchange-only FMU"):

@@ -1,4 +1,4 @@
-"""Real FMUs: export every component with pythonfmu, import any FMI 2.0 CS FMU through fmpy.
+"""Real FMUs: export every component with pythonfmu, import any FMI 2.0 or 3.0 CS FMU through fmpy.
 
 * :func:`build_fmus` / :func:`build_fmu` — one co-simulation FMU per component.
 * :class:`FMUComponent` — an FMU behind the component protocol (batch 1),

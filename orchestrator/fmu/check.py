@@ -9,7 +9,7 @@ from fmpy.validation import validate_fmu
 
 from fmus_src.units import UnitError, conversion_factor, unit as lookup_unit
 
-from .component import FMUComponent, fmu_unit, load_fmu
+from .component import FMUComponent, fmu_unit, load_fmu, our_type
 from .errors import FMUError
 from .roles import get_role
 
@@ -21,7 +21,10 @@ SMOKE_STEP = 1e-3
 
 @dataclass(frozen=True)
 class VariableInfo:
-    """One scalar variable of the FMU as declared in its model description."""
+    """One scalar variable of the FMU as declared in its model description.
+
+    ``type`` is the FMU's own type name (FMI 2.0 ``"Real"``, FMI 3.0 ``"Float64"``, ...).
+    """
 
     name: str
     causality: str
@@ -67,9 +70,11 @@ class FMUCheckReport:
     ----------
     path : Path
     model_name, fmi_version, generation_tool : str
+        ``fmi_version`` is ``"2.0"`` or ``"3.0"``.
     variables : list of VariableInfo
     problems : list of str
-        ``fmpy.validation.validate_fmu`` problems (empty = valid).
+        ``fmpy.validation.validate_fmu`` problems (empty = valid): schema (FMI 2.0 or
+        3.0), variable names, model structure, start values, units.
     smoke_ok : bool
         The short simulation ran without an FMI error.
     smoke_message : str
@@ -138,7 +143,7 @@ def _role_rows(path: Path, role_name: str, mapping: Mapping[str, str]) -> list[R
         if v is None:
             rows.append(RoleRow(spec.name, None, spec.name in required, "missing"))
             continue
-        type_ = "Integer" if v.type == "Enumeration" else v.type
+        type_ = our_type(v.type)
         unit = fmu_unit(v)
         if v.causality != spec.causality:
             status = f"is a {v.causality}, needs a {spec.causality}"
@@ -216,9 +221,9 @@ def check_fmu(
     Raises
     ------
     FMUError
-        The file is not a loadable FMI 2.0 co-simulation FMU at all (missing,
-        not a zip, wrong version, model exchange only, no binary), or an
-        unknown role.
+        The file is not a loadable FMI 2.0 or 3.0 co-simulation FMU at all
+        (missing, not a zip, wrong version, model exchange or scheduled
+        execution only, no binary), or an unknown role.
     """
     mapping = dict(mapping or {})
     loaded = load_fmu(path)
@@ -233,7 +238,7 @@ def check_fmu(
     problems = list(validate_fmu(str(loaded.path)))
     notes = []
     for v in variables:
-        if v.unit is not None and v.type == "Real":
+        if v.unit is not None and our_type(v.type) == "Real":
             try:
                 lookup_unit(v.unit)
             except UnitError:

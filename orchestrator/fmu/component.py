@@ -1,20 +1,29 @@
-"""Import: any FMI 2.0 co-simulation FMU behind the component protocol (through fmpy).
+"""Import: any FMI 2.0 or FMI 3.0 co-simulation FMU behind the component protocol (through fmpy).
 
 :class:`FMUComponent` looks to the master exactly like a native
 :class:`fmus_src.component.Component` with batch 1: ``name``, ``batch``,
 ``values`` (numpy arrays of shape ``(1,)`` that the master reads and writes
 in place), ``variable``, ``names``, ``setup``, ``do_step``, ``reset``,
 ``terminate`` and ``state``. ``do_step`` pushes the inputs held in
-``values`` into the FMU, calls ``fmi2DoStep`` and pulls the outputs back.
+``values`` into the FMU, calls ``fmi2DoStep`` (``fmi3DoStep``) and pulls the
+outputs back.
+
+FMI 3.0 (:mod:`orchestrator.fmu.fmi3`): scalar variables of every type but
+``Binary`` and ``Clock`` (``Float64``/``Float32`` are Real, ``Int8`` ...
+``UInt64`` Integer); an array variable (``<Dimension>``) among the
+parameters, inputs and outputs is refused. The instance is made with
+``eventModeUsed = false`` and ``earlyReturnAllowed = false``; a step that
+returns ``terminateSimulation`` or ``earlyReturn`` raises :class:`FMUError`.
 
 A foreign FMU whose variables are named differently stands in for a role of
 the twin through ``mapping={our_name: their_name}``; units are checked and
 converted with :mod:`fmus_src.units` (``values`` always holds our units).
 
 Every FMI call goes through :meth:`FMUComponent._fmi`, the one place where
-status codes are checked: fmi2Discard, fmi2Error and fmi2Fatal raise
-:class:`~orchestrator.fmu.errors.FMUError` naming the component, the FMI
-function, the time, the status and the FMU's last log messages.
+status codes are checked: fmi2Discard, fmi2Error and fmi2Fatal (fmi3Discard,
+fmi3Error, fmi3Fatal) raise :class:`~orchestrator.fmu.errors.FMUError` naming
+the component, the FMI function, the time, the status and the FMU's last log
+messages.
 """
 from __future__ import annotations
 
@@ -38,6 +47,8 @@ from fmpy.fmi2 import FMU2Slave, fmi2CallbackFunctions, fmi2CallbackLoggerTYPE, 
 from fmpy.fmi2 import fmi2CallbackFreeMemoryTYPE, fmi2CoSimulation
 from fmpy.model_description import ModelDescription, ScalarVariable
 
+from . import fmi3
+
 from fmus_src.component import Variable
 from fmus_src.units import UnitError, conversion_factor
 
@@ -50,6 +61,52 @@ PLATFORM = "linux64"
 _SUFFIX = ".so"
 _TYPES = ("Real", "Integer", "Boolean", "String")
 _DTYPES = {"Real": np.float64, "Integer": np.int64, "Boolean": np.bool_}
+
+
+@dataclass(frozen=True)
+class _Native:
+    """How one FMI variable type is exchanged.
+
+    Attributes
+    ----------
+    ours : str
+        Our type (``"Real"``, ``"Integer"``, ``"Boolean"``, ``"String"``).
+    ctype : type
+        ctypes element of the value buffer.
+    setter, getter : str
+        FMI functions (``"fmi2SetReal"``, ``"fmi3GetFloat32"``).
+    counted : bool
+        The functions take ``nValues`` after the value array (FMI 3.0).
+    """
+
+    ours: str
+    ctype: Any
+    setter: str
+    getter: str
+    counted: bool
+
+
+def _fmi2_native(ours: str, ctype: Any) -> _Native:
+    return _Native(ours, ctype, f"fmi2Set{ours}", f"fmi2Get{ours}", False)
+
+
+_NATIVE_FMI2 = {
+    "Real": _fmi2_native("Real", ctypes.c_double),
+    "Integer": _fmi2_native("Integer", ctypes.c_int),
+    "Enumeration": _fmi2_native("Integer", ctypes.c_int),
+    "Boolean": _fmi2_native("Boolean", ctypes.c_int),
+    "String": _fmi2_native("String", ctypes.c_char_p),
+}
+_NATIVE_FMI3 = {
+    name: _Native(ours, ctype, f"fmi3Set{suffix}", f"fmi3Get{suffix}", True)
+    for name, (ours, ctype, suffix) in fmi3.NATIVE_TYPES.items()
+}
+
+
+def _native(variable: ScalarVariable, version: str) -> _Native | None:
+    """How ``variable`` is exchanged, None for a type the twin does not exchange (FMI 3.0 Binary, Clock)."""
+    table = _NATIVE_FMI3 if fmi3.is_fmi3(version) else _NATIVE_FMI2
+    return table.get(variable.type)
 
 # ----------------------------------------------------------------------------- archive handling
 _EXTRACTED: dict[tuple[str, int, int], Path] = {}
@@ -74,7 +131,7 @@ class LoadedFMU:
 
 
 def load_fmu(path: str | Path) -> LoadedFMU:
-    """Check and extract an FMI 2.0 co-simulation FMU (cached per file and modification time).
+    """Check and extract an FMI 2.0 or 3.0 co-simulation FMU (cached per file and modification time).
 
     Parameters
     ----------
@@ -89,8 +146,9 @@ def load_fmu(path: str | Path) -> LoadedFMU:
     ------
     FMUError
         Missing file, not a zip archive, no or malformed ``modelDescription.xml``,
-        FMI version other than 2.0, model-exchange-only FMU, no binary for
-        this platform.
+        FMI version other than 2.0 or 3.x (FMI 1.0), an FMU without a
+        co-simulation interface (model exchange or scheduled execution only),
+        no binary for this platform.
     """
     path = Path(path).resolve()
     if not path.is_file():
@@ -107,16 +165,26 @@ def load_fmu(path: str | Path) -> LoadedFMU:
     except ET.ParseError as exc:
         raise FMUError(f"{path}: modelDescription.xml is not well-formed XML ({exc})", path=str(path)) from None
     version = root.get("fmiVersion", "?")
-    if version != "2.0":
+    if version != "2.0" and not fmi3.is_fmi3(version):
         raise FMUError(
-            f"{path}: FMI version {version!r}; only FMI 2.0 co-simulation FMUs are supported", path=str(path)
+            f"{path}: FMI version {version!r}; only FMI 2.0 and FMI 3.0 co-simulation FMUs are supported",
+            path=str(path),
         )
     cs = root.find("CoSimulation")
     if cs is None:
-        kind = "model-exchange-only FMU" if root.find("ModelExchange") is not None else "FMU without <CoSimulation>"
+        interfaces = [label for tag, label in (("ModelExchange", "model-exchange"),
+                                               ("ScheduledExecution", "scheduled-execution"))
+                      if root.find(tag) is not None]
+        if len(interfaces) == 1:
+            kind = f"{interfaces[0]}-only FMU"
+        elif interfaces:
+            kind = "FMU with model-exchange and scheduled-execution interfaces only"
+        else:
+            kind = "FMU without <CoSimulation>"
         raise FMUError(f"{path}: {kind}; a co-simulation FMU is required", path=str(path))
     identifier = cs.get("modelIdentifier", "")
-    binary = f"binaries/{PLATFORM}/{identifier}{_SUFFIX}"
+    platform = fmi3.PLATFORM if fmi3.is_fmi3(version) else PLATFORM
+    binary = f"binaries/{platform}/{identifier}{_SUFFIX}"
     if binary not in names:
         platforms = sorted({n.split("/")[1] for n in names if n.startswith("binaries/") and n.count("/") >= 2})
         raise FMUError(f"{path}: no binary {binary} for this platform (the FMU has {platforms})", path=str(path))
@@ -143,8 +211,14 @@ def fmu_unit(variable: ScalarVariable) -> str | None:
     return getattr(declared, "unit", None) or None
 
 
-def _fmu_type(variable: ScalarVariable) -> str:
-    return "Integer" if variable.type == "Enumeration" else variable.type
+def our_type(type_name: str) -> str:
+    """Our type for an FMI 2.0 or 3.0 type name (``"Float32"`` -> ``"Real"``); the name itself when not exchanged."""
+    if type_name in _TYPES:
+        return type_name
+    if type_name == "Enumeration":
+        return "Integer"
+    ours = fmi3.NATIVE_TYPES.get(type_name)
+    return ours[0] if ours is not None else type_name
 
 
 def _start(variable: ScalarVariable, type_: str) -> Any:
@@ -165,30 +239,77 @@ class _Binding:
     ours: Variable
     theirs: ScalarVariable
     to_fmu: float  # their value = to_fmu × our value (Real only)
+    native: _Native  # how it is exchanged (FMI type, functions)
 
 
-class _Channel:
-    """Preallocated ctypes buffers for a block of Real variables exchanged every step."""
+class _Block:
+    """Preallocated ctypes buffers for variables of one FMI type exchanged together.
 
-    def __init__(self, values: dict, bindings: list[_Binding]) -> None:
+    ``args`` are the arguments of the get/set call after the instance:
+    ``(vr, nvr, values)`` (FMI 2.0) or ``(vr, nvr, values, nValues)`` (FMI 3.0).
+    Reals are converted with ``to_fmu`` (their value = to_fmu × ours); String
+    values are held in ``values`` as str, the others in arrays of shape (1,).
+    """
+
+    def __init__(self, values: dict, bindings: list[_Binding], native: _Native) -> None:
         n = len(bindings)
         self.n = n
+        self.native = native
+        self.values = values
+        self.names = [b.ours.name for b in bindings]
         self.vr = (ctypes.c_uint * n)(*[b.theirs.valueReference for b in bindings])
-        self.buffer = (ctypes.c_double * n)()
-        self.view = np.ctypeslib.as_array(self.buffer) if n else np.empty(0)
-        self.arrays = [values[b.ours.name] for b in bindings]
+        self.buffer = (native.ctype * n)()
+        self.args = (self.vr, n, self.buffer) + ((n,) if native.counted else ())
+        self.fast = native.ctype is ctypes.c_double  # vectorised Real path (the common case)
+        self.view = np.ctypeslib.as_array(self.buffer) if self.fast and n else np.empty(0)
+        self.arrays = [values[name] for name in self.names] if native.ours != "String" else []
         self.to_fmu = np.array([b.to_fmu for b in bindings])
         self.from_fmu = 1.0 / self.to_fmu if n else self.to_fmu
 
     def pack(self) -> None:
-        for i, arr in enumerate(self.arrays):
-            self.view[i] = arr[0]
-        self.view *= self.to_fmu
+        """Our values -> the buffer (in the FMU's units)."""
+        kind = self.native.ours
+        if self.fast:
+            for i, arr in enumerate(self.arrays):
+                self.view[i] = arr[0]
+            self.view *= self.to_fmu
+        elif kind == "Real":
+            for i, arr in enumerate(self.arrays):
+                self.buffer[i] = float(arr[0]) * self.to_fmu[i]
+        elif kind == "String":
+            for i, name in enumerate(self.names):
+                self.buffer[i] = str(self.values[name]).encode("utf-8")
+        elif kind == "Boolean":
+            for i, arr in enumerate(self.arrays):
+                self.buffer[i] = bool(arr[0])
+        else:
+            for i, arr in enumerate(self.arrays):
+                self.buffer[i] = int(arr[0])
 
     def unpack(self) -> None:
-        self.view *= self.from_fmu
-        for i, arr in enumerate(self.arrays):
-            arr[0] = self.view[i]
+        """The buffer -> our values (in our units)."""
+        kind = self.native.ours
+        if self.fast:
+            self.view *= self.from_fmu
+            for i, arr in enumerate(self.arrays):
+                arr[0] = self.view[i]
+        elif kind == "Real":
+            for i, arr in enumerate(self.arrays):
+                arr[0] = float(self.buffer[i]) * self.from_fmu[i]
+        elif kind == "String":
+            for i, name in enumerate(self.names):
+                self.values[name] = (self.buffer[i] or b"").decode("utf-8")
+        else:
+            for i, arr in enumerate(self.arrays):
+                arr[0] = self.buffer[i]
+
+
+def _blocks(values: dict, bindings: list[_Binding]) -> list[_Block]:
+    """Bindings grouped by FMI type (Reals first, then in model-description order), one block each."""
+    groups: dict[str, list[_Binding]] = {}
+    for b in sorted(bindings, key=lambda b: b.native.ours != "Real"):
+        groups.setdefault(b.native.setter, []).append(b)
+    return [_Block(values, group, group[0].native) for group in groups.values()]
 
 
 #: ``generationTool`` prefixes of FMUs whose ``fmi2FreeInstance`` corrupts the host process's heap: PythonFMU 0.7
@@ -197,7 +318,7 @@ class _Channel:
 NO_FREE_TOOLS = ("PythonFMU 0.7",)
 
 
-def _free_instance(slave: FMU2Slave, alive: list[bool], free: bool = True) -> None:
+def _free_instance(slave: Any, alive: list[bool], free: bool = True, function: str = "fmi2FreeInstance") -> None:
     """Free an FMU instance once (used by close() and the finaliser); ``free=False`` only marks it closed.
 
     The shared library is deliberately *not* unloaded: an FMU that embeds
@@ -209,11 +330,11 @@ def _free_instance(slave: FMU2Slave, alive: list[bool], free: bool = True) -> No
     if alive[0]:
         alive[0] = False
         if free:
-            slave.fmi2FreeInstance(slave.component)
+            getattr(slave, function)(slave.component)
 
 
 class FMUComponent:
-    """An FMI 2.0 co-simulation FMU behind the component protocol (batch 1).
+    """An FMI 2.0 or FMI 3.0 co-simulation FMU behind the component protocol (batch 1).
 
     Parameters
     ----------
@@ -239,7 +360,14 @@ class FMUComponent:
     ------
     FMUError
         Bad file (see :func:`load_fmu`), missing or incompatible role
-        variables, unknown mapping or parameter names, instantiation failure.
+        variables, unknown mapping or parameter names, an array variable
+        (FMI 3.0 ``<Dimension>``) among the parameters, inputs and outputs,
+        instantiation failure.
+
+    Attributes
+    ----------
+    fmi_version : str
+        ``"2.0"`` or the FMI 3 version of the model description (``"3.0"``).
     """
 
     def __init__(
@@ -257,6 +385,9 @@ class FMUComponent:
         self.path = self._fmu.path
         md = self._fmu.model_description
         self.model_description = md
+        self.fmi_version = md.fmiVersion
+        self._v3 = fmi3.is_fmi3(md.fmiVersion)
+        self._prefix = "fmi3" if self._v3 else "fmi2"
         self.name = name or md.coSimulation.modelIdentifier
         if batch != 1:
             raise FMUError(
@@ -278,13 +409,9 @@ class FMUComponent:
                 raise FMUError(f"{self.name}.{key} is an output and cannot be given as a parameter",
                                path=str(self.path), component=self.name)
         self._apply_init_parameters()
-        by_causality: dict[tuple[str, str], list[_Binding]] = {}
-        for b in self._bindings:
-            by_causality.setdefault((b.ours.causality, b.ours.type), []).append(b)
-        self._groups = by_causality
-        self._discrete_inputs = [t for (c, t) in by_causality if c == "input" and t != "Real"]
-        self._real_in = _Channel(self.values, by_causality.get(("input", "Real"), []))
-        self._real_out = _Channel(self.values, by_causality.get(("output", "Real"), []))
+        self._in_blocks = _blocks(self.values, [b for b in self._bindings if b.ours.causality == "input"])
+        self._out_blocks = _blocks(self.values, [b for b in self._bindings if b.ours.causality == "output"])
+        self._step_flags = fmi3.StepFlags() if self._v3 else None
         self.messages: deque[str] = deque(maxlen=log_capacity)
         self._worst_logged = 0
         self.time = float("nan")
@@ -310,9 +437,15 @@ class FMUComponent:
         for v in md.modelVariables:
             if v.causality not in ("parameter", "input", "output"):
                 continue
-            type_ = _fmu_type(v)
-            if type_ not in _TYPES:
-                continue
+            if getattr(v, "dimensions", None):
+                raise FMUError(
+                    f"{where}: variable {v.name!r} ({v.causality}) is an array (<Dimension>); only scalar "
+                    "variables are supported", path=str(self.path), component=self.name,
+                )
+            native = _native(v, md.fmiVersion)
+            if native is None:
+                continue  # FMI 3.0 Binary or Clock: not exchanged, shown by check_fmu
+            type_ = native.ours
             ours = reverse.get(v.name, v.name)
             if not ours.isidentifier():
                 continue  # e.g. "der(x)" or "a[1]": not addressable by the twin, shown by check_fmu
@@ -338,7 +471,7 @@ class FMUComponent:
             if type_ == "Real" and factor != 1.0:
                 start = start / factor
             declared = Variable(ours, v.causality, our_unit, start, v.description or "", type_)  # type: ignore[arg-type]
-            bindings.append(_Binding(declared, v, factor))
+            bindings.append(_Binding(declared, v, factor, native))
         if self.role is not None:
             present = {b.ours.name for b in bindings}
             missing = [r.name for r in self.role.required if r.name not in present]
@@ -428,37 +561,82 @@ class FMUComponent:
 
     # ------------------------------------------------------------------ FMI calls (status checked here only)
     def _fmi(self, function: str, *args: Any) -> Any:
-        """Call ``fmi2<function>`` through fmpy; turn any status worse than warning into FMUError."""
+        """Call ``function`` (``"fmi2DoStep"``, ``"fmi3GetFloat64"``) through fmpy; a status worse than warning
+        raises FMUError."""
         try:
             return getattr(self._slave, function)(self._slave.component, *args)
         except FMICallException as exc:
             raise self._failure(function, int(exc.status)) from None
 
+    def _status_name(self, status: int) -> str:
+        return fmi3.status_name(status) if self._v3 else status_name(status)
+
     def _failure(self, function: str, status: int, verb: str = "returned") -> FMUError:
+        return self._end(function, f"{verb} {self._status_name(status)}", status)
+
+    def _end(self, function: str, what: str, status: int | None) -> FMUError:
+        """The FMUError for a failed call (``what`` happened in ``function``); frees or abandons the instance."""
         at = "" if np.isnan(self.time) else f" at t = {self.time:.6f} s"
         detail = "; FMU log: " + " | ".join(self.messages) if self.messages else ""
         error = FMUError(
-            f"{self.name}: {function} {verb} {status_name(status)}{at} (FMU {self.path}){detail}",
+            f"{self.name}: {function} {what}{at} (FMU {self.path}){detail}",
             path=str(self.path), component=self.name, function=function,
             time=None if np.isnan(self.time) else self.time, status=status,
         )
-        if status >= 4:
-            # fmi2Fatal: no further FMI call is allowed on any instance (FMI 2.0, 2.1.3), not even
-            # fmi2FreeInstance; the instance is abandoned
+        if status is not None and status >= 4:
+            # fmi2Fatal / fmi3Fatal: no further FMI call is allowed on any instance (FMI 2.0, 2.1.3;
+            # FMI 3.0, 2.2.3), not even the FreeInstance; the instance is abandoned
             self._alive[0] = False
         else:
             self._close()
         self.state = "terminated"
         return error
 
-    def _logger(self, env: Any, instance: bytes, status: int, category: bytes, message: bytes) -> None:
+    def _log(self, status: int, message: bytes | None) -> None:
         text = message.decode("utf-8", "replace") if message else ""
-        label = status_name(status)
+        label = self._status_name(status)
         self._worst_logged = max(self._worst_logged, int(status))
         self.messages.append(f"[{label}] {text}")
         log.debug("%s: [%s] %s", self.name, label, text)
 
+    def _logger(self, env: Any, instance: bytes, status: int, category: bytes, message: bytes) -> None:
+        self._log(status, message)
+
+    def _logger3(self, env: Any, status: int, category: bytes, message: bytes) -> None:
+        self._log(status, message)
+
     def _instantiate(self) -> None:
+        md = self.model_description
+        if self._v3:
+            self._instantiate3()
+        else:
+            self._instantiate2()
+        self._alive = [True]
+        tool = md.generationTool or ""
+        frees = not tool.startswith(NO_FREE_TOOLS)
+        self._finalizer = weakref.finalize(self, _free_instance, self._slave, self._alive, frees,
+                                           f"{self._prefix}FreeInstance")
+
+    def _instantiate_failed(self) -> FMUError:
+        detail = "; FMU log: " + " | ".join(self.messages) if self.messages else ""
+        function = "fmi3InstantiateCoSimulation" if self._v3 else "fmi2Instantiate"
+        return FMUError(f"{self.name}: {function} failed (FMU {self.path}){detail}",
+                        path=str(self.path), component=self.name, function=function)
+
+    def _instantiate3(self) -> None:
+        md = self.model_description
+        try:
+            slave, log_cb, update_cb = fmi3.instantiate_co_simulation(
+                md.coSimulation.modelIdentifier, md.guid, self._fmu.unzip_dir, self.name, self._logger3)
+        except (OSError, AttributeError) as exc:
+            raise FMUError(f"{self.path}: cannot load the FMU's shared library ({exc})", path=str(self.path),
+                           component=self.name) from None
+        self._slave = slave
+        self._callbacks = (log_cb, update_cb)
+        if not slave.component:
+            raise self._instantiate_failed()
+
+    def _instantiate2(self) -> None:
         md = self.model_description
         try:
             self._slave = FMU2Slave(
@@ -486,15 +664,9 @@ class FMUComponent:
             ctypes.byref(callbacks), 0, 1,
         )
         if not component:
-            detail = "; FMU log: " + " | ".join(self.messages) if self.messages else ""
-            raise FMUError(f"{self.name}: fmi2Instantiate failed (FMU {self.path}){detail}",
-                           path=str(self.path), component=self.name, function="fmi2Instantiate")
+            raise self._instantiate_failed()
         self._slave.component = component
         self._slave.callbacks = callbacks
-        self._alive = [True]
-        tool = md.generationTool or ""
-        frees = not tool.startswith(NO_FREE_TOOLS)
-        self._finalizer = weakref.finalize(self, _free_instance, self._slave, self._alive, frees)
 
     def _close(self) -> None:
         """Free the FMU instance and its library (idempotent)."""
@@ -505,69 +677,28 @@ class FMUComponent:
 
     # -- typed transfers (all through _fmi)
     def _set_all(self, causalities: tuple[str, ...]) -> None:
-        for (causality, type_), bindings in self._groups.items():
-            if causality not in causalities:
-                continue
-            settable = [b for b in bindings if b.theirs.variability != "constant"]
-            if not settable:
-                continue
-            n = len(settable)
-            vr = (ctypes.c_uint * n)(*[b.theirs.valueReference for b in settable])
-            if type_ == "Real":
-                data = (ctypes.c_double * n)(*[float(self.values[b.ours.name][0]) * b.to_fmu for b in settable])
-                self._fmi("fmi2SetReal", vr, n, data)
-            elif type_ == "Integer":
-                data = (ctypes.c_int * n)(*[int(self.values[b.ours.name][0]) for b in settable])
-                self._fmi("fmi2SetInteger", vr, n, data)
-            elif type_ == "Boolean":
-                data = (ctypes.c_int * n)(*[int(bool(self.values[b.ours.name][0])) for b in settable])
-                self._fmi("fmi2SetBoolean", vr, n, data)
-            else:
-                data = (ctypes.c_char_p * n)(*[str(self.values[b.ours.name]).encode("utf-8") for b in settable])
-                self._fmi("fmi2SetString", vr, n, data)
-
-    def _get_discrete_outputs(self) -> None:
-        for (causality, type_), bindings in self._groups.items():
-            if causality != "output" or type_ == "Real":
-                continue
-            n = len(bindings)
-            vr = (ctypes.c_uint * n)(*[b.theirs.valueReference for b in bindings])
-            if type_ == "String":
-                data = (ctypes.c_char_p * n)()
-                self._fmi("fmi2GetString", vr, n, data)
-                for b, v in zip(bindings, data):
-                    self.values[b.ours.name] = (v or b"").decode("utf-8")
-                continue
-            data = (ctypes.c_int * n)()
-            self._fmi("fmi2GetBoolean" if type_ == "Boolean" else "fmi2GetInteger", vr, n, data)
-            for b, v in zip(bindings, data):
-                self.values[b.ours.name][0] = v  # type: ignore[index]
+        settable = [b for b in self._bindings
+                    if b.ours.causality in causalities and b.theirs.variability != "constant"]
+        for block in _blocks(self.values, settable):
+            block.pack()
+            self._fmi(block.native.setter, *block.args)
 
     def _pull_outputs(self) -> None:
-        ch = self._real_out
-        if ch.n:
-            self._fmi("fmi2GetReal", ch.vr, ch.n, ch.buffer)
-            ch.unpack()
-        self._get_discrete_outputs()
+        for block in self._out_blocks:
+            self._fmi(block.native.getter, *block.args)
+            block.unpack()
+
+    def _get_discrete_outputs(self) -> None:
+        """Read the Integer, Boolean and String outputs (used by :class:`~.fast_loop.FastFMULoop`)."""
+        for block in self._out_blocks:
+            if block.native.ours != "Real":
+                self._fmi(block.native.getter, *block.args)
+                block.unpack()
 
     def _push_inputs(self) -> None:
-        ch = self._real_in
-        if ch.n:
-            ch.pack()
-            self._fmi("fmi2SetReal", ch.vr, ch.n, ch.buffer)
-        for type_ in self._discrete_inputs:
-            self._set_discrete_input(type_)
-
-    def _set_discrete_input(self, type_: str) -> None:
-        bindings = self._groups[("input", type_)]
-        n = len(bindings)
-        vr = (ctypes.c_uint * n)(*[b.theirs.valueReference for b in bindings])
-        if type_ == "String":
-            data = (ctypes.c_char_p * n)(*[str(self.values[b.ours.name]).encode("utf-8") for b in bindings])
-            self._fmi("fmi2SetString", vr, n, data)
-        else:
-            data = (ctypes.c_int * n)(*[int(self.values[b.ours.name][0]) for b in bindings])
-            self._fmi("fmi2SetBoolean" if type_ == "Boolean" else "fmi2SetInteger", vr, n, data)
+        for block in self._in_blocks:
+            block.pack()
+            self._fmi(block.native.setter, *block.args)
 
     # ------------------------------------------------------------------ lifecycle
     def setup(self, t0: float = 0.0) -> None:
@@ -577,20 +708,33 @@ class FMUComponent:
                            component=self.name)
         self.t0 = float(t0)
         self.time = self.t0
-        self._fmi("fmi2SetupExperiment", 0, 0.0, self.t0, 0, 0.0)
-        self._fmi("fmi2EnterInitializationMode")
+        if self._v3:
+            # no tolerance, start time t0, no stop time
+            self._fmi("fmi3EnterInitializationMode", False, 0.0, self.t0, False, 0.0)
+        else:
+            self._fmi("fmi2SetupExperiment", 0, 0.0, self.t0, 0, 0.0)
+            self._fmi("fmi2EnterInitializationMode")
         self._set_all(("parameter", "input"))
         self._worst_logged = 0
-        self._fmi("fmi2ExitInitializationMode")
+        exit_init = f"{self._prefix}ExitInitializationMode"
+        self._fmi(exit_init)
         if self._worst_logged >= 3:
             # the initialisation failed but the FMU could not say so in its status (pythonfmu: see
             # fmus_src.fmu.slave.ComponentSlave.exit_initialization_mode); the log names the cause
-            raise self._failure("fmi2ExitInitializationMode", self._worst_logged, "logged")
+            raise self._failure(exit_init, self._worst_logged, "logged")
         self._pull_outputs()
         self.state = "initialized"
 
     def do_step(self, t: float, h: float) -> None:
-        """Push inputs, ``fmi2DoStep(t, h)``, pull outputs (valid at ``t + h``)."""
+        """Push inputs, ``fmi2DoStep(t, h)`` or ``fmi3DoStep``, pull outputs (valid at ``t + h``).
+
+        Raises
+        ------
+        FMUError
+            A status worse than warning; for FMI 3.0 also ``terminateSimulation = true``
+            (the FMU asks to end the simulation) and ``earlyReturn = true`` (not allowed:
+            the instance was made with ``earlyReturnAllowed = false``).
+        """
         if self.state != "initialized":
             raise FMUError(f"{self.name}: do_step() called in state {self.state!r}", path=str(self.path),
                            component=self.name)
@@ -599,14 +743,32 @@ class FMUComponent:
                            component=self.name)
         self.time = t
         self._push_inputs()
-        self._fmi("fmi2DoStep", float(t), float(h), 1)
+        if self._v3:
+            self._do_step3(float(t), float(h))
+        else:
+            self._fmi("fmi2DoStep", float(t), float(h), 1)
         self.time = t + h
         self._pull_outputs()
+
+    def _do_step3(self, t: float, h: float) -> None:
+        flags = self._step_flags
+        flags.terminate_simulation.value = False
+        flags.early_return.value = False
+        # noSetFMUStatePriorToCurrentPoint = true: the master never rolls back
+        self._fmi("fmi3DoStep", t, h, True, *flags.args)
+        if flags.early_return.value:
+            raise self._end("fmi3DoStep", f"returned earlyReturn = true (lastSuccessfulTime = "
+                            f"{flags.last_successful_time.value:.6f} s, expected a full step to t + h = "
+                            f"{t + h:.6f} s); early return is not supported (the instance was made with "
+                            "earlyReturnAllowed = false)", None)
+        if flags.terminate_simulation.value:
+            raise self._end("fmi3DoStep", "returned terminateSimulation = true (the FMU asks to end the "
+                            "simulation)", None)
 
     def reset(self) -> None:
         """Back to the instantiated state with start values and the constructor's parameters."""
         if self._alive[0]:
-            self._fmi("fmi2Reset")
+            self._fmi(f"{self._prefix}Reset")
         else:
             self._instantiate()
         self._load_start_values()
@@ -615,9 +777,9 @@ class FMUComponent:
         self.state = "instantiated"
 
     def terminate(self) -> None:
-        """``fmi2Terminate`` (when initialised); the instance stays allocated for :meth:`reset`."""
+        """``fmi2Terminate`` / ``fmi3Terminate`` (when initialised); the instance stays allocated for :meth:`reset`."""
         if self.state == "initialized":
-            self._fmi("fmi2Terminate")
+            self._fmi(f"{self._prefix}Terminate")
         self.state = "terminated"
 
     def __repr__(self) -> str:

@@ -320,6 +320,9 @@ class _Instance:
     def __init__(self, name: str, obj: FMU2Slave | FMUComponent) -> None:
         self.name = name
         self.owner: FMUComponent | None = obj if isinstance(obj, FMUComponent) else None
+        if self.owner is not None and self.owner.fmi_version != "2.0":
+            raise FMUError(f"FastFMULoop: {name!r} is an FMI {self.owner.fmi_version} FMU; the compiled loop calls "
+                           "the FMI 2.0 API only (the Python master runs it)", component=name)
         if self.owner is not None:
             self.slave: FMU2Slave = obj._slave  # noqa: SLF001 - same package; the instance FMUComponent drives
             self.inputs: dict[str, _Port] = {}

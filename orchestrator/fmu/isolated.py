@@ -169,7 +169,7 @@ def _signal_name(number: int) -> str:
 
 
 class IsolatedFMUComponent:
-    """An FMI 2.0 co-simulation FMU run in a worker process, behind the component protocol (batch 1).
+    """An FMI 2.0 or 3.0 co-simulation FMU run in a worker process, behind the component protocol (batch 1).
 
     Parameters
     ----------
@@ -206,6 +206,8 @@ class IsolatedFMUComponent:
     ) -> None:
         loaded = load_fmu(path)  # file errors without starting a process
         self.path = loaded.path
+        self.fmi_version = loaded.model_description.fmiVersion
+        self._prefix = "fmi3" if self.fmi_version.startswith("3.") else "fmi2"
         self.name = name or loaded.model_description.coSimulation.modelIdentifier
         if batch != 1:
             raise FMUError(f"{self.name}: an FMU instance has batch 1, got batch={batch!r}; "
@@ -237,7 +239,8 @@ class IsolatedFMUComponent:
             pass  # a worker that died at once is reported by the first _call
         self._finalizer = weakref.finalize(self, _stop_worker, process, parent)
         self.state = "starting"
-        reply = self._call(None, "fmi2Instantiate", timeout=max(self.timeout or 0.0, START_TIMEOUT))
+        instantiate = "fmi3InstantiateCoSimulation" if self._prefix == "fmi3" else "fmi2Instantiate"
+        reply = self._call(None, instantiate, timeout=max(self.timeout or 0.0, START_TIMEOUT))
         variables: tuple[Variable, ...] = reply[1]
         self._variables = variables
         self._by_name = {v.name: v for v in variables}
@@ -383,33 +386,33 @@ class IsolatedFMUComponent:
         self._require("instantiated", "setup()")
         self.t0 = float(t0)
         self.time = self.t0
-        reply = self._call(("setup", self.t0, self._current(self._settable)), "fmi2ExitInitializationMode")
+        reply = self._call(("setup", self.t0, self._current(self._settable)), f"{self._prefix}ExitInitializationMode")
         self._store(reply[1])
         self.messages = reply[2]
         self.state = "initialized"
 
     def do_step(self, t: float, h: float) -> None:
-        """Send the inputs, ``fmi2DoStep(t, h)`` in the worker, receive the outputs (valid at ``t + h``)."""
+        """Send the inputs, ``fmi2DoStep(t, h)`` (``fmi3DoStep``) in the worker, receive the outputs (at ``t + h``)."""
         self._require("initialized", "do_step()")
         if not h > 0.0:
             raise FMUError(f"{self.name}: step size must be positive, got {h!r}", path=str(self.path),
                            component=self.name)
         self.time = float(t)
-        reply = self._call(("do_step", float(t), float(h), self._current(self._inputs)), "fmi2DoStep")
+        reply = self._call(("do_step", float(t), float(h), self._current(self._inputs)), f"{self._prefix}DoStep")
         self._store(reply[1])
         self.messages = reply[2]
         self.time = float(t) + float(h)
 
     def terminate(self) -> None:
-        """``fmi2Terminate`` in the worker (when initialised); the worker stays for :meth:`reset`."""
+        """``fmi2Terminate`` (``fmi3Terminate``) in the worker (when initialised); it stays for :meth:`reset`."""
         if self.state == "initialized":
-            self._call(("terminate",), "fmi2Terminate")
+            self._call(("terminate",), f"{self._prefix}Terminate")
         self.state = "terminated"
 
     def reset(self) -> None:
         """Back to the instantiated state; a dead worker is replaced by a fresh one."""
         if self._process.is_alive() and self.state != "starting":
-            reply = self._call(("reset",), "fmi2Reset")
+            reply = self._call(("reset",), f"{self._prefix}Reset")
             self._store(reply[1])
             self.state = "instantiated"
         else:

@@ -21,8 +21,8 @@ the values the components hold afterwards are the Python loop's, bit for bit
 (tested). An FMI call that fails ends the run with the master's message and
 the recording of the steps completed before it.
 
-Everything else (other component types, discrete connections, probes on
-inputs or parameters, no C compiler) runs on the Python loop;
+Everything else (other component types, FMI 3.0 FMUs, discrete connections,
+probes on inputs or parameters, no C compiler) runs on the Python loop;
 :func:`fast_fmu_support` says why.
 """
 from __future__ import annotations
@@ -65,6 +65,9 @@ def fast_fmu_support(master: "Master") -> str | None:
     others = [f"{n} ({type(c).__name__})" for n, c in comps.items() if not isinstance(c, FMUComponent)]
     if others:
         return f"not every component is an FMUComponent: {', '.join(others)}"
+    fmi3_fmus = [n for n, c in comps.items() if c.fmi_version != "2.0"]
+    if fmi3_fmus:
+        return f"FMI 3.0 FMU(s) {fmi3_fmus}: the compiled FMU loop calls the FMI 2.0 API only"
     if sorted(master.order) != sorted(comps):
         return f"the execution order {master.order} does not name every component once: {sorted(comps)}"
     not_new = [n for n, c in comps.items() if c.state != "instantiated"]
