@@ -23,6 +23,9 @@ are not mistaken for cutting physics.
   independent truth's definition). The component takes it so from its own
   record of the steps (:func:`fmus_src.cutting.kernel.chord_feed`), also
   where the feed changes within ``T`` (a cut that stops in the material).
+* **Speed**: all steps of all members in one compiled call
+  (:func:`fmus_src.cutting.path_replay.compiled_path_steps`, bit-identical to
+  stepping the component), the step-by-step loop as the fallback.
 """
 from __future__ import annotations
 
@@ -35,6 +38,7 @@ from scipy.signal import savgol_filter
 
 from fmus_src.cutting.component import CuttingError
 from fmus_src.cutting.path_component import PathCuttingLoad
+from fmus_src.cutting.path_replay import compiled_path_steps
 from fmus_src.cutting.table import EngagementTable
 
 from ..case import Case
@@ -180,6 +184,18 @@ def run_force_replay(case: Case, table: EngagementTable, inputs: ForceInputs,
     step_omega : ndarray, shape (n - 1,), optional
         Spindle speed input of each step (default :func:`step_speeds`); the component turns the
         spindle by ``step_omega[k] (t[k+1] - t[k])`` over step ``k``.
+
+    Notes
+    -----
+    All steps run in one compiled call (:func:`fmus_src.cutting.path_replay.compiled_path_steps`, the
+    same outputs bit for bit) when it covers the case; otherwise, or when a member fails on the way, the
+    component is stepped here one force sample at a time, which raises the errors below.
+
+    Raises
+    ------
+    DiagnosisError
+        A parameter the component does not have, or every member failed (the component's reason and the
+        logger time of the step).
     """
     batch = len(members)
     params = cutting_parameters(case)
@@ -202,6 +218,14 @@ def run_force_replay(case: Case, table: EngagementTable, inputs: ForceInputs,
         comp.set(f"{a}_position", p[0, i])
     comp.setup(float(t[0]))
     n = t.size
+    fast = compiled_path_steps(comp, t, p, om)
+    if fast is not None:
+        omega = fast["spindle_speed_actual"]
+        omega[0] = inputs.omega[0]
+        for name in ("fx", "fy", "spindle_torque", "engaged_teeth", "axial_depth"):
+            fast[name][0] = 0  # no step yet: no force, as the loop below
+        return ForceReplay(fast["fx"], fast["fy"], fast["spindle_torque"], omega, fast["engaged_teeth"].astype(int),
+                           fast["axial_depth"])
     out = {k: np.zeros((n, batch)) for k in ("fx", "fy", "spindle_torque", "omega", "engaged_teeth",
                                                 "axial_depth")}
     v = comp.values
