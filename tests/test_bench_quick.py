@@ -27,13 +27,18 @@ def result(tmp_path_factory):
     settings.ring_steps = 200
     settings.servo_steps = 5
     settings.fused_seconds = 0.3
+    settings.replay_seconds = 0.3
     settings.fmu_dir = str(tmp_path_factory.mktemp("bench_fmus"))
     return run_bench(settings)
 
 
 def test_keys(result):
     assert {"machine", "settings", "native_twin", "fused", "c_fmu", "native_ring", "pythonfmu", "scaling",
-            "master_us_per_step", "ratios", "targets", "bench_wall_s"} <= set(result)
+            "master_us_per_step", "ratios", "targets", "bench_wall_s", "servo_replay"} <= set(result)
+    replay = result["servo_replay"]
+    assert replay["compiled"]["compiled"] and not replay["tick_by_tick"]["compiled"]
+    assert replay["compiled"]["batch"] == replay["tick_by_tick"]["batch"] == 10
+    assert "servo_replay_tick_by_tick_over_compiled" in result["ratios"]
     assert result["machine"]["nproc"] >= 1 and result["machine"]["cpu"]
     twin = result["native_twin"]
     threaded = twin["batch_100"]["threads"] > 1  # members in blocks on several cores: also timed in one thread

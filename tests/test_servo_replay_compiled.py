@@ -49,9 +49,9 @@ def _effects(reversal: bool) -> tuple[dict, dict]:
 
 def _both(monkeypatch, run):
     fast = run()
-    with monkeypatch.context() as m:
-        m.setattr(compiled_replay, "_covered", lambda *args, **kwargs: False)
+    with compiled_replay.stepped_tick_by_tick():
         slow = run()
+    assert compiled_replay.ENABLED
     return fast, slow
 
 

@@ -16,7 +16,8 @@ from __future__ import annotations
 
 import os
 from concurrent.futures import ThreadPoolExecutor
-from typing import Mapping
+from contextlib import contextmanager
+from typing import Iterator, Mapping
 
 import numpy as np
 
@@ -28,6 +29,10 @@ from .replay_numba import DRIVE_EXTRA_ROWS, N_OUTPUT_ROWS, REPLAY_OK, replay_axi
 #: Outputs of :func:`compiled_ticks` (besides the MCU's ``current_cmd``).
 COMPILED_OUTPUTS = ("table_position", "position", "motor_force")
 
+#: False: :func:`compiled_ticks` declines and the callers step the components tick by tick
+#: (set by :func:`stepped_tick_by_tick`, for comparisons and benchmarks).
+ENABLED = True
+
 #: Fewest members per thread's block (below this a thread costs more than it saves).
 MIN_MEMBERS_PER_BLOCK = 4
 
@@ -35,9 +40,20 @@ MIN_MEMBERS_PER_BLOCK = 4
 GRID_RTOL = 1e-12
 
 
+@contextmanager
+def stepped_tick_by_tick() -> Iterator[None]:
+    """Within the block every replay steps the components tick by tick (the reference the compiled path equals)."""
+    global ENABLED
+    previous, ENABLED = ENABLED, False
+    try:
+        yield
+    finally:
+        ENABLED = previous
+
+
 def _covered(mcu: MCU, drives: Mapping[str, DriveAxis], t0: float, tv: float) -> bool:
     """True when the compiled replay reproduces these set-up components exactly."""
-    if not (NUMBA_AVAILABLE and mcu.use_compiled and mcu.state == "initialized"):
+    if not (ENABLED and NUMBA_AVAILABLE and mcu.use_compiled and mcu.state == "initialized"):
         return False
     if mcu._next_tick != 0 or mcu.t0 != t0 or abs(mcu._tv - tv) > GRID_RTOL * tv or mcu.failed_members.any():
         return False

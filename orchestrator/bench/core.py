@@ -26,6 +26,7 @@ from .cfmu import build_lag_fmu, lag_ring
 from .fused import prepare_fused, reference_run
 from ..twin import TwinOptions, engagement_table
 from .native import bench_case, time_fused, time_twin
+from .replays import time_servo_replay
 from .systems import build_servo_fmus, native_lag_ring, plain_fmpy_loop, servo_fmu_system
 
 #: Targets of issue 9.
@@ -63,6 +64,11 @@ class BenchSettings:
         ``n`` of the slope measurements over the pythonfmu servo FMUs.
     fused_seconds : float
         Simulated time of the fused reference runs, s.
+    replay_seconds : float
+        Replayed time of the compiled servo replay (identification, diagnosis), s; the tick-by-tick
+        replay it is compared with replays ``compare_seconds``.
+    replay_batch : int
+        Parameter sets of the servo replays.
     fmu_dir : str or None
         Where the pythonfmu FMUs are built (a temp folder by default).
     """
@@ -77,6 +83,8 @@ class BenchSettings:
     ring_steps: int = 20_000
     servo_steps: int = 300
     fused_seconds: float = 30.0
+    replay_seconds: float = 30.0
+    replay_batch: int = 10
     fmu_dir: str | None = None
 
     @classmethod
@@ -84,7 +92,7 @@ class BenchSettings:
         """A run of well under a minute (figures are then rough)."""
         return cls(twin_seconds=2.0, batch_seconds=2.0, compare_seconds=2.0, length_seconds=(0.5, 1.0),
                    population_sizes=(1, 10), population_seconds=0.5, ring_steps=1000, servo_steps=20,
-                   fused_seconds=2.0)
+                   fused_seconds=2.0, replay_seconds=2.0)
 
 
 def machine_info() -> dict:
@@ -220,7 +228,8 @@ def run_bench(settings: BenchSettings | None = None, quick: bool = False,
     -------
     dict
         ``machine``, ``settings``, ``native_twin`` (single, single_air, batch_10, batch_100, ...),
-        ``fused`` (same keys), ``master_us_per_step`` (every path), ``c_fmu``, ``pythonfmu``,
+        ``fused`` (same keys), ``servo_replay`` (compiled, tick_by_tick), ``master_us_per_step`` (every path),
+        ``c_fmu``, ``pythonfmu``,
         ``scaling`` (length, population), ``ratios`` and ``targets`` (value, target, met).
     """
     s = settings or (BenchSettings.quick() if quick else BenchSettings())
@@ -276,6 +285,14 @@ def run_bench(settings: BenchSettings | None = None, quick: bool = False,
         problem.run()  # compile / load the cache
         fused[key] = time_fused(problem, repeats=2)
     out["fused"] = fused
+
+    # --- the servo replay of identification and diagnosis: compiled against the components tick by tick
+    say(f"servo replay (identification, diagnosis): B = {s.replay_batch}, compiled {s.replay_seconds:g} s, "
+        f"tick by tick {s.compare_seconds:g} s")
+    time_servo_replay(case, min(0.2, s.replay_seconds), s.replay_batch)  # warm-up
+    out["servo_replay"] = {"compiled": time_servo_replay(case, s.replay_seconds, s.replay_batch),
+                           "tick_by_tick": time_servo_replay(case, s.compare_seconds, s.replay_batch,
+                                                             compiled=False)}
 
     # --- C FMUs (four Lag instances in a ring) and the same ring of native components
     say("C-FMU ring: master, FastFMULoop, plain fmpy loop")
@@ -357,6 +374,9 @@ def run_bench(settings: BenchSettings | None = None, quick: bool = False,
         "pythonfmu_master_over_plain_fmpy": ratio(us["pythonfmu_master"], us["pythonfmu_plain_fmpy"]),
         "pythonfmu_fast_loop_over_plain_fmpy": ratio(us["pythonfmu_fast_loop"], us["pythonfmu_plain_fmpy"]),
     }
+    replay = out["servo_replay"]
+    ratios["servo_replay_tick_by_tick_over_compiled"] = ratio(replay["tick_by_tick"]["us_per_member_tick"],
+                                                              replay["compiled"]["us_per_member_tick"])
     for b in s.batches:
         ratios[f"native_twin_over_fused_batch_{b}"] = ratio(us[f"native_twin_batch_{b}"], us[f"fused_batch_{b}"])
         ratios[f"native_twin_batch_{b}_per_member_over_single"] = ratio(
@@ -397,6 +417,11 @@ def format_table(result: dict) -> str:
         for key, r in group.items():
             lines.append(f"{label + ' ' + key:<40}{r['batch']:>5}{r.get('threads', 1):>4}{r['sim_s']:>8.2f}"
                          f"{r['wall_s']:>9.3f}{r['rt_factor']:>13.1f}{r['us_per_step']:>11.1f}")
+    lines += ["", f"{'servo replay (identification, diagnosis)':<40}{'B':>5}{'sim s':>8}{'wall s':>9}"
+                  f"{'x real time':>13}{'us/member tick':>16}"]
+    for key, r in result.get("servo_replay", {}).items():
+        lines.append(f"{key:<40}{r['batch']:>5}{r['sim_s']:>8.2f}{r['wall_s']:>9.3f}{r['rt_factor']:>13.1f}"
+                     f"{r['us_per_member_tick']:>16.3f}")
     lines += ["", f"{'communication step of':<44}{'us/step':>10}"]
     for key, value in result["master_us_per_step"].items():
         lines.append(f"{key:<44}{value:>10.2f}")
