@@ -1,12 +1,12 @@
 """The G and M codes and addresses the interpreter knows: modal groups, rejections, and the words of one block.
 
 Accepted as no-ops, because they cancel features that are never switched on
-(CAM posts emit them in safe-start lines): G15 (polar coordinates cancel),
-G50 (scaling cancel; a mill: G50 with X/Y/Z/S, the lathe meaning, is an
-error), G50.1 (programmable mirror image cancel), G69 (coordinate rotation
-cancel), G67 (macro modal call cancel), G13.1 (polar interpolation cancel).
-Rejected with a :class:`GCodeError`: the codes switching those features on
-(G16, G51, G51.1, G68, G66, G12.1), G65 outside its own block (G65 calls: :mod:`.macro.calls`), what
+(CAM posts emit them in safe-start lines): G67 (macro modal call cancel), G13.1 (polar interpolation
+cancel). G50 (scaling cancel; a mill: G50 with X/Y/Z/S, the lathe meaning, is an error), G50.1 (mirror
+image cancel), G69 (rotation cancel) and G15 (polar coordinates cancel) do nothing when their feature is
+off; G51/G50, G51.1/G50.1, G68/G69 and G16/G15: :mod:`.transforms` and :mod:`.polar`.
+Rejected with a :class:`GCodeError`: the codes switching the other features on
+(G66, G12.1), G65 outside its own block (G65 calls: :mod:`.macro.calls`), what
 cutter compensation G41/G42 with a
 nonzero radius does not simulate (see :mod:`.compensation`), G88 (boring with a manual operation),
 G29, and every other G/M code or address.
@@ -54,18 +54,16 @@ G_GROUP: dict[int | float, str] = {
     # look-ahead / contour-control modes (accepted, see lookahead_codes)
     5.1: "look-ahead", 8: "look-ahead", 5: "look-ahead",
     98: "return level", 99: "return level",
+    # programmable transforms and polar coordinates (see transforms, polar)
+    15: "polar coordinates", 16: "polar coordinates", 50: "scaling", 51: "scaling",
+    50.1: "mirror image", 51.1: "mirror image", 68: "coordinate rotation", 69: "coordinate rotation",
     # cancel codes of features never switched on: accepted as no-ops
-    15: "polar coordinates", 50: "scaling", 50.1: "mirror image", 69: "coordinate rotation",
     67: "macro modal call", 13.1: "polar interpolation",
 }
 #: Known G codes the twin does not execute -> why.
 G_REJECT: dict[int | float, str] = {
     88: "boring cycle G88 is not supported: it stops at the hole bottom for a manual operation (the operator "
         "jogs the tool out), which the twin cannot do (use G76, G85, G86 or G89)",
-    16: "polar coordinate command G16 is not supported (only its cancel G15)",
-    51: "scaling G51 is not supported (only its cancel G50)",
-    51.1: "programmable mirror image G51.1 is not supported (only its cancel G50.1)",
-    68: "coordinate rotation G68 is not supported (only its cancel G69)",
     65: "macro call G65 with other G codes or from a variable (write G65 P<n> <arguments> alone in its block)",
     66: "macro modal call G66 is not supported (only its cancel G67): it would call the macro after every move "
         "block until G67; write G65 P<n> <arguments> at each position instead",
@@ -79,9 +77,9 @@ M_GROUP: dict[int, str] = {
     7: "coolant", 8: "coolant", 9: "coolant", 98: "subprogram", 99: "subprogram",
     29: "rigid tapping",
 }
-SUPPORTED_G = ("G0 G1 G2 G3 G4 G5 G5.1 G8 G9 G10 G13.1 G15 G17 G18 G19 G20 G21 G28 G30 G40 G41 G42 G43 G44 G49 G50 "
-               "G50.1 G52 G53 G54-G59 G54.1 G61 G64 G67 G69 G73 G74 G76 G80 G81 G82 G83 G84 G85 G86 G87 G89 G90 "
-               "G90.1 G91 G91.1 G92 G92.1 G92.2 G92.3 G94 G95 G98 G99")
+SUPPORTED_G = ("G0 G1 G2 G3 G4 G5 G5.1 G8 G9 G10 G13.1 G15 G16 G17 G18 G19 G20 G21 G28 G30 G40 G41 G42 G43 G44 "
+               "G49 G50 G50.1 G51 G51.1 G52 G53 G54-G59 G54.1 G61 G64 G67 G68 G69 G73 G74 G76 G80 G81 G82 G83 G84 "
+               "G85 G86 G87 G89 G90 G90.1 G91 G91.1 G92 G92.1 G92.2 G92.3 G94 G95 G98 G99")
 SUPPORTED_M = "M0 M1 M2 M3 M4 M5 M6 M7 M8 M9 M19 M29 M30 M98 M99"
 #: Address letters of the dialect.
 LETTERS = set("GMXYZIJKRFSTHDPQNOL") | {",C", ",R"}  # ,C / ,R: optional chamfer / corner R (see .corners)
@@ -150,7 +148,7 @@ def check_stray_words(gs: GWords, vals: ValueWords, err: ErrorFactory) -> None:
     """L outside M98/G10 and G50 with X/Y/Z/I/J/K/P/S (the lathe's G50) are errors; call after M98 took its P/L."""
     if "L" in vals and gs.get("non-modal", (None,))[0] != 10:
         raise err("L" + vals["L"].text, "word L outside an M98 block", "L only as the repeat count of M98 P<n> L<k>")
-    if "scaling" in gs:
+    if gs.get("scaling", (None,))[0] == 50:
         for a in "XYZIJKPS":
             if a in vals:
                 raise err(a + vals[a].text, f"word {a} with G50: on a mill G50 only cancels scaling "

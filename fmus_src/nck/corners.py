@@ -21,6 +21,8 @@ Conventions (FANUC 0i-MF / 31i-B "optional chamfering and corner R"; the twin's 
   the first) has no chamfer or tangent circle: an error.
 * The value is in the program unit (G20/G21) and must be > 0; ``,C`` and ``,R`` in one block, and either in
   a block with G0, G4, G10, G28/G30/G53, G52/G92, a canned cycle, M0/M1/M2/M30 or M98/M99, are errors.
+* Under G51 the size is scaled with the plane (different factors of its two axes: an error); G51.1/G68 move
+  the corner with the path (:mod:`.transforms`).
 * Cutter compensation: the corner is part of the programmed contour and is offset with it (an outer corner
   R under G41/G42 becomes an arc of radius R + r), as FANUC does. The compensation state (G40/G41/G42 and
   the radius of D) must be the same in both blocks; a start-up or cancel between them is an error.
@@ -141,7 +143,11 @@ def open_corner(st: ModalState, word: Word | None, moved: bool, ms: MWords, out:
                   f"{word.letter} in a G1 block with an end point in the plane")
     _check_planar(last, st.plane, lambda problem: err(name, problem, f"{word.letter} between two G1 moves "
                                                       f"in the {st.plane} plane"))
-    st.corner = OpenCorner(word.letter, word.value * st.scale, name, line, text, len(out) - 1, st.plane,
+    factor = st.xf.plane_factor(st.plane)  # G51 scaling scales the corner (G51.1/G68 move it with the path)
+    if factor is None:
+        raise err(name, f"{what} {word.letter} under scaling with different factors on the two {st.plane} axes",
+                  f"the same magnification on both plane axes (G51 P_) for {word.letter}")
+    st.corner = OpenCorner(word.letter, word.value * st.scale * factor, name, line, text, len(out) - 1, st.plane,
                            (st.comp, st.tool_radius() if st.comp != 40 else 0.0), st.scale == INCH)
 
 

@@ -10,6 +10,9 @@ Conventions
 * Under G95 the feed blocks of a hole keep their feed per revolution (spindle overrides rescale them).
 * Tapping G84/G74 (feed = pitch x S, M29 rigid tapping): :mod:`.tapping`; G76/G87 need Q > 0 (the shift) and
   the spindle turning clockwise (M3); G87 needs Z above R and G98 (FANUC returns it to the initial level only).
+* Under G16 the hole positions X/Y are polar (K repeats with a G91 angle make a bolt circle); under
+  G51.1/G51/G68 the hole positions are transformed and the levels (initial, R, bottom) scaled with Z; Q, the
+  G73/G83 return d and the G76/G87 shift (along the machine axes) are not (:mod:`.transforms`).
 """
 from __future__ import annotations
 
@@ -24,8 +27,10 @@ from .errors import ErrorFactory, fmt_number
 from .feed import block_feed
 from .modal import ModalState
 from .motion import SAME_POINT
+from .polar import program_targets
 from .settings import INCH
 from .tapping import RIGID_ACTIVE, RIGID_PENDING, start_tapping, tap_feed
+from .transforms import advance, check_cycle, z_work
 
 #: Largest repeat count K of a canned cycle (FANUC: 4 digits).
 MAX_REPEAT = 9999
@@ -91,6 +96,8 @@ def canned_cycle_block(st: ModalState, vals: ValueWords, code: int | None, line:
         raise err(gname, f"canned cycle {gname} without an R point", "an R word on this or an earlier cycle block")
     if st.cycle_bottom is None:
         raise err(gname, f"canned cycle {gname} without a hole bottom Z", "a Z word on this or an earlier cycle block")
+    if st.xf.engaged:
+        check_cycle(st, gname, err)
     u = 1.0 / scale
     unit_name = "in" if scale == INCH else "mm"
     r_level, bottom = cycle_levels(st.cycle_initial, st.cycle_r, st.cycle_bottom)
@@ -133,14 +140,22 @@ def canned_cycle_block(st: ModalState, vals: ValueWords, code: int | None, line:
     off = st.work_offset()
     tool = st.tool_length()
     z_off = off[2] + tool
-    levels = (st.cycle_initial + z_off, r_level + z_off, bottom + z_off)
+    if st.xf.active:  # Z scaled about the scaling centre (check_cycle: not mirrored, not rotated)
+        levels = (z_work(st, st.cycle_initial) + z_off, z_work(st, r_level) + z_off, z_work(st, bottom) + z_off)
+    else:
+        levels = (st.cycle_initial + z_off, r_level + z_off, bottom + z_off)
     for _ in range(repeat):
-        for a in "XY":
-            if a in vals:
-                i = AXIS_INDEX[a]
-                v = vals[a].value * scale
-                st.prog[i] = v if st.absolute else st.prog[i] + v
-        hole = Hole(code=st.cycle, line=line, x=st.prog[0] + off[0], y=st.prog[1] + off[1], initial=levels[0],
+        if st.xf.engaged:  # G16 polar hole position and/or G51.1/G51/G68 transforms
+            targets, absolute = program_targets(st, vals, err, "XY")
+            x, y = advance(st, targets, absolute)[0][:2]
+        else:
+            for a in "XY":
+                if a in vals:
+                    i = AXIS_INDEX[a]
+                    v = vals[a].value * scale
+                    st.prog[i] = v if st.absolute else st.prog[i] + v
+            x, y = st.prog[0] + off[0], st.prog[1] + off[1]
+        hole = Hole(code=st.cycle, line=line, x=x, y=y, initial=levels[0],
                     r_level=levels[1], bottom=levels[2], return_to_initial=st.return_initial, feed=feed,
                     feed_line=st.feed_line, peck=st.cycle_q, dwell=st.cycle_dwell,
                     spindle=(st.speed, st.direction, st.speed_line), pitch=pitch, rigid=rigid,

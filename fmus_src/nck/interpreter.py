@@ -10,7 +10,8 @@ L2/L20/L10-L13 (programmable data input), G5.1 Q0/Q1, G8 P0/P1, G5
 P0/P10000 (look-ahead modes, accepted), G61/G64 (exact stop mode / cutting
 mode; LinuxCNC G64 P Q, see :mod:`.path_blending`), canned cycles G73 G74 G76 G81-G87 G89
 with G98/G99 and G80 (see :mod:`.cycles`; tapping and M29: :mod:`.tapping`), G90/G91,
-G90.1/G91.1 (arc centre I/J/K absolute/incremental), G94/G95; M0 M1 M2 M3 M4 M5 M6 M7 M8 M9
+G90.1/G91.1 (arc centre I/J/K absolute/incremental), G94/G95, G51.1/G50.1 (programmable mirror image),
+G51/G50 (scaling), G68/G69 (coordinate rotation), G16/G15 (polar coordinates); M0 M1 M2 M3 M4 M5 M6 M7 M8 M9
 M19 M29 M30; subprograms
 M98/M99 in the same file (see :mod:`.subprograms`); Custom Macro B variables, IF/WHILE/GOTO and
 G65 calls (see :mod:`.macro`); F S T H D P Q N O L words
@@ -36,6 +37,8 @@ Conventions (each topic in the module that implements it)
 * G52 local coordinate system, G92/G92.1/G92.2/G92.3 workpiece coordinate system setting:
   :mod:`.coordinate_shifts`.
 * ``,C``/``,R`` optional chamfer and corner R: :mod:`.corners`.
+* G51.1/G50.1 mirror, G51/G50 scaling, G68/G69 rotation (order, centres, what they apply to):
+  :mod:`.transforms`; G16/G15 polar coordinates: :mod:`.polar`.
 * Canned cycles: the modal data :mod:`.cycle_mode`, the moves of a hole :mod:`.cycles`.
 * M98/M99 subprograms: run time :mod:`.call_stack`, the file's programs :mod:`.subprograms`.
 * Custom Macro B (variables, expressions, IF/WHILE/GOTO, G65 calls): :mod:`.macro`.
@@ -87,6 +90,7 @@ from .settings import (
 )
 from .subprograms import MAX_CALLED_LINES, Call, Return, Subprogram, index_subprograms, next_program_start
 from .tapping import end_cycle_mode, rigid_tapping_word
+from .transforms import check_plane_change, check_transform_block, transform_modes
 
 # re-exported for importers of the former single-module interpreter (their homes: settings, compensation)
 __all__ = [
@@ -275,12 +279,15 @@ def _block(st: ModalState, words: tuple[Word, ...], line: int, text: str, file: 
     # 7. modes
     if "plane" in gs:
         plane = _PLANE_OF_G[gs["plane"][0]]
+        check_plane_change(st, plane, gs, err)
         if plane != st.plane and st.comp != 40:
             raise err("G" + gs["plane"][1].text, f"G{gs['plane'][0]} changes the plane while cutter compensation "
                       f"G{st.comp} is on (FANUC alarm PS0037)", "G40 and its cancel move before changing the plane")
         st.plane = plane
     if "distance" in gs:
         st.absolute = gs["distance"][0] == 90
+    consumed = transform_modes(st, gs, vals, err)  # G15/G16, G69/G68, G50/G51, G50.1/G51.1 (see .transforms)
+    check_transform_block(st, gs, err)
     if "work offset" in gs:
         select_work_offset(st, gs, vals, call is not None, err)
     tool_length_words(st, gs, vals, err)
@@ -299,7 +306,11 @@ def _block(st: ModalState, words: tuple[Word, ...], line: int, text: str, file: 
         other = gs["motion"][1] if "motion" in gs else gs["non-modal"][1]
         raise err("G" + other.text, f"G{other.text} and the canned cycle G{cycle} in one block",
                   "a canned cycle block without G0-G3, G4, G28, G30 or G53 (G80 or G0-G3 cancel the cycle)")
-    if non_modal == 4:
+    if consumed:  # the axis words were the centre / mirror positions of G51.1, G50.1, G51 or G68: no move
+        check_coordinates(vals, unit_name, err)
+        if cycle == 80:
+            end_cycle_mode(st, "G80", err)
+    elif non_modal == 4:
         out.append(dwell_block(gs, vals, line, err))
     else:
         check_coordinates(vals, unit_name, err)

@@ -12,6 +12,9 @@ Conventions
 * The modal state is one for the main program and its subprograms (see :mod:`.call_stack`).
 * The G52 local shift and the G92 shift (:mod:`.coordinate_shifts`) are added to every workpiece coordinate
   system (G54-G59, G54.1 Pn); they start at zero (power-on, after a reference return).
+* The programmable transforms G51.1/G51/G68 and G16 (:mod:`.transforms`, :mod:`.polar`) sit between the
+  programmed coordinates and the work offset: machine = transformed(programmed) + work offset (+ tool length
+  on Z); all off at power-on.
 """
 from __future__ import annotations
 
@@ -20,6 +23,7 @@ from typing import TYPE_CHECKING, Sequence
 from .blocks import Vec3
 from .cycles import LevelWord
 from .settings import EXTERNAL_OFFSET, MM, InterpreterSettings
+from .transforms import Transforms
 
 if TYPE_CHECKING:
     from .corners import OpenCorner
@@ -77,12 +81,14 @@ class ModalState:
         self.comp = 40  # cutter compensation G40/G41/G42
         self.d = 0  # tool radius offset number (modal)
         self.comp_pending: str | None = None  # "start-up"/"cancel" until the next move block
+        self.xf = Transforms()  # G51.1 mirror, G51 scaling, G68 rotation, G16 polar (see .transforms)
 
     def sync_prog(self, axes: Sequence[int]) -> None:
         """Programmed position of ``axes`` from the machine position (after a machine-coordinate move)."""
         off = self.work_offset()
         for i in axes:
             self.prog[i] = self.machine[i] - off[i] - (self.applied_tool if i == 2 else 0.0)
+        self.xf.pending -= set(axes)  # the machine position is known in work coordinates again
 
     def work_offset(self) -> Vec3:
         """Active work offset + external offset + G52 local shift + G92 shift (m)."""
@@ -100,6 +106,10 @@ class ModalState:
         off = self.work_offset()
         self.prog = [self.machine[a] - off[a] for a in range(3)]
         self.prog[2] -= self.applied_tool
+        if self.xf.active:  # G10 changed the active offset under a transform: back through the transforms
+            self.prog = self.xf.to_program(self.prog)
+        else:
+            self.xf.pending.clear()
 
     def tool_length(self) -> float:
         """Active tool length offset (m): +-(geometry + wear) of H under G43/G44, 0 under G49 or with H0."""

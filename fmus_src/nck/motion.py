@@ -9,6 +9,9 @@ Conventions
 * G90.1 (LinuxCNC, modal until G91.1): I/J/K are the centre in work coordinates (plus the work offset, and
   the tool length on Z, as an end point); both centre words of the plane are then required. G91.1 (the
   power-on mode, FANUC's only one): I/J/K are incremental from the start point.
+* Under G16 the end point is polar, under G51.1/G51/G68 it is transformed (:mod:`.polar`, :mod:`.transforms`):
+  the arc keeps its shape (centre I/J/K and R transformed, R times the plane's scale factor), G2 and G3
+  exchange under a mirror of one plane axis.
 * G61 (modal) and G9 (one block): the feed block decelerates to rest at its
   end and the next block starts after the in-position check; G64 cancels G61.
   Rapids always end with an exact stop.
@@ -22,7 +25,9 @@ from .codes import ValueWords
 from .errors import ErrorFactory, fmt_number
 from .feed import block_feed
 from .modal import ModalState
+from .polar import program_targets
 from .settings import INCH, MM
+from .transforms import advance, check_arc
 
 #: Tolerance on the radius difference of an I/J/K arc (FANUC alarm PS0020 style), m.
 ARC_RADIUS_TOLERANCE = 0.002e-3
@@ -70,13 +75,20 @@ def programmed_move(st: ModalState, vals: ValueWords, g9: bool, line: int, err: 
     start: Vec3 = tuple(st.machine)  # type: ignore[assignment]
     off = st.work_offset()
     tool = st.tool_length()
-    for a in axes:
-        i = AXIS_INDEX[a]
-        v = vals[a].value * scale
-        st.prog[i] = v if st.absolute else st.prog[i] + v
-        st.machine[i] = st.prog[i] + off[i] + (tool if i == 2 else 0.0)
-        if i == 2:
+    xf = st.xf
+    if xf.engaged:  # G16 polar point and/or G51.1/G51/G68 transforms
+        targets, absolute = program_targets(st, vals, err)
+        st.machine, moved = advance(st, targets, absolute)
+        if 2 in moved:
             st.applied_tool = tool
+    else:
+        for a in axes:
+            i = AXIS_INDEX[a]
+            v = vals[a].value * scale
+            st.prog[i] = v if st.absolute else st.prog[i] + v
+            st.machine[i] = st.prog[i] + off[i] + (tool if i == 2 else 0.0)
+            if i == 2:
+                st.applied_tool = tool
     end: Vec3 = tuple(st.machine)  # type: ignore[assignment]
     if st.motion == 0:
         out.append(Rapid(line, start, end))
@@ -89,12 +101,16 @@ def programmed_move(st: ModalState, vals: ValueWords, g9: bool, line: int, err: 
     plane_letters = {"XY": "IJ", "ZX": "KI", "YZ": "JK"}[st.plane]
     clockwise = st.motion == 2
     gname = f"G{st.motion}"
+    factor = 1.0
+    if xf.active:  # the arc of the transformed program: radius x factor, direction mirrored
+        factor = check_arc(st, st.plane, gname, err)
+        clockwise = clockwise != (xf.handedness(st.plane) < 0)
     u = 1.0 / (INCH if scale == INCH else MM)  # SI -> program units for messages
     d1, d2 = end[i1] - start[i1], end[i2] - start[i2]
     chord = math.hypot(d1, d2)
     if has_r:
         rw = vals["R"]
-        r = rw.value * scale
+        r = rw.value * scale * factor
         if chord <= SAME_POINT:
             raise err("R" + rw.text, "an arc given by R cannot end at its start point",
                       "I/J/K for a full circle, or an end point different from the start")
@@ -121,10 +137,23 @@ def programmed_move(st: ModalState, vals: ValueWords, g9: bool, line: int, err: 
     if st.arc_centre_absolute and len(centre) < 2:
         raise err(gname, f"{gname} under G90.1 without both centre words {plane_letters[0]} and {plane_letters[1]}",
                   f"{plane_letters[0]} and {plane_letters[1]} (the centre in work coordinates under G90.1)")
-    for cl in centre:
-        i = CENTRE_INDEX[cl]
-        v = vals[cl].value * scale
-        c[i] = v + off[i] + (st.applied_tool if i == 2 else 0.0) if st.arc_centre_absolute else start[i] + v
+    if xf.active:
+        given = [0.0, 0.0, 0.0]
+        for cl in centre:
+            given[CENTRE_INDEX[cl]] = vals[cl].value * scale
+        if st.arc_centre_absolute:
+            w = xf.to_work([given[i] if i in (i1, i2) else st.prog[i] for i in range(3)])
+            for i in (i1, i2):
+                c[i] = w[i] + off[i] + (st.applied_tool if i == 2 else 0.0)
+        else:
+            d = xf.linear(given)
+            for i in (i1, i2):
+                c[i] = start[i] + d[i]
+    else:
+        for cl in centre:
+            i = CENTRE_INDEX[cl]
+            v = vals[cl].value * scale
+            c[i] = v + off[i] + (st.applied_tool if i == 2 else 0.0) if st.arc_centre_absolute else start[i] + v
     r1 = math.hypot(start[i1] - c[i1], start[i2] - c[i2])
     if r1 <= SAME_POINT:
         raise err(gname, "arc centre coincides with the start point", "a non-zero radius from I/J/K")

@@ -11,10 +11,12 @@ Conventions (FANUC cutter compensation C, as the 0i-MF / 31i-B operator's manual
 reading where noted)
 -----------------------------------------------------------------------------------------------------------
 * Offset vector: length r (the D register, geometry + wear), to the left of the direction of travel under
-  G41, to the right under G42; a negative r swaps G41 and G42. The vector at the end of a block comes from
-  the offset elements of this and the next move (line: the parallel line; arc: the circle with the same
-  centre and radius R -+ r): the vector of a block is computed with the r in effect in that block, so a D
-  change (D word or ``G10 L12/L13``) in offset mode applies to the end of the next move.
+  G41, to the right under G42; a negative r swaps G41 and G42, and so does a G51.1 mirror (or a negative
+  G51 factor) of one of X and Y (:mod:`.transforms`): the offset is made on the transformed path. The
+  vector at the end of a block comes from the offset elements of this and the next move (line: the parallel
+  line; arc: the circle with the same centre and radius R -+ r): the vector of a block is computed with the
+  r in effect in that block, so a D change (D word or ``G10 L12/L13``) in offset mode applies to the end of
+  the next move.
 * Corners in offset mode, by the angle alpha between the two moves on the workpiece side:
   inner corners (alpha >= 180 deg) and outer corners with 90 <= alpha < 180 deg: the intersection of the
   two offset elements (line-line, line-arc, arc-line, arc-arc; of two intersections the one nearest the
@@ -150,7 +152,7 @@ class RadiusOffset:
         if st.comp == 40 and not self._used:
             return
         self._used = True
-        side = {40: 0, 41: 1, 42: -1}[st.comp]
+        side = {40: 0, 41: 1, 42: -1}[st.comp] * st.xf.handedness("XY")  # a mirror exchanges G41/G42 (FANUC)
         offset = side * st.tool_radius() if side else 0.0
         self.records.append(LineRecord(line, text, first, side, offset, st.d, st.scale == INCH))
 

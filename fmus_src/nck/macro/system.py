@@ -5,8 +5,9 @@ Conventions
 * ``#4001``-``#4022``: the G code of modal group 1..22 in effect before the block (FANUC M series groups):
   4001 G0-G3, 4002 G17-G19, 4003 G90/G91, 4005 G94/G95, 4006 G20/G21, 4007 G40-G42, 4008 G43/G44/G49,
   4009 the canned cycle or G80, 4010 G98/G99, 4014 G54-G59 (54.1 for G54.1 Pn), 4015 G61/G64. Groups of
-  features that are never on read their cancel code: 4011 G50, 4012 G67, 4013 G97, 4016 G69, 4017 G15,
-  4022 G50.1. Groups 4, 18-21 are errors (the twin does not track them).
+  features that are never on read their cancel code: 4012 G67, 4013 G97; 4011 G50/G51, 4016 G68/G69,
+  4017 G15/G16, 4022 G50.1/G51.1 (:mod:`..transforms`). Groups 4, 18-21 are errors (the twin does not track
+  them).
 * ``#4107`` D, ``#4109`` F (in the program's unit: mm/min, in/min, or mm/rev under G95), ``#4111`` H,
   ``#4119`` S (rpm), ``#4120`` T (vacant before the first T or F).
 * ``#5001``-``#5003``: end point X, Y, Z of the last block in work coordinates (programmed position, without
@@ -21,7 +22,7 @@ from ..settings import INCH, RPM
 from .variables import Fail
 
 #: Modal group (4000 + k) -> the code the twin always has there (features it never switches on).
-_FIXED = {4011: 50.0, 4012: 67.0, 4013: 97.0, 4016: 69.0, 4017: 15.0, 4022: 50.1}
+_FIXED = {4012: 67.0, 4013: 97.0}
 #: What the twin provides, for messages.
 PROVIDED = ("#4001-#4003, #4005-#4017, #4022 (modal G codes), #4107 D, #4109 F, #4111 H, #4119 S, #4120 T, "
             "#5001-#5003 (end point X Y Z)")
@@ -49,6 +50,10 @@ def read_system(st: ModalState, n: int, text: str, fail: Fail) -> float | None:
         4010: lambda: 98.0 if st.return_initial else 99.0,
         4014: lambda: float(st.work) if st.work < 1000 else 54.1,
         4015: lambda: 61.0 if st.exact_stop else 64.0,
+        4011: lambda: 51.0 if st.xf.scaling else 50.0,
+        4016: lambda: 68.0 if st.xf.rotation is not None else 69.0,
+        4017: lambda: 16.0 if st.xf.polar else 15.0,
+        4022: lambda: 51.1 if any(m is not None for m in st.xf.mirror) else 50.1,
         4107: lambda: float(st.d),
         4111: lambda: float(st.h),
         4109: lambda: _feed(st),
