@@ -13,7 +13,7 @@ import pytest
 import fmus_src.servo.replay as compiled_replay
 from fmus_src.servo import MCU, DriveAxis, ServoError
 from orchestrator.diagnose.replay import run_replay
-from orchestrator.identify.closed_loop import run_servo_ticks
+from orchestrator.identify.closed_loop import run_servo_samples, run_servo_ticks
 from orchestrator.machine import load_machine
 from orchestrator.twin import drive_parameters, mcu_parameters
 
@@ -47,7 +47,7 @@ def _effects(reversal: bool) -> tuple[dict, dict]:
     return mcu, drives
 
 
-def _both(monkeypatch, run):
+def _both(run):
     fast = run()
     with compiled_replay.stepped_tick_by_tick():
         slow = run()
@@ -55,11 +55,11 @@ def _both(monkeypatch, run):
     return fast, slow
 
 
-def test_compiled_replay_is_bit_identical_without_exp_terms(machine, monkeypatch):
+def test_compiled_replay_is_bit_identical_without_exp_terms(machine):
     t, cmds = _commands()
     mcu_values, drive_values = _effects(reversal=False)
     disturbance = {"x": lambda q: 30.0 * np.sin(40.0 * q), "y": lambda q: 10.0 + 0.0 * q}
-    fast, slow = _both(monkeypatch, lambda: run_replay(machine, t, cmds, t, batch=B, mcu_values=mcu_values,
+    fast, slow = _both(lambda: run_replay(machine, t, cmds, t, batch=B, mcu_values=mcu_values,
                                                        drive_values=drive_values, disturbance=disturbance))
     for name in ("table", "motor", "force", "current"):
         for a in "xyz":
@@ -69,10 +69,10 @@ def test_compiled_replay_is_bit_identical_without_exp_terms(machine, monkeypatch
     assert np.ptp(fast.current["x"][-1]) > 0.0
 
 
-def test_compiled_replay_with_reversal_friction_to_rounding(machine, monkeypatch):
+def test_compiled_replay_with_reversal_friction_to_rounding(machine):
     t, cmds = _commands()
     mcu_values, drive_values = _effects(reversal=True)
-    fast, slow = _both(monkeypatch, lambda: run_replay(machine, t, cmds, t, batch=B, mcu_values=mcu_values,
+    fast, slow = _both(lambda: run_replay(machine, t, cmds, t, batch=B, mcu_values=mcu_values,
                                                        drive_values=drive_values))
     for name, atol in (("table", 1e-15), ("motor", 1e-15), ("force", 1e-9), ("current", 1e-12)):
         for a in "xyz":
@@ -93,31 +93,58 @@ def _components(machine, batch: int, mcu_values: dict | None = None, integrator:
     return mcu, drives
 
 
+def _every_tick(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Samples at the ticks themselves: tick ``j`` with weight 1 gives the output after tick ``j`` exactly."""
+    return np.arange(1, n + 1), np.ones(n)
+
+
 def test_not_covered_cases_fall_back(machine):
     tv = float(machine.si("servo")["velocity_loop_period"])
     n = 400
     ref = {a: np.linspace(0.0, 0.002, n + 1) for a in "xyz"}
+    j, w = _every_tick(n)
     mcu, drives = _components(machine, 2, integrator="rk4")
-    assert compiled_replay.compiled_ticks(mcu, drives, ref, 0.0, tv, n) is None  # RK4 drives: not covered
+    assert compiled_replay.compiled_samples(mcu, drives, ref, 0.0, tv, n, j, w) is None  # RK4 drives
     mcu, drives = _components(machine, 2)
-    assert compiled_replay.compiled_ticks(mcu, drives, ref, 0.0, 2 * tv, n) is None  # another tick grid
-    traces = compiled_replay.compiled_ticks(mcu, drives, ref, 0.0, tv, n)
-    assert traces is not None and traces["position"]["x"].shape == (n + 1, 2)
+    assert compiled_replay.compiled_samples(mcu, drives, ref, 0.0, 2 * tv, n, j, w) is None  # another tick grid
+    traces = compiled_replay.compiled_samples(mcu, drives, ref, 0.0, tv, n, j, w)
+    assert traces is not None and traces["position"]["x"].shape == (n, 2)
 
 
-def test_alarm_falls_back_to_the_components_message(machine, monkeypatch):
+def test_samples_equal_the_ticks_interpolated_in_any_order(machine):
+    """Samples between ticks, unsorted and repeated: the tick-by-tick traces interpolated, bit for bit."""
+    tv = float(machine.si("servo")["velocity_loop_period"])
+    n = 600
+    ref = {"x": 0.003 * np.sin(np.linspace(0.0, 6.0, n + 1)), "z": np.linspace(0.0, -0.002, n + 1)}
+    rng = np.random.default_rng(3)
+    j = rng.integers(1, n + 1, 250)
+    w = rng.uniform(0.0, 1.0, 250)
+    mcu, drives = _components(machine, 3, {"x_servo_delay": np.array([0.0, 3e-4, 7e-4])})
+    fast = run_servo_samples(mcu, {a: drives[a] for a in ref}, ref, 0.0, tv, n, j, w,
+                             ("table_position", "position", "motor_force"))
+    mcu, drives = _components(machine, 3, {"x_servo_delay": np.array([0.0, 3e-4, 7e-4])})
+    ticks = run_servo_ticks(mcu, {a: drives[a] for a in ref}, ref, 0.0, tv, n,
+                            ("table_position", "position", "motor_force"))
+    for name, per_axis in ticks.items():
+        for a, arr in per_axis.items():
+            expected = arr[j - 1] * (1.0 - w[:, None]) + arr[j] * w[:, None]
+            assert np.array_equal(fast[name][a], expected), (name, a)
+
+
+def test_alarm_falls_back_to_the_components_message(machine):
     """A member over its excess-error limit: the compiled path steps back, the MCU names the alarm."""
     tv = float(machine.si("servo")["velocity_loop_period"])
     n = 400
     ramp = np.linspace(0.0, 0.01, n + 1)  # 10 mm in 0.1 s: a following error of millimetres
     ref = {"x": ramp}
+    j, w = _every_tick(n)
     limits = {"x_excess_error_in_motion": np.array([1.0, 1e-5])}  # member 1 alarms, member 0 does not
     mcu, drives = _components(machine, 2, limits)
-    assert compiled_replay.compiled_ticks(mcu, {"x": drives["x"]}, ref, 0.0, tv, n) is None
+    assert compiled_replay.compiled_samples(mcu, {"x": drives["x"]}, ref, 0.0, tv, n, j, w) is None
     mcu, drives = _components(machine, 2, limits)
-    traces = run_servo_ticks(mcu, {"x": drives["x"]}, ref, 0.0, tv, n)
+    traces = run_servo_samples(mcu, {"x": drives["x"]}, ref, 0.0, tv, n, j, w)
     assert mcu.failed_members.tolist() == [False, True]
     assert np.all(np.isfinite(traces["position"]["x"][:, 0]))
     mcu, drives = _components(machine, 1, {"x_excess_error_in_motion": 1e-5})
     with pytest.raises(ServoError, match="SV0411"):
-        run_servo_ticks(mcu, {"x": drives["x"]}, ref, 0.0, tv, n)
+        run_servo_samples(mcu, {"x": drives["x"]}, ref, 0.0, tv, n, j, w)

@@ -1,7 +1,7 @@
 """Compiled replay of a set-up MCU and its drives against given reference positions (identification, diagnosis).
 
-:func:`compiled_ticks` runs what a tick-by-tick loop of ``mcu.do_step`` and
-``drive.do_step`` would (see :func:`orchestrator.identify.closed_loop.run_servo_ticks`)
+:func:`compiled_samples` runs what a tick-by-tick loop of ``mcu.do_step`` and
+``drive.do_step`` would (see :func:`orchestrator.identify.closed_loop.run_servo_samples`)
 in :func:`fmus_src.servo.replay_numba.replay_axis` from the blocks the
 components built at set-up: one call per axis and block of members, run in
 threads side by side (the kernel releases the GIL; members and axes never
@@ -26,10 +26,10 @@ from .drive import DriveAxis
 from .mcu import AXES, MCU
 from .replay_numba import DRIVE_EXTRA_ROWS, N_OUTPUT_ROWS, REPLAY_OK, replay_axis
 
-#: Outputs of :func:`compiled_ticks` (besides the MCU's ``current_cmd``).
+#: Outputs of :func:`compiled_samples` (besides the MCU's ``current_cmd``).
 COMPILED_OUTPUTS = ("table_position", "position", "motor_force")
 
-#: False: :func:`compiled_ticks` declines and the callers step the components tick by tick
+#: False: :func:`compiled_samples` declines and the callers step the components tick by tick
 #: (set by :func:`stepped_tick_by_tick`, for comparisons and benchmarks).
 ENABLED = True
 
@@ -91,16 +91,18 @@ def _drive_block(drive: DriveAxis) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return block, switches, np.ascontiguousarray(state)
 
 
-def compiled_ticks(
+def compiled_samples(
     mcu: MCU,
     drives: Mapping[str, DriveAxis],
     ref: Mapping[str, np.ndarray],
     t0: float,
     tv: float,
     n_ticks: int,
+    sample_tick: np.ndarray,
+    sample_weight: np.ndarray,
     disturbance: Mapping[str, np.ndarray] | None = None,
 ) -> dict[str, dict[str, np.ndarray]] | None:
-    """Tick-by-tick traces of set-up components, or ``None`` when they must be stepped one tick at a time.
+    """Outputs of set-up components at given instants, or ``None`` when they must be stepped one tick at a time.
 
     Parameters
     ----------
@@ -112,17 +114,28 @@ def compiled_ticks(
         Start time and velocity-loop period [s].
     n_ticks : int
         Ticks to run.
+    sample_tick : ndarray of int, shape (n_out,)
+        Output ``i`` lies between the outputs after ticks ``sample_tick[i] - 1`` and ``sample_tick[i]``
+        (``1 <= sample_tick[i] <= n_ticks``; tick 0 is the set-up).
+    sample_weight : ndarray, shape (n_out,)
+        Its weight ``w``: ``y[j - 1] (1 - w) + y[j] w`` (``w = 1``: the output after tick ``j`` itself).
     disturbance : mapping axis -> ndarray, shape (n_ticks,), optional
         Disturbance force of the axis during each tick [N].
 
     Returns
     -------
     dict or None
-        ``{output: {axis: ndarray (n_ticks + 1, B)}}`` for the outputs ``table_position``, ``position``,
-        ``motor_force`` and ``current_cmd`` (after each tick; row 0 the set-up values).
+        ``{output: {axis: ndarray (n_out, B)}}`` for the outputs ``table_position``, ``position``,
+        ``motor_force`` and ``current_cmd``: only the samples are kept, never the ticks.
     """
     if not _covered(mcu, drives, t0, tv):
         return None
+    tick = np.asarray(sample_tick, dtype=np.int64)
+    weight = np.asarray(sample_weight, dtype=float)
+    if tick.size and (tick.min() < 1 or tick.max() > n_ticks):
+        raise ValueError(f"sample ticks must lie in 1..{n_ticks}, got {tick.min()}..{tick.max()}")
+    order = np.argsort(tick, kind="stable")  # the kernel walks the samples with the ticks
+    tick, weight = np.ascontiguousarray(tick[order]), np.ascontiguousarray(weight[order])
     batch = mcu.batch
     names = (*COMPILED_OUTPUTS, "current_cmd")
     line = mcu._delay_line
@@ -131,7 +144,7 @@ def compiled_ticks(
     outs: dict[str, np.ndarray] = {}
     for a, drive in drives.items():
         i = AXES.index(a)
-        out = np.empty((N_OUTPUT_ROWS, n_ticks + 1, batch))
+        out = np.empty((N_OUTPUT_ROWS, max(tick.size, 1), batch))
         out[0, 0], out[1, 0] = drive.values["table_position"], drive.values["position"]
         out[2, 0], out[3, 0] = drive.values["motor_force"], mcu.values[f"{a}_current_cmd"]
         block, switches, state = _drive_block(drive)
@@ -140,7 +153,7 @@ def compiled_ticks(
         calls[a] = (int(n_ticks), int(mcu._ratio), float(mcu._tp), float(mcu._tv), float(t0), i,
                     np.ascontiguousarray(mcu._gain_block[:, i, :]), mcu._state.block[:, i, :].copy(),
                     np.ascontiguousarray(mcu._limit_block[:, i, :]), np.ascontiguousarray(mcu._delay[i]),
-                    int(capacity), _columns(ref[a]), dist, block, switches, state, out)
+                    int(capacity), _columns(ref[a]), dist, block, switches, state, tick, weight, out)
         outs[a] = out
     items = [(a, b0, b1) for a in calls for b0, b1 in member_blocks(batch, len(calls))]
     if len(items) == 1:
@@ -150,7 +163,13 @@ def compiled_ticks(
             statuses = list(pool.map(lambda item: replay_axis(item[1], item[2], *calls[item[0]]), items))
     if any(status != REPLAY_OK for status, _, _ in statuses):
         return None
-    return {name: {a: outs[a][r] for a in calls} for r, name in enumerate(names)}
+    result: dict[str, dict[str, np.ndarray]] = {name: {} for name in names}
+    for a, out in outs.items():
+        for r, name in enumerate(names):
+            column = np.empty((tick.size, batch))
+            column[order] = out[r, : tick.size]
+            result[name][a] = column
+    return result
 
 
 def usable_cores() -> int:

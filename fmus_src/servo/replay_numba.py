@@ -51,7 +51,7 @@ N_DRIVE_ROWS = 12 + len(DRIVE_EXTRA_ROWS)
 STATE_ROWS = ("position", "velocity", "direction", "table", "travel", "last_direction")
 N_STATE_ROWS = len(STATE_ROWS)
 
-#: Rows of the output block, shape ``(N_OUTPUT_ROWS, n_ticks + 1, B)``.
+#: Rows of the output block, shape ``(N_OUTPUT_ROWS, n_out, B)``.
 OUTPUT_ROWS = ("table_position", "position", "motor_force", "current_cmd")
 N_OUTPUT_ROWS = len(OUTPUT_ROWS)
 
@@ -90,7 +90,7 @@ def replay_axis(
     b0: int, b1: int, n_ticks: int, ratio: int, tp: float, tv: float, t0: float, axis_index: int,
     gains: np.ndarray, mcu_state: np.ndarray, limits: np.ndarray, delay: np.ndarray, delay_capacity: int,
     ref: np.ndarray, disturbance: np.ndarray, drive: np.ndarray, switches: np.ndarray,
-    state: np.ndarray, out: np.ndarray,
+    state: np.ndarray, sample_tick: np.ndarray, sample_weight: np.ndarray, out: np.ndarray,
 ) -> tuple[int, int, int]:
     """Ticks ``0 .. n_ticks - 1`` of one axis of members ``b0 .. b1 - 1`` (see the module docstring).
 
@@ -126,8 +126,14 @@ def replay_axis(
         Load terms, reversal friction, table terms on (1) or off (0), as the drive decided at set-up.
     state : ndarray, shape (N_STATE_ROWS, B)
         Drive and table state (:data:`STATE_ROWS`), updated in place.
-    out : ndarray, shape (N_OUTPUT_ROWS, n_ticks + 1, B)
-        Rows ``1 ..`` written: the outputs after each tick (:data:`OUTPUT_ROWS`; row 0 is the caller's).
+    sample_tick, sample_weight : ndarray, shape (n_out,)
+        Output sample ``i`` is ``y[j - 1] (1 - w) + y[j] w`` with ``j = sample_tick[i]`` (non-decreasing,
+        ``1 <= j <= n_ticks``), ``w = sample_weight[i]`` and ``y[k]`` the output after tick ``k`` (``y[0]``: the
+        set-up values, see ``out``); ``j = k``, ``w = 1`` gives ``y[k]`` itself.
+    out : ndarray, shape (N_OUTPUT_ROWS, n_out, B)
+        On entry, column ``b`` of ``out[:, 0]`` holds the set-up outputs ``y[0]`` of member ``b``; on return,
+        the output samples (:data:`OUTPUT_ROWS`). Only the samples are stored, never the ticks: a
+        10-minute log at 250 µs ticks would otherwise hold 2.4 million rows per output and member.
 
     Returns
     -------
@@ -142,8 +148,13 @@ def replay_axis(
     per_member_ref = ref.shape[1] > 1
     per_member_dist = disturbance.shape[1] > 1
     held_dist = disturbance.shape[0] == 1
+    n_out = sample_tick.shape[0]
     ring = np.empty(max(delay_capacity, 2))
+    prev = np.empty(4)
     for b in range(b0, b1):
+        for r in range(4):
+            prev[r] = out[r, 0, b]
+        p = 0
         integ = mcu_state[0, b]
         v_cmd = mcu_state[1, b]
         i_ff = mcu_state[2, b]
@@ -193,10 +204,17 @@ def replay_axis(
                 elapsed = ((t0 + k * tv) + tv) - t0
                 table, position_out = table_position(table, x, u, elapsed, drive[19, b], drive[20, b],
                                                      drive[21, b], drive[22, b], drive[23, b], drive[24, b])
-            out[0, k + 1, b] = position_out
-            out[1, k + 1, b] = x
-            out[2, k + 1, b] = u
-            out[3, k + 1, b] = current
+            while p < n_out and sample_tick[p] == k + 1:
+                w = sample_weight[p]
+                out[0, p, b] = prev[0] * (1.0 - w) + position_out * w
+                out[1, p, b] = prev[1] * (1.0 - w) + x * w
+                out[2, p, b] = prev[2] * (1.0 - w) + u * w
+                out[3, p, b] = prev[3] * (1.0 - w) + current * w
+                p += 1
+            prev[0] = position_out
+            prev[1] = x
+            prev[2] = u
+            prev[3] = current
         mcu_state[0, b] = integ
         mcu_state[1, b] = v_cmd
         mcu_state[2, b] = i_ff

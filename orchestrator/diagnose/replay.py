@@ -19,7 +19,7 @@ from scipy.interpolate import PchipInterpolator
 
 from fmus_src.servo import MCU, DriveAxis
 
-from ..identify.closed_loop import run_servo_ticks
+from ..identify.closed_loop import run_servo_samples
 from ..machine import Machine
 from ..twin import drive_parameters, mcu_parameters
 from .errors import DiagnosisError
@@ -130,14 +130,8 @@ def run_replay(
         d.setup(t0)
     dist = ({a: np.asarray(f(tick_t[:-1] + 0.5 * tv), dtype=float) for a, f in disturbance.items() if a in drives}
             if disturbance else None)
-    traces = run_servo_ticks(mcu, drives, ref, t0, tv, n_ticks, ("table_position", "position", "motor_force"), dist)
-    table, motor, force = traces["table_position"], traces["position"], traces["motor_force"]
-    cur = traces["current_cmd"]
     j = np.clip(np.searchsorted(tick_t, t_out, side="right"), 1, n_ticks)
-    f = np.clip((t_out - tick_t[j - 1]) / tv, 0.0, 1.0)[:, None]
-
-    def sample(arr: np.ndarray) -> np.ndarray:
-        return arr[j - 1] * (1.0 - f) + arr[j] * f
-
-    return Replay(t_out, {a: sample(table[a]) for a in axes}, {a: sample(motor[a]) for a in axes},
-                  {a: sample(force[a]) for a in axes}, {a: sample(cur[a]) for a in axes})
+    f = np.clip((t_out - tick_t[j - 1]) / tv, 0.0, 1.0)
+    out = run_servo_samples(mcu, drives, ref, t0, tv, n_ticks, j, f, ("table_position", "position", "motor_force"),
+                            dist)
+    return Replay(t_out, out["table_position"], out["position"], out["motor_force"], out["current_cmd"])

@@ -30,7 +30,7 @@ from typing import Callable, Mapping
 import numpy as np
 
 from fmus_src.servo import MCU, DriveAxis
-from fmus_src.servo.replay import COMPILED_OUTPUTS, compiled_ticks
+from fmus_src.servo.replay import COMPILED_OUTPUTS, compiled_samples
 
 from ..machine import Machine
 from ..twin import drive_parameters, mcu_parameters
@@ -153,14 +153,11 @@ def replay(
         d.setup(t0)
     dist = ({a: np.asarray(fd(tick_t[:-1] + 0.5 * tv), dtype=float) for a, fd in disturbance.items() if a in drives}
             if disturbance else None)
-    traces = run_servo_ticks(mcu, drives, ref_ticks, t0, tv, n_ticks, ("position",), dist)
-    pos, cur = traces["position"], traces["current_cmd"]
-    # linear interpolation of the tick outputs to the requested times (held before the first tick)
+    # outputs interpolated linearly between the ticks to the requested times (held before the first tick)
     j = np.clip(np.searchsorted(tick_t, t_out, side="right"), 1, n_ticks)
-    f = np.maximum((t_out - tick_t[j - 1]) / tv, 0.0)[:, None]
-    out_p = {a: pos[a][j - 1] * (1.0 - f) + pos[a][j] * f for a in axes}
-    out_c = {a: cur[a][j - 1] * (1.0 - f) + cur[a][j] * f for a in axes}
-    return ReplayResult(t_out, out_p, out_c, n_ticks)
+    f = np.maximum((t_out - tick_t[j - 1]) / tv, 0.0)
+    out = run_servo_samples(mcu, drives, ref_ticks, t0, tv, n_ticks, j, f, ("position",), dist)
+    return ReplayResult(t_out, out["position"], out["current_cmd"], n_ticks)
 
 
 def run_servo_ticks(
@@ -194,17 +191,9 @@ def run_servo_ticks(
     dict
         ``{output: {axis: ndarray (n_ticks + 1, B)}}`` with ``"current_cmd"`` (A) included.
 
-    Notes
-    -----
-    The ticks run in one compiled call per axis (:func:`fmus_src.servo.replay.compiled_ticks`) whenever
-    the components allow it (compiled kernels, exponential drives, outputs among
-    ``table_position``, ``position``, ``motor_force``); otherwise, or when a member fails on the
-    way, tick by tick here. The components are consumed: their state afterwards is not defined.
+    The components are stepped here one tick at a time (:func:`run_servo_samples` runs them compiled
+    when it can, and keeps only the samples it is asked for).
     """
-    if set(outputs) <= set(COMPILED_OUTPUTS):
-        compiled = compiled_ticks(mcu, drives, ref, t0, tv, n_ticks, disturbance)
-        if compiled is not None:
-            return {name: compiled[name] for name in (*outputs, "current_cmd")}
     axes = list(ref)
     batch = mcu.batch
     traces = {name: {a: np.empty((n_ticks + 1, batch)) for a in axes} for name in (*outputs, "current_cmd")}
@@ -233,3 +222,52 @@ def run_servo_ticks(
             drives[a].do_step(t, tv)
         record(k + 1)
     return traces
+
+
+def run_servo_samples(
+    mcu: MCU,
+    drives: dict[str, DriveAxis],
+    ref: dict[str, np.ndarray],
+    t0: float,
+    tv: float,
+    n_ticks: int,
+    sample_tick: np.ndarray,
+    sample_weight: np.ndarray,
+    outputs: tuple[str, ...] = ("position",),
+    disturbance: dict[str, np.ndarray] | None = None,
+) -> dict[str, dict[str, np.ndarray]]:
+    """Outputs of a set-up MCU and its drives at given instants between their ticks.
+
+    Output sample ``i`` is ``y[j - 1] (1 - w) + y[j] w`` with ``j = sample_tick[i]`` and
+    ``w = sample_weight[i]``, ``y[k]`` the output after tick ``k`` of :func:`run_servo_ticks` (``y[0]``:
+    the set-up values). All ticks run in one compiled call per axis and block of members
+    (:func:`fmus_src.servo.replay.compiled_samples`: the same numbers, only the samples kept in memory)
+    whenever the components allow it (compiled kernels, exponential drives, outputs among
+    ``table_position``, ``position``, ``motor_force``); otherwise, or when a member fails on the way
+    (the components then fail it with their own message), by :func:`run_servo_ticks`. The components
+    are consumed: their state afterwards is not defined.
+
+    Parameters
+    ----------
+    mcu, drives, ref, t0, tv, n_ticks, outputs, disturbance
+        As :func:`run_servo_ticks`.
+    sample_tick : ndarray of int, shape (n_out,)
+        ``1 <= j <= n_ticks``.
+    sample_weight : ndarray, shape (n_out,)
+        ``w``.
+
+    Returns
+    -------
+    dict
+        ``{output: {axis: ndarray (n_out, B)}}`` with ``"current_cmd"`` (A) included.
+    """
+    names = (*outputs, "current_cmd")
+    if set(outputs) <= set(COMPILED_OUTPUTS):
+        compiled = compiled_samples(mcu, drives, ref, t0, tv, n_ticks, sample_tick, sample_weight, disturbance)
+        if compiled is not None:
+            return {name: compiled[name] for name in names}
+    traces = run_servo_ticks(mcu, drives, ref, t0, tv, n_ticks, outputs, disturbance)
+    j = np.asarray(sample_tick, dtype=np.int64)
+    w = np.asarray(sample_weight, dtype=float)[:, None]
+    return {name: {a: arr[j - 1] * (1.0 - w) + arr[j] * w for a, arr in traces[name].items()} for name in names}
+
