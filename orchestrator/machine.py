@@ -8,6 +8,10 @@ component parameters expect.
 
 Every key is checked against :data:`SCHEMA`; an unknown or missing key is a
 :class:`MachineFileError` naming the file, the line and what was expected.
+
+The optional section ``[nck.m_codes]`` maps the machine builder's M codes to the standard ones
+(``13 = { means = [3, 8], source = "..." }``; rules: :mod:`fmus_src.nck.m_aliases`); :meth:`Machine.m_codes`
+returns it.
 """
 from __future__ import annotations
 
@@ -19,6 +23,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from fmus_src.nck.m_aliases import ALIAS_TARGETS, alias_problem
 from fmus_src.units import UnitError, split_unit_suffix, to_si
 
 from .errors import CncTwinError
@@ -77,6 +82,9 @@ SCHEMA: dict[str, set[str]] = {
         "taylor_n", "taylor_C",
     },
 }
+
+#: The optional section of M-code aliases: ``<builder's M code> = { means = [<standard M codes>], source = "..." }``.
+M_CODES_SECTION = "nck.m_codes"
 
 #: Keys that may be left out of a machine file (the component default is used).
 OPTIONAL_SECTIONS: set[str] = {"machine", "material.*", *(f"axis.{a}.effects" for a in AXES), "cutting.effects"}
@@ -161,6 +169,12 @@ class Machine:
             node = node[part]
         return isinstance(node, dict)
 
+    def m_codes(self) -> dict[int, tuple[int, ...]]:
+        """The M-code aliases of ``[nck.m_codes]``: builder's M code -> the standard M codes it stands for (empty
+        when the file has no such section)."""
+        table = self.values.get("nck", {}).get("m_codes", {})
+        return {int(code): tuple(means) for code, means in table.items()}
+
     def materials(self) -> list[str]:
         """Names of the materials defined in the file."""
         return sorted(self.values.get("material", {}))
@@ -199,6 +213,9 @@ def _flatten(path: Path, text: str, node: dict[str, Any], section: str, provenan
     allowed = _allowed_keys(section) if section else set()
     for key, item in node.items():
         dotted = f"{section}.{key}" if section else key
+        if dotted == M_CODES_SECTION and isinstance(item, dict):
+            out[key] = _m_codes(path, text, item, provenance)
+            continue
         is_leaf_table = isinstance(item, dict) and "value" in item and set(item) <= {"value", "source"}
         if isinstance(item, dict) and not is_leaf_table:
             if _allowed_keys(dotted) is None and not any(p.startswith(dotted + ".") for p in SCHEMA):
@@ -231,6 +248,29 @@ def _flatten(path: Path, text: str, node: dict[str, Any], section: str, provenan
         except UnitError as exc:  # pragma: no cover - the schema only holds known suffixes
             raise MachineFileError(f"{path}: {exc}") from None
         out[key] = value
+    return out
+
+
+def _m_codes(path: Path, text: str, node: dict[str, Any], provenance: dict[str, str]) -> dict[str, list[int]]:
+    """Validate ``[nck.m_codes]``: builder's M code -> ``{ means = [...], source = "..." }``."""
+    out: dict[str, list[int]] = {}
+    allowed = " ".join(str(c) for c in ALIAS_TARGETS)
+    form = f'<M code> = {{ means = [<standard M codes among {allowed}>], source = "..." }}'
+    for key, item in node.items():
+        where = f"{path}:{_line_of(text, M_CODES_SECTION, key)}: [{M_CODES_SECTION}] {key}"
+        if not key.isdigit():
+            raise MachineFileError(f"{where}: the key is not an M code number; expected {form}")
+        if not isinstance(item, dict) or "means" not in item or not set(item) <= {"means", "source"}:
+            raise MachineFileError(f"{where}: expected {form}, got {item!r}")
+        means = item["means"]
+        if not isinstance(means, list):
+            raise MachineFileError(f"{where}: means must be a list of M code numbers; expected {form}")
+        problem = alias_problem(int(key), means)
+        if problem is not None:
+            raise MachineFileError(f"{where}: {problem}")
+        if "source" in item:
+            provenance[f"{M_CODES_SECTION}.{key}"] = str(item["source"])
+        out[key] = list(means)
     return out
 
 
@@ -327,7 +367,10 @@ def machine_to_toml(machine: Machine, extra_provenance: dict[str, str] | None = 
                 lines.append(f"[{section}]")
             for key, value in plain.items():
                 dotted = f"{section}.{key}" if section else key
-                if dotted in sources:
+                if isinstance(value, list):  # [nck.m_codes]
+                    source = f", source = {_toml_value(sources[dotted])}" if dotted in sources else ""
+                    lines.append(f"{key} = {{ means = [{', '.join(str(m) for m in value)}]{source} }}")
+                elif dotted in sources:
                     lines.append(f"{key} = {{ value = {_toml_value(value)}, source = {_toml_value(sources[dotted])} }}")
                 else:
                     lines.append(f"{key} = {_toml_value(value)}")

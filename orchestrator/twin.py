@@ -25,6 +25,7 @@ from fmus_src.cutting.component import CuttingLoad
 from fmus_src.cutting.path_component import PathCuttingLoad
 from fmus_src.cutting.table import EngagementTable
 from fmus_src.nck.component import NCKernel
+from fmus_src.nck.m_aliases import format_m_codes
 from fmus_src.servo.drive import DriveAxis
 from fmus_src.servo.mcu import MCU
 
@@ -81,7 +82,8 @@ def _declared(component_cls: type, mapping: Mapping[str, object]) -> dict[str, o
 def nck_parameters(machine: Machine) -> dict[str, object]:
     """NC kernel parameters (SI) from a machine file.
 
-    A 2nd/3rd/4th reference position (G30) the file leaves out is its 1st one (``reference_*_mm``).
+    A 2nd/3rd/4th reference position (G30) the file leaves out is its 1st one (``reference_*_mm``). The M-code
+    aliases of ``[nck.m_codes]`` become the String parameter ``m_codes`` (none in the file: no aliases).
     """
     params: dict[str, object] = dict(machine.si("nck"))
     for n in (2, 3, 4):
@@ -91,6 +93,7 @@ def nck_parameters(machine: Machine) -> dict[str, object]:
     params.update({f"spindle_{k}": v for k, v in machine.si("spindle").items()})
     for a in AXES:
         params[f"{a}_rapid_feed"] = machine.si(f"axis.{a}")["rapid_feed"]
+    params["m_codes"] = format_m_codes(machine.m_codes())  # [nck.m_codes]; none in the file: no aliases
     return _declared(NCKernel, params)
 
 

@@ -14,7 +14,10 @@ Conventions
   levels (31i-B); deeper (e.g. a subprogram calling itself), a missing
   program, M99 in the main program (FANUC: an endless restart), M99 P<seq>
   without that N in the caller or making the program endless, and M98 with
-  G4/G28/G30/G53 or a canned-cycle code are errors. Blocks from a subprogram carry the
+  G4/G28/G30/G53 or a canned-cycle code are errors.
+* Haas ``M97 P<n> [L<k>]`` calls the local subprogram from the block N<n> of the running program to its
+  M99 (:func:`.subprograms.local_subprogram`); it is a frame on the same stack as M98 (same nesting limit,
+  same returns, same restrictions on the block). Blocks from a subprogram carry the
   subprogram's own source lines; :attr:`Program.segments` gives the order in
   which lines ran.
 """
@@ -26,7 +29,8 @@ from typing import TYPE_CHECKING, Sequence
 from .codes import GWords, MWords, ValueWords
 from .errors import ErrorFactory, GCodeError
 from .subprograms import (
-    MAX_NESTING, Call, Return, Subprogram, find_sequence, main_program_end, read_call, read_return,
+    MAX_NESTING, Call, Return, Subprogram, find_sequence, local_subprogram, main_program_end, read_call,
+    read_local_call, read_return,
 )
 
 if TYPE_CHECKING:
@@ -39,7 +43,7 @@ def subprogram_words(gs: GWords, ms: MWords, vals: ValueWords, err: ErrorFactory
     Returns
     -------
     call : Call or None
-        The M98 call of the block, None without M98.
+        The M98 (or M97, ``local``) call of the block, None without one.
     ret : Return
         The M99 return of the block (plain :class:`Return` when the block has no M99 or its P belongs to
         G4/G10/G30).
@@ -51,13 +55,14 @@ def subprogram_words(gs: GWords, ms: MWords, vals: ValueWords, err: ErrorFactory
         if "end" in ms:
             raise err(f"M{ms['end'][0]}", f"M{code} and M{ms['end'][0]} in one block",
                       f"M{code} and the program end M30/M2 in separate blocks")
-        if code == 98:
+        if code in (97, 98):
             drill = "canned cycle" in gs and gs["canned cycle"][0] != 80
             if "non-modal" in gs or drill:
                 other = (gs.get("non-modal") or gs["canned cycle"])[1]
-                raise err("G" + other.text, f"G{other.text} and M98 in one block",
-                          "M98 P<n> alone or with a G0-G3 move (the move runs first, then the call)")
-            call = read_call(vals.pop("P", None), vals.pop("L", None), err)
+                raise err("G" + other.text, f"G{other.text} and M{code} in one block",
+                          f"M{code} P<n> alone or with a G0-G3 move (the move runs first, then the call)")
+            read = read_call if code == 98 else read_local_call
+            call = read(vals.pop("P", None), vals.pop("L", None), err)
         elif gs.get("non-modal", (None,))[0] not in (4, 10, 30):  # there P is the dwell, offset or reference no.
             ret = read_return(vals.pop("P", None), err)
     return call, ret
@@ -84,7 +89,7 @@ def return_target(sequence: int, lines: Sequence[str], stack: list[Frame], subs:
     word = f"P{sequence}"
     if stack:
         caller = stack[-1].sub
-        first, last, name = caller.start, caller.end, f"subprogram O{caller.number}"
+        first, last, name = caller.first, caller.end, f"subprogram {caller.name}"
     else:
         subs_start = min((s.start for s in (subs or {}).values()), default=len(lines))
         end = main_program_end(lines, frame.call_line - 1, file, block_delete)
@@ -104,17 +109,35 @@ def return_target(sequence: int, lines: Sequence[str], stack: list[Frame], subs:
 
 
 def called_subprogram(call: Call, subs: dict[int, Subprogram], stack: list[Frame], line: int, text: str,
-                      file: str, code: str = "M98") -> Subprogram:
-    """The subprogram an M98 (or G65, ``code``) block calls, or a :class:`GCodeError` (missing program, nesting
-    too deep; M98 and G65 calls count together)."""
+                      file: str, code: str = "M98", lines: Sequence[str] = (), block_delete: bool = False,
+                      ) -> Subprogram:
+    """The subprogram an M98 (or G65, ``code``; or M97, ``call.local``) block calls, or a :class:`GCodeError`
+    (missing program or block N, nesting too deep; M97, M98 and G65 calls count together).
+
+    ``lines`` and ``block_delete`` (the program's source lines and the block delete switch) are needed for an
+    M97 call: its block N<n> is searched in the running program (:func:`.subprograms.local_subprogram`).
+    """
+    if call.local:
+        code = "M97"
     word = f"{code} P{call.number}"
-    if call.number not in subs:
+    if call.local:
+        if stack:
+            here = stack[-1].sub
+            first, last, name = here.first, here.end, f"subprogram {here.name}"
+        else:
+            subs_start = min((s.start for s in subs.values()), default=len(lines))
+            first, last, name = 0, subs_start - 1, "the main program"
+        target = local_subprogram(call.number, first, last, lines, file, block_delete, name, line, text)
+    elif call.number not in subs:
         have = ", ".join(f"O{n} (line {s.start + 1})" for n, s in sorted(subs.items())) or "none"
         raise GCodeError(file, line, word, f"one of the subprograms after the main program's M30: {have}",
                          f"subprogram O{call.number} is not in the file", text)
+    else:
+        target = subs[call.number]
     if len(stack) >= MAX_NESTING:
-        active = " -> ".join(f"O{f.sub.number}" for f in stack)
-        again = " (recursion: it is already running)" if any(f.sub.number == call.number for f in stack) else ""
-        raise GCodeError(file, line, word, f"subprogram calls nested at most {MAX_NESTING} levels deep (FANUC 31i-B)",
-                         f"calling O{call.number}{again} would nest {len(stack) + 1} levels ({active})", text)
-    return subs[call.number]
+        active = " -> ".join(f.sub.name for f in stack)
+        again = " (recursion: it is already running)" if any(f.sub == target for f in stack) else ""
+        raise GCodeError(file, line, word, f"subprogram calls (M97, M98, G65) nested at most {MAX_NESTING} levels "
+                         "deep (FANUC 31i-B)",
+                         f"calling {target.name}{again} would nest {len(stack) + 1} levels ({active})", text)
+    return target

@@ -11,6 +11,10 @@ cutter compensation G41/G42 with a
 nonzero radius does not simulate (see :mod:`.compensation`), G88 (boring with a manual operation),
 G29, and every other G/M code or address.
 
+Machine builders' M codes (M13, M48, M88, ...): the machine file's aliases (:mod:`.m_aliases`), passed to
+:func:`group_words`; each expands to the standard codes it stands for on its block, so M13 M5 is a conflict
+as M3 M5 is. M97 P<n> (Haas local subprogram call): :mod:`.subprograms`.
+
 Conventions
 -----------
 * Decimal G codes (``G50.1``, ``G13.1``) are single codes; the lexer reads
@@ -20,7 +24,7 @@ Conventions
 """
 from __future__ import annotations
 
-from typing import Sequence
+from typing import Mapping, Sequence
 
 from .cycles import CYCLES
 from .errors import ErrorFactory
@@ -74,13 +78,13 @@ G_REJECT: dict[int | float, str] = {
 M_GROUP: dict[int, str] = {
     0: "stop", 1: "stop", 2: "end", 30: "end", 3: "spindle", 4: "spindle", 5: "spindle", 19: "spindle",
     6: "tool change",
-    7: "coolant", 8: "coolant", 9: "coolant", 98: "subprogram", 99: "subprogram",
+    7: "coolant", 8: "coolant", 9: "coolant", 97: "subprogram", 98: "subprogram", 99: "subprogram",
     29: "rigid tapping",
 }
 SUPPORTED_G = ("G0 G1 G2 G3 G4 G5 G5.1 G8 G9 G10 G13.1 G15 G16 G17 G18 G19 G20 G21 G28 G30 G40 G41 G42 G43 G44 "
                "G49 G50 G50.1 G51 G51.1 G52 G53 G54-G59 G54.1 G61 G64 G67 G68 G69 G73 G74 G76 G80 G81 G82 G83 G84 "
                "G85 G86 G87 G89 G90 G90.1 G91 G91.1 G92 G92.1 G92.2 G92.3 G94 G95 G98 G99")
-SUPPORTED_M = "M0 M1 M2 M3 M4 M5 M6 M7 M8 M9 M19 M29 M30 M98 M99"
+SUPPORTED_M = "M0 M1 M2 M3 M4 M5 M6 M7 M8 M9 M19 M29 M30 M97 M98 M99"
 #: Address letters of the dialect.
 LETTERS = set("GMXYZIJKRFSTHDPQNOL") | {",C", ",R"}  # ,C / ,R: optional chamfer / corner R (see .corners)
 
@@ -104,12 +108,36 @@ def integer_code(w: Word) -> int | None:
     return int(w.value)
 
 
-def group_words(words: Sequence[Word], err: ErrorFactory) -> tuple[GWords, MWords, ValueWords]:
+def describe_m_codes(m_codes: Mapping[int, Sequence[int]]) -> str:
+    """M-code aliases as quoted in messages: ``"M13 (M3 M8), M48 (no effect)"``; ``"none"`` when empty."""
+    if not m_codes:
+        return "none"
+    return ", ".join(f"M{c} (" + (" ".join(f"M{m}" for m in m_codes[c]) or "no effect") + ")" for c in sorted(m_codes))
+
+
+def _m_name(code: int, w: Word) -> str:
+    """``M3``, or ``M13 (= M3)`` when the standard code came from the alias word ``w``."""
+    return f"M{code}" if integer_code(w) == code else f"M{w.text} (= M{code})"
+
+
+def group_words(words: Sequence[Word], err: ErrorFactory, m_codes: Mapping[int, Sequence[int]] | None = None,
+                ) -> tuple[GWords, MWords, ValueWords]:
     """Sort the words of a block into G codes by modal group, M codes by kind and the other words by letter.
 
+    Parameters
+    ----------
+    words : sequence of Word
+        The block's words.
+    err : ErrorFactory
+        Builds the error for this block.
+    m_codes : mapping int -> sequence of int, optional
+        The machine file's M-code aliases (:mod:`.m_aliases`): an alias word enters the standard codes it
+        stands for (each under its kind, with the alias word), an empty one nothing.
+
     Raises the error of ``err`` for an unknown address, an unsupported or rejected G/M code, two codes of one
-    group and an address given twice.
+    group or kind (also through an alias) and an address given twice.
     """
+    aliases = m_codes or {}
     gs: GWords = {}
     ms: MWords = {}
     vals: ValueWords = {}
@@ -130,13 +158,21 @@ def group_words(words: Sequence[Word], err: ErrorFactory) -> tuple[GWords, MWord
             gs[group] = (code, w)  # type: ignore[assignment]
         elif w.letter == "M":
             mcode = integer_code(w)
-            if mcode is None or mcode not in M_GROUP:
-                raise err("M" + w.text, f"M code M{w.text} is not supported", f"one of {SUPPORTED_M}")
-            kind = M_GROUP[mcode]
-            if kind in ms and ms[kind][0] != mcode:
-                raise err("M" + w.text, f"M{ms[kind][0]} and M{mcode} conflict in one block",
-                          "at most one M code of each kind per block")
-            ms[kind] = (mcode, w)
+            if mcode is not None and mcode in aliases:
+                standard: Sequence[int] = aliases[mcode]
+            elif mcode is not None and mcode in M_GROUP:
+                standard = (mcode,)
+            else:
+                raise err("M" + w.text, f"M code M{w.text} is not supported",
+                          f"one of {SUPPORTED_M} or the machine file's aliases: {describe_m_codes(aliases)} "
+                          "(a machine builder's M code: add it under [nck.m_codes] of the machine file, e.g. "
+                          "13 = { means = [3, 8], source = \"...\" })")
+            for code in standard:
+                kind = M_GROUP[code]
+                if kind in ms and ms[kind][0] != code:
+                    raise err("M" + w.text, f"{_m_name(*ms[kind])} and {_m_name(code, w)} conflict in one block",
+                              f"at most one M code of each kind ({kind}) per block")
+                ms[kind] = (code, w)
         else:
             if w.letter in vals:
                 raise err(w.letter + w.text, f"word {w.letter} appears twice", f"at most one {w.letter} word per block")

@@ -22,6 +22,7 @@ from .blocks import Block, Program
 from .cycles import CycleMachine
 from .errors import NCParameterError
 from .interpreter import interpret
+from .m_aliases import DEFAULT_M_CODES, format_m_codes, parse_m_codes
 from .overrides import apply_overrides
 from .params import NCParams
 from .planner import BatchPlan, build_schedule, plan_batch
@@ -99,6 +100,8 @@ def _variables() -> tuple[Variable, ...]:
     v.append(Variable("rigid_tapping_time_constant", p, "s", _D.rigid_tapping_time_constant,
                       "rigid-tapping linear acc/dec time to the maximum spindle speed (FANUC No. 5261)"))
     v.append(Variable("block_delete", p, "1", False, "block delete switch: skip blocks starting with /", "Boolean"))
+    v.append(Variable("m_codes", p, "1", format_m_codes(DEFAULT_M_CODES),
+                      "machine builder's M codes: alias=standard codes;... (machine file [nck.m_codes])", "String"))
     o = "output"
     v += [
         Variable("x_ref", o, "m", 0.0, "X reference position after acc/dec after interpolation"),
@@ -222,6 +225,7 @@ class NCKernel(Component):
             cycles=CycleMachine(self._uniform("g73_retract"), self._uniform("g83_clearance"),
                                 _rigid_always(str(self.values["rigid_tapping_mode"]), self.name),
                                 str(self.values["boring_shift"])),
+            m_codes=parse_m_codes(str(self.values["m_codes"]), f"{self.name}.m_codes"),
         )
         for n in (1, 2, 3, 4):
             if not all(np.isfinite(settings.reference_position(n))):

@@ -12,8 +12,8 @@ mode; LinuxCNC G64 P Q, see :mod:`.path_blending`), canned cycles G73 G74 G76 G8
 with G98/G99 and G80 (see :mod:`.cycles`; tapping and M29: :mod:`.tapping`), G90/G91,
 G90.1/G91.1 (arc centre I/J/K absolute/incremental), G94/G95, G51.1/G50.1 (programmable mirror image),
 G51/G50 (scaling), G68/G69 (coordinate rotation), G16/G15 (polar coordinates); M0 M1 M2 M3 M4 M5 M6 M7 M8 M9
-M19 M29 M30; subprograms
-M98/M99 in the same file (see :mod:`.subprograms`); Custom Macro B variables, IF/WHILE/GOTO and
+M19 M29 M30 and the machine builder's M codes of the machine file (:mod:`.m_aliases`); subprograms
+M98/M99 in the same file and Haas M97 local subprograms (see :mod:`.subprograms`); Custom Macro B variables, IF/WHILE/GOTO and
 G65 calls (see :mod:`.macro`); F S T H D P Q N O L words
 (K: arc centre, or repeat count in a canned cycle; L: repeat count of M98);
 ``,C``/``,R`` optional chamfer and corner R between G1 blocks; ``( )`` and ``;`` comments, ``%`` lines,
@@ -210,7 +210,8 @@ def interpret(text: str, file: str = "<text>", settings: InterpreterSettings | N
         if isinstance(action, Call):
             if subs is None:
                 subs = index_subprograms(lines, number - 1, file, settings.block_delete)
-            sub = called_subprogram(action, subs, stack, number, lexed.text, file)
+            sub = called_subprogram(action, subs, stack, number, lexed.text, file, lines=lines,
+                                    block_delete=settings.block_delete)  # lines: M97's block N<n>
             stack.append(Frame(sub, number, pc, action.repeats))
             pc = sub.start
         else:  # M99
@@ -253,7 +254,7 @@ def _block(st: ModalState, words: tuple[Word, ...], line: int, text: str, file: 
     def err(word: str, problem: str, expected: str) -> GCodeError:
         return GCodeError(file, line, word, expected, problem, text)
 
-    gs, ms, vals = group_words(words, err)
+    gs, ms, vals = group_words(words, err, st.settings.m_codes)  # m_codes: the machine builder's M codes
     begin = len(out)  # index of this block's first typed block
     if "look-ahead" in gs:
         check_look_ahead(gs["look-ahead"], words, err)

@@ -18,6 +18,7 @@ from typing import Mapping, Sequence
 
 from .blocks import Vec3
 from .cycles import CycleMachine
+from .m_aliases import check_m_codes
 
 #: One millimetre (G21 program unit), m.
 MM = 1e-3
@@ -77,6 +78,10 @@ class InterpreterSettings:
         None: the 1st reference position ``reference``.
     cycles : CycleMachine
         Return amount of G73 (No. 5114) and clearance of G83 (No. 5115).
+    m_codes : Mapping[int, tuple[int, ...]]
+        The machine builder's M codes: alias -> the standard M codes it stands for (:mod:`.m_aliases`, the
+        machine file's ``[nck.m_codes]``). Default: none (the FANUC codes only). Checked at construction
+        (:class:`.errors.NCParameterError`).
     """
 
     initial: Vec3 = (0.0, 0.0, 0.0)
@@ -89,6 +94,10 @@ class InterpreterSettings:
     reference3: Vec3 | None = None
     reference4: Vec3 | None = None
     cycles: CycleMachine = field(default_factory=CycleMachine)
+    m_codes: Mapping[int, tuple[int, ...]] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "m_codes", check_m_codes(self.m_codes, "InterpreterSettings.m_codes"))
 
     def reference_position(self, n: int) -> Vec3:
         """The n-th reference position (n = 1..4, m, machine coordinates); an unset 2nd-4th is the 1st."""

@@ -22,6 +22,12 @@ M30, and then the subprograms, each ``O<n>`` ... ``M99``, before the closing ``%
   without P) runs the subprogram again; P takes effect at the last return. A missing N<seq> is an error, and
   so is a jump that makes the program endless (the same return with the same calls active again: the program
   has no conditions, so it would repeat forever).
+* ``M97 P<n>`` (Haas mill: local subprogram call) runs the block N<n> of the *same* program (the main program
+  including the lines after its M30, up to the first ``O<n>`` subprogram; or the running subprogram) up to its
+  M99, which returns to the block after the M97; ``L<k>`` repeats it k times (1..9999). P is a sequence
+  number 1..99999 (no packed repeat count). The first N<n> from the top of that program is the target; a
+  missing N<n>, or an M30/M2/``%`` before the M99 after it, is an error. M97 and M98 calls nest together
+  (:data:`MAX_NESTING`).
 * Subprograms written *before* the main program (``O2000 ... M99`` then ``O1000 ... M30``) are not
   supported: the CAM posts the twin reads (Fusion 360's FANUC post, Mastercam) write the main program first
   and its subprograms after M30, and a file is executed from its first line, so such a file stops at the
@@ -55,27 +61,46 @@ MAX_SEQUENCE = 99999
 class Subprogram:
     """One ``O<n>`` ... ``M99`` program of the file.
 
+    Or a local subprogram of an M97 call: the lines from the block N<number> on.
+
     Attributes
     ----------
     number : int
-        Program number n.
+        Program number n (a local subprogram: the sequence number N<n> it starts at).
     start : int
-        0-based index of the ``O<n>`` line (its 1-based line number is ``start + 1``).
+        0-based index of the ``O<n>`` line (its 1-based line number is ``start + 1``); a local subprogram: of
+        the N<n> line (where a run starts).
     end : int
-        0-based index of the line holding M99.
+        0-based index of the line holding M99; a local subprogram: the last line of the program holding it.
+    scope_start : int or None
+        A local subprogram: 0-based first line of the program holding it (its block N<n> is searched there);
+        None for an ``O<n>`` program.
     """
 
     number: int
     start: int
     end: int
+    scope_start: int | None = None
+
+    @property
+    def name(self) -> str:
+        """``O1001``, or ``N100 (M97)`` for a local subprogram, as quoted in messages."""
+        return f"O{self.number}" if self.scope_start is None else f"N{self.number} (M97)"
+
+    @property
+    def first(self) -> int:
+        """0-based first line of the program this runs in (``start`` for an ``O<n>`` program)."""
+        return self.start if self.scope_start is None else self.scope_start
 
 
 @dataclass(frozen=True)
 class Call:
-    """An M98 call read from a block: program ``number``, called ``repeats`` times."""
+    """An M98 call read from a block: program ``number``, called ``repeats`` times; ``local``: an M97 call of the
+    block N<number> of the same program."""
 
     number: int
     repeats: int
+    local: bool = False
 
 
 @dataclass(frozen=True)
@@ -299,3 +324,58 @@ def read_call(p: Word | None, l_word: Word | None, err: Callable[[str, str, str]
     if number == 0:
         raise err("P" + p.text, f"P{p.text} calls program O0", "a program number 1..9999 in the last 4 digits of P")
     return Call(number, repeats)
+
+
+def read_local_call(p: Word | None, l_word: Word | None, err: Callable[[str, str, str], GCodeError]) -> Call:
+    """The sequence number and repeat count of an M97 block (Haas: ``M97 P<n> [L<k>]``).
+
+    Raises
+    ------
+    GCodeError
+        No P, a P that is not an integer 1..99999, an L that is not an integer 1..9999.
+    """
+    forms = f"M97 P<n> (a block N<n> of this program, n = 1..{MAX_SEQUENCE}) or M97 P<n> L<k> (k times)"
+    if p is None:
+        raise err("M97", "M97 without a P word (the sequence number N to call)", forms)
+    if p.has_point or p.value < 1 or p.value > MAX_SEQUENCE:
+        raise err("P" + p.text, f"M97 P{p.text}: P is not a sequence number", forms)
+    repeats = 1
+    if l_word is not None:
+        if l_word.has_point or l_word.value < 1 or l_word.value > MAX_CALL_REPEAT:
+            raise err("L" + l_word.text, f"repeat count L{l_word.text} is not an integer in 1..{MAX_CALL_REPEAT}",
+                      "L1..L9999 (the number of calls)")
+        repeats = int(l_word.value)
+    return Call(int(p.value), repeats, local=True)
+
+
+def local_subprogram(sequence: int, first: int, last: int, lines: Sequence[str], file: str, block_delete: bool,
+                     name: str, line: int, text: str) -> Subprogram:
+    """The local subprogram an ``M97 P<sequence>`` block calls: from the first N<sequence> in ``lines[first:last
+    + 1]`` (the program ``name`` holding the M97) to its M99.
+
+    Raises
+    ------
+    GCodeError
+        No block N<sequence> there, or an M30/M2/``%`` or the program's end before an M99 after it.
+    """
+    word = f"M97 P{sequence}"
+    target = find_sequence(lines, first, last, sequence)
+    if target is None:
+        raise GCodeError(file, line, word, f"a block N{sequence} in {name} (lines {first + 1}-{last + 1}), "
+                         "ending with M99", f"{name} has no block N{sequence} to call", text)
+    for i in range(target, min(last, len(lines) - 1) + 1):
+        try:
+            lexed = scan_line(lines[i])
+        except LexError:  # raised when executed
+            continue
+        if lexed.block_delete and block_delete:
+            continue
+        if _has_m(lexed.words, (99.0,)):
+            return Subprogram(sequence, target, last, first)
+        if lexed.percent or _has_m(lexed.words, (2.0, 30.0)):
+            raise GCodeError(file, line, word, f"M99 at the end of the local subprogram N{sequence}",
+                             f"the local subprogram from N{sequence} (line {target + 1}) reaches "
+                             f"'{lexed.text or '%'}' (line {i + 1}) before an M99", text)
+    raise GCodeError(file, line, word, f"M99 at the end of the local subprogram N{sequence}",
+                     f"the local subprogram from N{sequence} (line {target + 1}) has no M99 before the end of "
+                     f"{name} (line {last + 1})", text)
