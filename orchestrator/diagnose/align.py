@@ -13,6 +13,8 @@
 """
 from __future__ import annotations
 
+import os
+from concurrent.futures import ThreadPoolExecutor
 from typing import Callable
 
 import numpy as np
@@ -133,6 +135,23 @@ def _offset_cost(t_rec: np.ndarray, rec: np.ndarray, t_nc: np.ndarray, ref: np.n
     d = rec[ok][inside] - np.interp(tp[inside], t_nc, ref)
     d = d - np.median(d)
     return float(np.mean(d * d))
+
+
+def _offset_costs(t_rec: np.ndarray, rec: np.ndarray, t_nc: np.ndarray, ref: np.ndarray,
+                  shifts: np.ndarray) -> np.ndarray:
+    """:func:`_offset_cost` at every clock shift, shape (len(shifts),), the same numbers.
+
+    The finite samples are taken out once, and the shifts are spread over threads (numpy's
+    interpolation and partition release the GIL): a 10-minute log has 350 000 samples per axis and
+    the refinement tries 401 shifts.
+    """
+    ok = np.isfinite(rec)
+    t_ok, rec_ok = np.asarray(t_rec)[ok], np.asarray(rec)[ok]
+    workers = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    if workers < 2 or shifts.size < 8:
+        return np.array([_offset_cost(t_ok, rec_ok, t_nc, ref, float(s)) for s in shifts])
+    with ThreadPoolExecutor(max_workers=workers) as pool:
+        return np.array(list(pool.map(lambda s: _offset_cost(t_ok, rec_ok, t_nc, ref, float(s)), shifts)))
 
 
 def refine_offset_by_axes(t_rec: np.ndarray, ref_rec: dict[str, np.ndarray], t_nc: np.ndarray,
@@ -260,8 +279,7 @@ def refine_offset(t_rec: np.ndarray, ref_rec: dict[str, np.ndarray], t_nc: np.nd
     shifts = offset + np.arange(-span_s, span_s + step_s / 2, step_s)
     cost = np.zeros(shifts.size)
     for a, rec in ref_rec.items():
-        for i, s in enumerate(shifts):
-            cost[i] += _offset_cost(t_rec, rec, t_nc, ref_nc[a], s)
+        cost += _offset_costs(t_rec, rec, t_nc, ref_nc[a], shifts)
     i = int(np.argmin(cost))
     if 0 < i < shifts.size - 1 and np.all(np.isfinite(cost[i - 1:i + 2])):
         den = cost[i - 1] - 2 * cost[i] + cost[i + 1]
