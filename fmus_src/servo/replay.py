@@ -23,6 +23,7 @@ import numpy as np
 
 from ..jit import NUMBA_AVAILABLE
 from .drive import DriveAxis
+from .errors import ServoError
 from .mcu import AXES, MCU
 from .replay_numba import DRIVE_EXTRA_ROWS, N_OUTPUT_ROWS, REPLAY_OK, replay_axis
 
@@ -127,13 +128,18 @@ def compiled_samples(
     dict or None
         ``{output: {axis: ndarray (n_out, B)}}`` for the outputs ``table_position``, ``position``,
         ``motor_force`` and ``current_cmd``: only the samples are kept, never the ticks.
+
+    Raises
+    ------
+    ServoError
+        A sample tick outside ``1 .. n_ticks``.
     """
     if not _covered(mcu, drives, t0, tv):
         return None
     tick = np.asarray(sample_tick, dtype=np.int64)
     weight = np.asarray(sample_weight, dtype=float)
     if tick.size and (tick.min() < 1 or tick.max() > n_ticks):
-        raise ValueError(f"sample ticks must lie in 1..{n_ticks}, got {tick.min()}..{tick.max()}")
+        raise ServoError(f"servo replay: sample ticks must lie in 1..{n_ticks}, got {tick.min()}..{tick.max()}")
     order = np.argsort(tick, kind="stable")  # the kernel walks the samples with the ticks
     tick, weight = np.ascontiguousarray(tick[order]), np.ascontiguousarray(weight[order])
     batch = mcu.batch
