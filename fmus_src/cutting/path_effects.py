@@ -21,6 +21,10 @@ and tool mode those of :mod:`.kernel_effects` (shared scalar kernels in
   generalised chip (:func:`.chip.add_piece`); the tooth's engaged depth for
   the static deflection is the sum over its bands of the deepest piece with a
   positive chip at its middle;
+* the peak force is searched at the substep ends and where a band's piece
+  starts or ends inside the substep (entry/exit instants); for a helix the
+  substep ends, shared by all bands and flutes, are evaluated once each
+  (:func:`_force_helix_exact` with its work space allocated once per step);
 * the tool mode advances exactly per substep under the substep-mean force
   (:func:`.chip.mode_advance`); the regenerative displacement is held at its
   substep-middle value over a substep (exact at the instants ``t + k h / n``).
@@ -36,7 +40,9 @@ from ..jit_cache import guard_cache
 from . import chip, effect_model, kernel, path_kernel
 from .chip import add_piece, add_piece_point, build_forms, chip_now, deflection_factors, edge_force_on_tool, \
     effect_workspace, history_push, mode_advance, regenerative_displacements
-from .effect_model import CHATTER_SUBSTEPS_PER_PERIOD, E_KC, E_STIFF, E_TANH, E_WN, E_ZETA, MAX_PASSES, helix_bands
+from .effect_model import (
+    CHATTER_SUBSTEPS_PER_PERIOD, E_KC, E_STIFF, E_TANH, E_WN, E_ZETA, MAX_BANDS, MAX_PASSES, helix_bands,
+)
 from .kernel import chord_feed, stalled_cut
 from .path_kernel import (
     ERR_OFF_PATH, ERR_STALLED, ERR_SUBSTEPS, INCLUSIVE_TOL, PAR_FLUTES, PAR_RADIUS, PAR_STEPS, ST_HISTORY, ST_THETA,
@@ -126,12 +132,44 @@ def _max_chip(forms: np.ndarray, nf: int, alpha: float, beta: float, lo: float, 
 
 
 @njit
+def helix_workspace() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Work space of :func:`_force_helix_exact`, allocated once per step call, not per evaluation.
+
+    Returns
+    -------
+    lo, hi : ndarray, shape (HELIX_PIECES,)
+        Angle pieces of one flute, rad.
+    pint : ndarray, shape (HELIX_PIECES, 6)
+        Chip integrals of each piece (:func:`.chip.envelope_integrals`).
+    tmp : ndarray, shape (6,)
+        Scratch.
+    cuts : ndarray, shape (MAX_PASSES (MAX_PASSES - 1) + 2,)
+        Scratch of :func:`.chip.envelope_integrals`.
+    """
+    return (np.empty(HELIX_PIECES), np.empty(HELIX_PIECES), np.zeros((HELIX_PIECES, 6)), np.zeros(6),
+            np.zeros(MAX_PASSES * (MAX_PASSES - 1) + 2))
+
+
+@njit
+def _piece_force(kt: float, ke: float, kte: float, kre: float, scale: float, tmp: np.ndarray) -> tuple[float, float]:
+    """Fx, Fy of :func:`.chip.add_piece` (depth 1) from the piece's chip integrals ``tmp``, N (same operations)."""
+    kd = kt * 1.0
+    ed = kte * 1.0
+    rd = kre * 1.0
+    return (scale * (-kd * tmp[0] - ed * tmp[3] - ke * kd * tmp[1] - rd * tmp[4]),
+            scale * (kd * tmp[1] + ed * tmp[4] - ke * kd * tmp[0] - rd * tmp[3]))
+
+
+@njit
 def _force_helix_exact(
     phi0: float, flutes: int, pitch: float, tanh: float, radius: float, ia: np.ndarray, ib: np.ndarray,
     it: np.ndarray, cnt: int, bottom: float, ztip: float, fxt: float, fyt: float, dq: np.ndarray, nf: int,
     toff: np.ndarray, kt: float, ke: float, kte: float, kre: float, stiff: float, forms: np.ndarray,
+    lo: np.ndarray, hi: np.ndarray, pint: np.ndarray, tmp: np.ndarray, cuts: np.ndarray, detail: bool,
 ) -> tuple[float, float, float, float, int]:
-    """:func:`force_at_effects` of helical flutes, integrated exactly over the axial depth.
+    """Force on the tool at one instant (tooth 0 at ``phi0``) of helical flutes, exact over the axial depth.
+
+    Returns as :func:`force_at_effects`.
 
     With ``phi(z) = phi_j - z tan(helix) / R`` (Altintas, *Manufacturing Automation*, ch. 2) the
     force of flute ``j`` is ``int dF(phi(z)) dz = R / |tan(helix)| int dF(phi) dphi`` over the
@@ -140,15 +178,16 @@ def _force_helix_exact(
     of :func:`.chip.add_piece` (zero crossings and envelope of the chip forms located exactly). The
     engaged depth of a flute (static deflection) is ``R / |tan(helix)|`` times the angle measure of
     its pieces with a positive geometric chip.
+
+    ``lo``, ``hi``, ``pint``, ``tmp``, ``cuts`` are work space (:func:`helix_workspace`). The chip
+    integrals of a piece are computed once for a rigid tool (``alpha = 1, beta = 0``: the geometric
+    chip is the cut chip) and twice with a static deflection. With ``detail`` False only ``fx``, ``fy``
+    are wanted (the peak search): the largest chip is not searched and returned as 0.
     """
     if cnt == 0:
         return 0.0, 0.0, 0.0, 0.0, 0
     scale = radius / abs(tanh)
-    lo = np.empty(HELIX_PIECES)
-    hi = np.empty(HELIX_PIECES)
-    acc = np.zeros(4)
-    tmp = np.zeros(6)
-    cuts = np.zeros(MAX_PASSES * (MAX_PASSES - 1) + 2)
+    rigid = not stiff > 0.0
     fx = 0.0
     fy = 0.0
     hmax = 0.0
@@ -161,24 +200,31 @@ def _force_helix_exact(
         build_forms(forms, nf, fxt, fyt, dq, toff[j])
         depth = 0.0
         for i in range(np_):
-            tmp[:] = 0.0
-            chip.envelope_integrals(forms, nf, 1.0, 0.0, lo[i], hi[i], tmp, cuts)
-            depth += scale * tmp[5]
+            pint[i, :] = 0.0
+            chip.envelope_integrals(forms, nf, 1.0, 0.0, lo[i], hi[i], pint[i], cuts)
+            depth += scale * pint[i, 5]
         if not depth > 0.0:
             continue
         alpha, beta = deflection_factors(kt, ke, kre, depth, stiff)
-        acc[:] = 0.0
+        ax = 0.0
+        ay = 0.0
         engaged = 0.0
         for i in range(np_):
-            add_piece(kt, ke, kte, kre, 1.0, forms, nf, alpha, beta, fxt, fyt, lo[i], hi[i], radius, 1.0, scale,
-                      acc, tmp, cuts)
-            tmp[:] = 0.0
-            chip.envelope_integrals(forms, nf, alpha, beta, lo[i], hi[i], tmp, cuts)
-            if tmp[5] > 0.0:
-                engaged += scale * tmp[5]
-                hmax = max(hmax, _max_chip(forms, nf, alpha, beta, lo[i], hi[i]))
-        fx += acc[0]
-        fy += acc[1]
+            if rigid:  # alpha = 1, beta = 0: the integrals of the depth pass
+                w = pint[i]
+            else:
+                tmp[:] = 0.0
+                chip.envelope_integrals(forms, nf, alpha, beta, lo[i], hi[i], tmp, cuts)
+                w = tmp
+            px, py = _piece_force(kt, ke, kte, kre, scale, w)
+            ax += px
+            ay += py
+            if w[5] > 0.0:
+                engaged += scale * w[5]
+                if detail:
+                    hmax = max(hmax, _max_chip(forms, nf, alpha, beta, lo[i], hi[i]))
+        fx += ax
+        fy += ay
         if engaged > 0.0:
             n_in += 1
             dmax = max(dmax, engaged)
@@ -190,14 +236,16 @@ def force_at_effects(
     phi0: float, flutes: int, pitch: float, nb: int, lag: np.ndarray, z_lo: np.ndarray, z_hi: np.ndarray,
     ia: np.ndarray, ib: np.ndarray, it: np.ndarray, cnt: int, bottom: float, ztip: float, fxt: float, fyt: float,
     dq: np.ndarray, nf: int, toff: np.ndarray, kt: float, ke: float, kte: float, kre: float, stiff: float,
-    dsum: np.ndarray, forms: np.ndarray, tanh: float, radius: float,
+    dsum: np.ndarray, forms: np.ndarray,
 ) -> tuple[float, float, float, float, int]:
-    """Force on the tool at one instant (tooth 0 at ``phi0``) with the effect terms.
+    """Force on the tool at one instant (tooth 0 at ``phi0``) with the effect terms, teeth cut in bands.
 
     ``dq`` holds the regenerative displacements at that instant, ``toff`` the
-    runout offsets (nmax, passes) of the member, ``forms`` is work space. A
-    helical flute (``tanh != 0``) is integrated exactly over the axial depth
-    (:func:`_force_helix_exact`), not in bands; a straight one is one band.
+    runout offsets (nmax, passes) of the member, ``forms`` is work space. Used
+    for straight flutes (one band); a helical flute is integrated exactly over
+    the axial depth by :func:`_force_helix_exact` instead (the step calls
+    that one directly: one small function per case keeps the compiled
+    straight-flute step as fast as it was).
 
     Returns
     -------
@@ -210,9 +258,6 @@ def force_at_effects(
     """
     if cnt == 0:
         return 0.0, 0.0, 0.0, 0.0, 0
-    if tanh != 0.0:
-        return _force_helix_exact(phi0, flutes, pitch, tanh, radius, ia, ib, it, cnt, bottom, ztip, fxt, fyt, dq,
-                                  nf, toff, kt, ke, kte, kre, stiff, forms)
     for j in range(flutes):
         dsum[j] = 0.0
         build_forms(forms, nf, fxt, fyt, dq, toff[j])
@@ -296,6 +341,10 @@ max_substeps
     ia, ib, it, ja, jb, jt = interval_buffers(alpha.shape[1])
     acc, sub, tmp, cuts, forms, dq, dtooth, dsum = effect_workspace(toff.shape[1])
     cuts_forms = np.zeros((MAX_PASSES, 3))
+    hlo, hhi, pint, htmp, hcuts = helix_workspace()
+    lag = np.zeros(MAX_BANDS)
+    z_lo = np.zeros(MAX_BANDS)
+    z_hi = np.zeros(MAX_BANDS)
     bad = 0
     for m in range(batch):
         x1, y1, z1 = inp[0, m], inp[1, m], inp[2, m]
@@ -325,13 +374,16 @@ max_substeps
         span = om * h / n
         dt = h / n
         # helix bands for this step
-        nb, dz = helix_bands(epar[E_TANH, m], radius, pitch, steps, stock_top - min(z0, z1))
-        lag = np.zeros(nb)
-        z_lo = np.zeros(nb)
-        z_hi = np.full(nb, math.inf)
+        tanh = epar[E_TANH, m]
+        helix = tanh != 0.0
+        nb, dz = helix_bands(tanh, radius, pitch, steps, stock_top - min(z0, z1))
+        for b in range(nb):
+            lag[b] = 0.0
+            z_lo[b] = 0.0
+            z_hi[b] = math.inf
         if math.isfinite(dz):
             for b in range(nb):
-                lag[b] = (b + 0.5) * dz * epar[E_TANH, m] / radius
+                lag[b] = (b + 0.5) * dz * tanh / radius
                 z_lo[b] = b * dz
                 if b < nb - 1:
                     z_hi[b] = (b + 1) * dz
@@ -355,6 +407,8 @@ max_substeps
                 regenerative_displacements(dq, nf, ht, hx, hy, meta, m, angle[m] + span * (k + 0.5),
                                            qx + 0.5 * dt * vx, qy + 0.5 * dt * vy, pitch)
             sub[:] = 0.0
+            at_start = False  # a helix band's piece starts at the substep's first instant
+            at_end = False  # ... ends at its last instant
             if cm > 0:
                 any_material = True
                 phi_k = theta0 + om * h * k / n
@@ -418,11 +472,30 @@ max_substeps
                                 for edge in (lo, hi):
                                     if edge == pa and k == 0:
                                         continue
-                                    fx, fy, _, _, _ = force_at_effects(
-                                        edge - j * pitch + lag[b], flutes, pitch, nb, lag, z_lo, z_hi, ia, ib, it,
-                                        cm, bottom, ztip, fxt, fyt, dq, nf, toff[m], kt, ke, kte, kre, stiff, dsum,
-                                        cuts_forms, epar[E_TANH, m], radius)
+                                    if helix and (edge == pa or edge == pb):
+                                        # the substep's first or last instant: the same for every band and
+                                        # flute, evaluated once below (the helix force is continuous in the
+                                        # angle, the bands' copies differ by rounding of the angle only)
+                                        at_start = at_start or edge == pa
+                                        at_end = at_end or edge == pb
+                                        continue
+                                    if helix:
+                                        fx, fy, _, _, _ = _force_helix_exact(
+                                            edge - j * pitch + lag[b], flutes, pitch, tanh, radius, ia, ib, it, cm,
+                                            bottom, ztip, fxt, fyt, dq, nf, toff[m], kt, ke, kte, kre, stiff,
+                                            cuts_forms, hlo, hhi, pint, htmp, hcuts, False)
+                                    else:
+                                        fx, fy, _, _, _ = force_at_effects(
+                                            edge - j * pitch + lag[b], flutes, pitch, nb, lag, z_lo, z_hi, ia, ib,
+                                            it, cm, bottom, ztip, fxt, fyt, dq, nf, toff[m], kt, ke, kte, kre,
+                                            stiff, dsum, cuts_forms)
                                     peak = max(peak, math.sqrt(fx * fx + fy * fy))
+                for edge, hit in ((phi_k, at_start), (phi_k + span, at_end)):
+                    if hit:
+                        fx, fy, _, _, _ = _force_helix_exact(
+                            edge, flutes, pitch, tanh, radius, ia, ib, it, cm, bottom, ztip, fxt, fyt, dq, nf, toff[m],
+                            kt, ke, kte, kre, stiff, cuts_forms, hlo, hhi, pint, htmp, hcuts, False)
+                        peak = max(peak, math.sqrt(fx * fx + fy * fy))
             for i in range(4):
                 acc[i] += sub[i]
             if chat:
@@ -437,10 +510,15 @@ max_substeps
             if cj > 0:
                 any_material = True
                 zt1 = z0 + f1 * ddz
-                fx, fy, dm, hm, ne = force_at_effects(
-                    theta0 + om * h * f1, flutes, pitch, nb, lag, z_lo, z_hi, ja, jb, jt, cj, max(zt1, z_floor),
-                    zt1, fxt, fyt, dq, nf, toff[m], kt, ke, kte, kre, stiff, dsum, cuts_forms, epar[E_TANH, m],
-                    radius)
+                if helix:
+                    fx, fy, dm, hm, ne = _force_helix_exact(
+                        theta0 + om * h * f1, flutes, pitch, tanh, radius, ja, jb, jt, cj, max(zt1, z_floor), zt1,
+                        fxt, fyt, dq, nf, toff[m], kt, ke, kte, kre, stiff, cuts_forms, hlo, hhi, pint, htmp, hcuts,
+                        True)
+                else:
+                    fx, fy, dm, hm, ne = force_at_effects(
+                        theta0 + om * h * f1, flutes, pitch, nb, lag, z_lo, z_hi, ja, jb, jt, cj, max(zt1, z_floor),
+                        zt1, fxt, fyt, dq, nf, toff[m], kt, ke, kte, kre, stiff, dsum, cuts_forms)
             else:
                 fx, fy, dm, hm, ne = 0.0, 0.0, 0.0, 0.0, 0
             peak = max(peak, math.sqrt(fx * fx + fy * fy))
