@@ -102,3 +102,41 @@ def test_cost_matches_eq_19_to_22(short_ref):
     rate_krw = model.labor_KRW_per_s + model.depreciation_KRW_per_s
     expected = tp * rate_krw + used * (model.tool_price_KRW + model.tool_change_time_s * rate_krw)
     assert ref.evaluation.cost_KRW[0] == pytest.approx(expected, rel=1e-9)
+
+
+def test_population_split_by_memory_budget_changes_no_figure(short_ref, monkeypatch):
+    """A population larger than one run's memory budget runs in several batched runs with the same figures."""
+    from orchestrator.optimize import evaluate as evaluate_module
+
+    ctx = short_ref.context
+    feeds = np.array([[300.0, 300.0], [200.0, 400.0], [250.0, 350.0]])
+    spindles = np.array([[3000.0, 3000.0], [5000.0, 5000.0], [4000.0, 6000.0]])
+    whole = evaluate_population(ctx, feeds, spindles)
+    steps = ctx.time_limit_s / ctx.step
+    per_member = 8 * 6 * (steps + 2)  # 3 recorded channels per step + 3 plan positions per 1 ms period
+    assert evaluate_module.members_per_run(ctx, int(2.5 * per_member)) == 2
+    monkeypatch.setattr(evaluate_module, "EVAL_MEMORY_BYTES", int(1.5 * per_member))  # one member per run
+    runs = []
+    real_run = evaluate_module.run_twin
+    monkeypatch.setattr(evaluate_module, "run_twin", lambda *a, **k: runs.append(a[3]) or real_run(*a, **k))
+    split = evaluate_population(ctx, feeds, spindles)
+    assert runs == [1, 1, 1]
+    for name in ("cycle_time_s", "cost_KRW", "max_load_N", "tool_life_used", "line_time_s", "line_max_load_N",
+                 "success", "feasible"):
+        np.testing.assert_array_equal(getattr(split, name), getattr(whole, name), err_msg=name)
+    assert split.reason == whole.reason
+
+
+def test_per_line_time_and_load_from_hand_samples():
+    """Line times are the sums of the samples' weights, loads their maxima; other lines are ignored."""
+    from orchestrator.optimize.evaluate import per_line
+
+    lines = np.array([12, 7, 30])                       # cutting lines, in the problem's order
+    executing = np.array([5, 7, 7, 12, 12, 12, 7, np.nan, 40, 12, 0])
+    weight = np.array([1.0, 2.0, 3.0, 0.5, 0.5, 0.5, 4.0, 9.0, 9.0, 0.25, 1.0])
+    load = np.array([99.0, 10.0, 11.0, 20.0, 25.0, 21.0, 12.0, 99.0, 99.0, 30.0, 99.0])
+    time_s, max_load = per_line(lines, executing, weight, load)
+    np.testing.assert_array_equal(time_s, [1.75, 9.0, 0.0])   # line 12: 0.5 * 3 + 0.25; line 7: 2 + 3 + 4
+    np.testing.assert_array_equal(max_load, [30.0, 12.0, 0.0])  # line 30 never ran: 0 N
+    _, with_nan = per_line(lines, executing, weight, np.where(np.arange(11) == 4, np.nan, load))
+    assert np.isnan(with_nan[0]) and with_nan[1] == 12.0

@@ -35,6 +35,9 @@ from .context import ProblemContext
 
 #: Channels an evaluation records (a full recording of a large batch would not fit in memory).
 EVAL_CHANNELS = ("line", "spindle_rpm", "fc_peak_N")
+#: Memory one batched run of an evaluation may hold for its members' recordings and NC plans, bytes. A larger
+#: population of a long program runs in several batched runs, one after the other (:func:`members_per_run`).
+EVAL_MEMORY_BYTES = 1 << 30
 
 
 @dataclass
@@ -150,6 +153,50 @@ def _column(recording: Recording, name: str, batch: int) -> np.ndarray:
     return x.reshape(-1, 1) if batch == 1 and x.ndim == 1 else x
 
 
+def per_line(cutting_lines: np.ndarray, executing: np.ndarray, weight: np.ndarray,
+             load: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Time and largest load of each cutting line over one member's samples, in O(samples).
+
+    Parameters
+    ----------
+    cutting_lines : ndarray (L,) of int
+        Source lines of the cutting lines (distinct).
+    executing : ndarray (n,)
+        Line executing at each sample (the recording's ``line``, float; NaN where unknown).
+    weight : ndarray (n,)
+        Time each sample stands for, s.
+    load : ndarray (n,)
+        ``fc_peak`` at each sample, N.
+
+    Returns
+    -------
+    time_s, max_load_N : ndarray (L,)
+        Sum of ``weight`` and maximum of ``load`` over the samples executing each line; a line never executed
+        has time 0 and load 0 (a NaN load on a line's sample makes its maximum NaN).
+    """
+    L = len(cutting_lines)
+    time_s, max_load = np.zeros(L), np.zeros(L)
+    if L == 0 or len(executing) == 0:
+        return time_s, max_load
+    column = np.full(int(np.max(cutting_lines)) + 1, -1, dtype=np.int64)
+    column[np.asarray(cutting_lines, dtype=np.int64)] = np.arange(L)
+    known = np.isfinite(executing) & (executing >= 0) & (executing < len(column))
+    index = np.full(len(executing), -1, dtype=np.int64)
+    index[known] = column[executing[known].astype(np.int64)]
+    # samples run line by line: reduce each run of one line, then the runs of each cutting line
+    starts = np.flatnonzero(np.r_[True, index[1:] != index[:-1]])
+    run_line = index[starts]
+    cut = run_line >= 0
+    run_line = run_line[cut]
+    seen = np.zeros(L, dtype=bool)
+    seen[run_line] = True
+    max_load[seen] = -np.inf
+    with np.errstate(invalid="ignore"):  # a NaN load makes its line's maximum NaN, as max() does
+        np.add.at(time_s, run_line, np.add.reduceat(weight, starts)[cut])
+        np.maximum.at(max_load, run_line, np.maximum.reduceat(load, starts)[cut])
+    return time_s, max_load
+
+
 def figures(ctx: ProblemContext, run, batch: int) -> Evaluation:
     """Evaluation of a finished batched run (see the module docstring)."""
     rec = run.recording
@@ -186,14 +233,10 @@ def figures(ctx: ProblemContext, run, batch: int) -> Evaluation:
         c = production_cost(t[:n], rpm[:n, b], diameter, model, tp)
         out["time"][b], out["cost"][b], out["used"][b] = tp, c.total_KRW, c.tool_life_used
         out["load"][b] = float(np.nanmax(load[:n, b])) if n else 0.0
-        ln = lines[:n, b]
         w = dt[:n].copy()
         if n:
             w[-1] = 0.0
-        for i, line in enumerate(ctx.lines.tolist()):
-            mask = ln == line
-            line_time[b, i] = float(w[mask].sum())
-            line_load[b, i] = float(load[:n, b][mask].max()) if mask.any() else 0.0
+        line_time[b], line_load[b] = per_line(ctx.lines, lines[:n, b], w, load[:n, b])
         success[b] = True
         reasons.append("")
     feasible = success & (np.nan_to_num(out["load"], nan=np.inf) <= ctx.load_limit_N)
@@ -230,5 +273,29 @@ def evaluate_population(ctx: ProblemContext, feeds: np.ndarray, spindles: np.nda
 
         raise OptimizeError(f"feeds {feeds.shape} and spindles {spindles.shape} must both be (B, {ctx.n_lines})")
     batch = feeds.shape[0]
-    run = run_twin(ctx, feeds, spindles, batch, threads=threads)
-    return figures(ctx, run, batch)
+    runs = max(1, math.ceil(batch / members_per_run(ctx)))
+    parts = []
+    for idx in np.array_split(np.arange(batch), runs):
+        run = run_twin(ctx, feeds[idx], spindles[idx], len(idx), threads=threads)
+        parts.append(figures(ctx, run, len(idx)))
+        del run  # its recording and plan go before the next run's are built
+    return parts[0] if runs == 1 else Evaluation.concatenate(parts)
+
+
+def members_per_run(ctx: ProblemContext, memory_bytes: int | None = None) -> int:
+    """Most members one batched evaluation run holds within ``memory_bytes`` (default :data:`EVAL_MEMORY_BYTES`).
+
+    A member holds, up to the cycle-time cut-off ``ctx.time_limit_s``, one recorded row of
+    :data:`EVAL_CHANNELS` per communication step and its NC plan, three reference positions per interpolation
+    period of the case's machine (8 bytes each). Members are independent, so splitting a population changes no
+    figure, only how many members step side by side.
+
+    Returns
+    -------
+    int
+        At least 1.
+    """
+    period = float(ctx.case.machine.si("nck").get("interpolation_period", ctx.step))
+    per_member = 8 * (len(EVAL_CHANNELS) * (ctx.time_limit_s / ctx.step + 2) + 3 * (ctx.time_limit_s / period + 2))
+    budget = EVAL_MEMORY_BYTES if memory_bytes is None else memory_bytes
+    return max(1, int(budget // per_member))
