@@ -165,3 +165,18 @@ def test_not_covered_returns_none(setting):
     comp.setup(float(t[0]))
     assert compiled_path_steps(comp, t[::-1].copy(), inputs.position, om) is None
     assert compiled_path_steps(comp, t, inputs.position, om) is not None
+
+
+def test_member_blocks_in_threads_bit_identical_to_the_loop(monkeypatch, setting):
+    """Nine members (every effect kind and the baseline, mixed) run as blocks in threads: the loop's numbers."""
+    import fmus_src.cutting.path_replay as path_replay
+
+    monkeypatch.setattr(path_replay, "member_blocks", lambda batch: [(0, 4), (4, 6), (6, batch)])
+    case, table, inputs = setting
+    members = EFFECT_MEMBERS + [{}, {"kt": 1.4e9}, {"wear_rate": 1.0, "spindle_droop": 3.0}] + EFFECT_MEMBERS[::-1]
+    theta = np.linspace(0.1, 2.9, len(members))
+    fast, slow, used = _both(monkeypatch, case, table, inputs, members, theta)
+    assert used == [True]
+    _assert_identical(fast, slow)
+    fc = np.hypot(fast.fx, fast.fy)
+    assert np.all(fc[-20:].max(axis=0) > 30.0)  # every member, in every block, cuts

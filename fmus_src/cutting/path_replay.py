@@ -11,12 +11,19 @@ stepped, a member already failed, no table, inputs that are not finite or a
 time vector that does not increase) or when a member fails on the way (the
 kernel's status): the caller then steps the component itself, which fails
 the member with its own message.
+
+Members are independent (each has its own state columns), so blocks of members run in threads
+(:func:`fmus_src.threads.member_blocks`: one per core, at least 4 members each), on copies of their
+columns, with the numbers of one call over all members.
 """
 from __future__ import annotations
+
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
 from ..jit import NUMBA_AVAILABLE
+from ..threads import member_blocks
 from .component import MAX_SUBSTEPS
 from .path_component import PathCuttingLoad
 from .path_replay_numba import N_RECORD_ROWS, RECORD_ROWS, REPLAY_OK, replay_path
@@ -83,14 +90,33 @@ def compiled_path_steps(
     record = np.empty((N_RECORD_ROWS, t.size, batch))
     for r, name in enumerate(RECORD_ROWS):
         record[r, 0] = v[name]
-    status, _ = replay_path(
-        t, positions, step_omega, switches, effects, np.ascontiguousarray(comp._par), comp._st.copy(),
-        comp._out.copy(), engaged, tb.vertices, tb.vertex_s, tb.spacing, tb.count, tb.alpha, tb.beta, tb.top,
-        tb.z_floor, float(tb.stock_upper[2]), comp._margin, comp._tolerance, MAX_SUBSTEPS,
-        comp._epar, comp._runout, comp._passes, es.mode.copy(), es.ht.copy(), es.hx.copy(), es.hy.copy(),
-        es.meta.copy(), es.angle.copy(), comp._gap, es.cutting_time.copy(), es.torque.copy(),
-        np.zeros(batch, dtype=np.int64), record)
-    if status != REPLAY_OK:
+    # replay_path's member arrays with the axis of their members; everything else is shared and read only
+    members = (
+        (effects, 1), (comp._par, 1), (comp._st, 1), (comp._out, 1), (engaged, 0), (comp._epar, 1),
+        (comp._runout, 0), (comp._passes, 0), (es.mode, 0), (es.ht, 0), (es.hx, 0), (es.hy, 0), (es.meta, 0),
+        (es.angle, 0), (comp._gap, 0), (es.cutting_time, 0), (es.torque, 0),
+        (np.zeros(batch, dtype=np.int64), 0),
+    )
+    shared = (tb.vertices, tb.vertex_s, tb.spacing, tb.count, tb.alpha, tb.beta, tb.top, tb.z_floor,
+              float(tb.stock_upper[2]), comp._margin, comp._tolerance, MAX_SUBSTEPS)
+
+    def block(b0: int, b1: int) -> int:
+        """Members ``b0 .. b1 - 1`` on copies of their columns, writing their columns of ``record``."""
+        cols = [np.array(a[(slice(None),) * axis + (slice(b0, b1),)], order="C") for a, axis in members]
+        (eff_b, par_b, st_b, out_b, eng_b, epar_b, toff_b, passes_b, mode_b, ht_b, hx_b, hy_b, meta_b, angle_b,
+         gap_b, ct_b, tq_b, status_b) = cols
+        status, _ = replay_path(t, positions, step_omega, switches, eff_b, par_b, st_b, out_b, eng_b, *shared,
+                                epar_b, toff_b, passes_b, mode_b, ht_b, hx_b, hy_b, meta_b, angle_b, gap_b, ct_b,
+                                tq_b, status_b, record, b0)
+        return int(status)
+
+    ranges = member_blocks(batch)
+    if len(ranges) == 1:
+        statuses = [block(0, batch)]
+    else:  # members are independent: blocks of them in threads give the same numbers (replay_path is nogil)
+        with ThreadPoolExecutor(max_workers=len(ranges)) as pool:
+            statuses = list(pool.map(lambda r: block(*r), ranges))
+    if any(status != REPLAY_OK for status in statuses):
         return None
     traces = {name: record[r] for r, name in enumerate(RECORD_ROWS)}
     traces["engaged_teeth"] = traces["engaged_teeth"].astype(np.int64)

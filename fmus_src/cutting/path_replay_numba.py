@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..jit import njit
+from ..jit import njit, njit_nogil
 from ..jit_cache import guard_cache
 from . import chip, effect_model, kernel, path_effects, path_kernel
 from .path_effects import path_step_effects
@@ -49,7 +49,7 @@ EFFECT_ROWS = ("edge_force_tangential", "edge_force_radial", "wear_rate", "spind
 REPLAY_OK, REPLAY_MEMBER_FAILED = 0, 1
 
 
-@njit
+@njit_nogil
 def replay_path(
     t: np.ndarray, positions: np.ndarray, step_omega: np.ndarray, switches: np.ndarray, effects: np.ndarray,
     par: np.ndarray, st: np.ndarray, out: np.ndarray, engaged: np.ndarray,
@@ -57,7 +57,7 @@ def replay_path(
     top: np.ndarray, z_floor: float, stock_top: float, reach_margin: float, tolerance: float, max_substeps: int,
     epar: np.ndarray, toff: np.ndarray, passes: np.ndarray, mode: np.ndarray, ht: np.ndarray, hx: np.ndarray,
     hy: np.ndarray, meta: np.ndarray, angle: np.ndarray, gap: np.ndarray, cutting_time: np.ndarray,
-    torque: np.ndarray, status: np.ndarray, record: np.ndarray,
+    torque: np.ndarray, status: np.ndarray, record: np.ndarray, m0: int,
 ) -> tuple[int, int]:
     """Steps ``t[k] -> t[k + 1]``, ``k = 0 .. n - 2``, of every member (see the module docstring).
 
@@ -88,8 +88,12 @@ def replay_path(
         Wear clock [s] and previous step's torque [N.m], updated in place.
     status : ndarray of int64, shape (B,)
         Kernel error kinds, all 0 on entry.
-    record : ndarray, shape (N_RECORD_ROWS, n, B)
-        Rows ``1 .. n - 1`` written: the outputs after each step (:data:`RECORD_ROWS`; row 0 is the caller's).
+    record : ndarray, shape (N_RECORD_ROWS, n, B_all)
+        Rows ``1 .. n - 1`` of columns ``m0 .. m0 + B - 1`` written: the outputs after each step
+        (:data:`RECORD_ROWS`; row 0 is the caller's). Every other argument holds only the B members of this call,
+        so calls for disjoint member blocks may run side by side in threads, writing disjoint columns.
+    m0 : int
+        Column of this call's first member in ``record``.
 
     Returns
     -------
@@ -142,12 +146,12 @@ def replay_path(
                 cutting_time[m] = cutting_time[m] + h
             torque[m] = out[OUT_TORQUE, m]
             angle[m] = angle[m] + max(actual[m], 0.0) * h
-            record[0, k + 1, m] = out[OUT_FX, m]
-            record[1, k + 1, m] = out[OUT_FY, m]
-            record[2, k + 1, m] = out[OUT_TORQUE, m]
-            record[3, k + 1, m] = actual[m]
-            record[4, k + 1, m] = engaged[m]
-            record[5, k + 1, m] = out[OUT_DEPTH, m]
+            record[0, k + 1, m0 + m] = out[OUT_FX, m]
+            record[1, k + 1, m0 + m] = out[OUT_FY, m]
+            record[2, k + 1, m0 + m] = out[OUT_TORQUE, m]
+            record[3, k + 1, m0 + m] = actual[m]
+            record[4, k + 1, m0 + m] = engaged[m]
+            record[5, k + 1, m0 + m] = out[OUT_DEPTH, m]
     return REPLAY_OK, -1
 
 

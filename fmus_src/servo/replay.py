@@ -14,7 +14,6 @@ which fail the member with their own message.
 """
 from __future__ import annotations
 
-import os
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager
 from typing import Iterator, Mapping
@@ -22,6 +21,7 @@ from typing import Iterator, Mapping
 import numpy as np
 
 from ..jit import NUMBA_AVAILABLE
+from ..threads import member_blocks, usable_cores
 from .drive import DriveAxis
 from .errors import ServoError
 from .mcu import AXES, MCU
@@ -33,9 +33,6 @@ COMPILED_OUTPUTS = ("table_position", "position", "motor_force")
 #: False: :func:`compiled_samples` declines and the callers step the components tick by tick
 #: (set by :func:`stepped_tick_by_tick`, for comparisons and benchmarks).
 ENABLED = True
-
-#: Fewest members per thread's block (below this a thread costs more than it saves).
-MIN_MEMBERS_PER_BLOCK = 4
 
 #: Tolerance on the components' tick grid against the caller's ``t0``, ``tv`` (relative).
 GRID_RTOL = 1e-12
@@ -176,19 +173,3 @@ def compiled_samples(
             column[order] = out[r, : tick.size]
             result[name][a] = column
     return result
-
-
-def usable_cores() -> int:
-    """Cores this process may run on."""
-    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-
-
-def member_blocks(batch: int, n_axes: int) -> list[tuple[int, int]]:
-    """Member ranges ``(b0, b1)`` so that ``n_axes`` axes times the blocks keep every core busy.
-
-    At least :data:`MIN_MEMBERS_PER_BLOCK` members per block; one block when the axes alone fill the cores.
-    """
-    wanted = -(-usable_cores() // max(n_axes, 1))
-    blocks = max(1, min(wanted, batch // MIN_MEMBERS_PER_BLOCK))
-    edges = np.linspace(0, batch, blocks + 1).round().astype(int)
-    return [(int(edges[j]), int(edges[j + 1])) for j in range(blocks)]

@@ -29,19 +29,18 @@ Passes are short (:data:`PASS_STEPS`), so an event wastes at most one pass.
 """
 from __future__ import annotations
 
-import os
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
+
+from fmus_src.threads import MIN_MEMBERS_PER_BLOCK, usable_cores
 
 from ..errors import CncTwinError
 from .loop import EV_CHECK, EV_CHUNK, EV_TIME, NO_STOP_FLAGS, recording_buffers, run_chunk
 
 #: Longest pass of the blocks between two returns to Python, steps.
 PASS_STEPS = 500
-#: Fewest members per block (below this a thread costs more than it saves).
-MIN_MEMBERS_PER_BLOCK = 4
 
 
 @dataclass(frozen=True)
@@ -83,7 +82,7 @@ def block_count(batch: int, threads: int | None) -> int:
     :data:`MIN_MEMBERS_PER_BLOCK` members each; otherwise ``threads``, at most one per member.
     """
     if threads is None:
-        cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+        cores = usable_cores()
         return max(1, min(cores, batch // MIN_MEMBERS_PER_BLOCK))
     return max(1, min(int(threads), batch))
 

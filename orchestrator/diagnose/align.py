@@ -13,11 +13,12 @@
 """
 from __future__ import annotations
 
-import os
 from concurrent.futures import ThreadPoolExecutor
 from typing import Callable
 
 import numpy as np
+
+from fmus_src.threads import usable_cores
 
 from .correlate import correlation_peak
 
@@ -147,7 +148,7 @@ def _offset_costs(t_rec: np.ndarray, rec: np.ndarray, t_nc: np.ndarray, ref: np.
     """
     ok = np.isfinite(rec)
     t_ok, rec_ok = np.asarray(t_rec)[ok], np.asarray(rec)[ok]
-    workers = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    workers = usable_cores()
     if workers < 2 or shifts.size < 8:
         return np.array([_offset_cost(t_ok, rec_ok, t_nc, ref, float(s)) for s in shifts])
     with ThreadPoolExecutor(max_workers=workers) as pool:
