@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from importlib import metadata
 from typing import Sequence
 
 from .errors import CncTwinError
@@ -78,9 +79,18 @@ def _cmd_export_ssp(args: argparse.Namespace) -> int:
     return 0
 
 
+def installed_version() -> str:
+    """cnctwin's version as installed (``pyproject.toml``), or ``"unknown"`` when run from an uninstalled tree."""
+    try:
+        return metadata.version("cnctwin")
+    except metadata.PackageNotFoundError:
+        return "unknown"
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``cnctwin``."""
     parser = argparse.ArgumentParser(prog="cnctwin", description="Digital twin of a CNC machining center.")
+    parser.add_argument("--version", action="version", version=f"cnctwin {installed_version()}")
     sub = parser.add_subparsers(dest="command", required=True)
 
     p = sub.add_parser("simulate", help="run a G-code program on the twin")

@@ -81,3 +81,15 @@ def test_missing_program_names_the_file(tmp_path, capsys):
     code = main(["simulate", str(tmp_path / "nope.nc"), "--out", str(tmp_path / "o")])
     assert code == 2
     assert "nope.nc: program file not found" in capsys.readouterr().err
+
+
+def test_cli_version_is_the_installed_distributions(capsys):
+    """``cnctwin --version`` prints pyproject.toml's version (as installed) and exits 0."""
+    import tomllib
+    from pathlib import Path
+
+    expected = tomllib.loads((Path(__file__).resolve().parents[1] / "pyproject.toml").read_text())["project"]["version"]
+    with pytest.raises(SystemExit) as stop:
+        main(["--version"])
+    assert stop.value.code == 0
+    assert capsys.readouterr().out.strip() == f"cnctwin {expected}"
