@@ -132,7 +132,7 @@ def test_g10_tool_radius_geometry_plus_wear_is_the_radius_of_g41():
     ("G10 L2 X0\n", 1, "L2", "without P"),
     ("G10 L2 P7 X0\n", 1, "P7", "does not exist"),
     ("G10 L20 P0 X0\n", 1, "P0", "does not exist"),
-    ("G10 L20 P49 X0\n", 1, "P49", "does not exist"),
+    ("G10 L20 P100 X0\n", 1, "P100", "does not exist"),  # P1..P99: G54.1 Pn and Haas G154 Pn
     ("G10 L10 P2 R1\n", 1, "P2", "does not exist"),
     ("G10 L2 P1\n", 1, "L2", "without data"),
     ("G10 L2 P1 R1\n", 1, "R1", "word R in a G10 L2 block"),

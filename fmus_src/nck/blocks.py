@@ -48,6 +48,9 @@ class Linear:
     rigid_tap : int
         A rigid-tapping stroke: the spindle direction during it (+1 CW, -1 CCW), Z synchronised with the
         spindle from rest to rest (:mod:`fmus_src.nck.tapping`); 0 otherwise.
+    lookahead_limit : int
+        Haas ``G103 P<n>`` in effect when the block was read: the look-ahead may reach n blocks beyond this
+        one (:mod:`fmus_src.nck.block_buffering`); 0: no limit (the machine's ``lookahead_blocks``).
     """
 
     line: int
@@ -59,6 +62,7 @@ class Linear:
     feed_per_rev: float = 0.0
     tap_pitch: float = 0.0
     rigid_tap: int = 0
+    lookahead_limit: int = 0
 
 
 @dataclass(frozen=True, slots=True)
@@ -79,7 +83,7 @@ class Arc:
     turns : int
         1 for an ordinary arc (at most one revolution). A full circle
         (IJK, end == start) has ``turns = 1`` and a sweep of 2 pi.
-    exact_stop, feed_per_rev
+    exact_stop, feed_per_rev, lookahead_limit
         As for :class:`Linear`.
     """
 
@@ -94,6 +98,7 @@ class Arc:
     turns: int = 1
     exact_stop: bool = False
     feed_per_rev: float = 0.0
+    lookahead_limit: int = 0
 
     @property
     def axes(self) -> tuple[int, int, int]:

@@ -11,6 +11,10 @@ cutter compensation G41/G42 with a
 nonzero radius does not simulate (see :mod:`.compensation`), G88 (boring with a manual operation),
 G29, and every other G/M code or address.
 
+Haas words: G187 (accuracy control, accepted without effect: :mod:`.lookahead_codes`; its E word is read only
+in a G187 block), G103 (block buffering limit: :mod:`.block_buffering`), G154 P1..P99 and G110..G129 (additional
+work offsets: :mod:`.offsets`).
+
 Machine builders' M codes (M13, M48, M88, ...): the machine file's aliases (:mod:`.m_aliases`), passed to
 :func:`group_words`; each expands to the standard codes it stands for on its block, so M13 M5 is a conflict
 as M3 M5 is. M97 P<n> (Haas local subprogram call): :mod:`.subprograms`.
@@ -50,6 +54,8 @@ G_GROUP: dict[int | float, str] = {
     43: "tool length", 44: "tool length", 49: "tool length",
     54: "work offset", 55: "work offset", 56: "work offset", 57: "work offset", 58: "work offset",
     59: "work offset", 54.1: "work offset",
+    # Haas additional work offsets G154 P1..P99 and their aliases G110..G129 = G154 P1..P20 (see offsets)
+    154: "work offset", **{c: "work offset" for c in range(110, 130)},
     61: "path mode", 64: "path mode",
     80: "canned cycle", **{c: "canned cycle" for c in CYCLES},
     90: "distance", 91: "distance",
@@ -57,6 +63,8 @@ G_GROUP: dict[int | float, str] = {
     94: "feed mode", 95: "feed mode",
     # look-ahead / contour-control modes (accepted, see lookahead_codes)
     5.1: "look-ahead", 8: "look-ahead", 5: "look-ahead",
+    # Haas accuracy control G187 (accepted, see lookahead_codes) and block buffering limit G103 (block_buffering)
+    187: "accuracy control", 103: "block buffering",
     98: "return level", 99: "return level",
     # programmable transforms and polar coordinates (see transforms, polar)
     15: "polar coordinates", 16: "polar coordinates", 50: "scaling", 51: "scaling",
@@ -83,10 +91,12 @@ M_GROUP: dict[int, str] = {
 }
 SUPPORTED_G = ("G0 G1 G2 G3 G4 G5 G5.1 G8 G9 G10 G13.1 G15 G16 G17 G18 G19 G20 G21 G28 G30 G40 G41 G42 G43 G44 "
                "G49 G50 G50.1 G51 G51.1 G52 G53 G54-G59 G54.1 G61 G64 G67 G68 G69 G73 G74 G76 G80 G81 G82 G83 G84 "
-               "G85 G86 G87 G89 G90 G90.1 G91 G91.1 G92 G92.1 G92.2 G92.3 G94 G95 G98 G99")
+               "G85 G86 G87 G89 G90 G90.1 G91 G91.1 G92 G92.1 G92.2 G92.3 G94 G95 G98 G99 G103 G110-G129 G154 G187")
 SUPPORTED_M = "M0 M1 M2 M3 M4 M5 M6 M7 M8 M9 M19 M29 M30 M97 M98 M99"
 #: Address letters of the dialect.
 LETTERS = set("GMXYZIJKRFSTHDPQNOL") | {",C", ",R"}  # ,C / ,R: optional chamfer / corner R (see .corners)
+#: Address letters read only in a block with one of these G codes: E (corner rounding) of Haas G187.
+BLOCK_LETTERS: dict[str, int | float] = {"E": 187}
 
 
 def g_code(w: Word) -> int | float | None:
@@ -138,11 +148,12 @@ def group_words(words: Sequence[Word], err: ErrorFactory, m_codes: Mapping[int, 
     group or kind (also through an alias) and an address given twice.
     """
     aliases = m_codes or {}
+    codes = {g_code(w) for w in words if w.letter == "G"} - {None}  # for BLOCK_LETTERS
     gs: GWords = {}
     ms: MWords = {}
     vals: ValueWords = {}
     for w in words:
-        if w.letter not in LETTERS:
+        if w.letter not in LETTERS and BLOCK_LETTERS.get(w.letter) not in codes:
             raise err(w.letter + w.text, f"address {w.letter} is not supported",
                       "one of the addresses " + " ".join(sorted(LETTERS)))
         if w.letter == "G":

@@ -249,14 +249,15 @@ def corner_geometry(a: Linear, b: Linear, corner: OpenCorner,
     end_a, start_b = tuple(q1), tuple(q2)
     if corner.kind == ",C":
         block: Linear | Arc = Linear(corner.line, end_a, start_b, a.feed, a.feed_line,  # type: ignore[arg-type]
-                                     a.exact_stop, a.feed_per_rev)
+                                     a.exact_stop, a.feed_per_rev, lookahead_limit=a.lookahead_limit)
     else:
         left = cross > 0.0  # a left turn: counter-clockwise about the plane normal (G3)
         n = (-ua[1], ua[0]) if left else (ua[1], -ua[0])
         c = list(q1)
         c[i1], c[i2] = q1[i1] + corner.size * n[0], q1[i2] + corner.size * n[1]
         block = Arc(corner.line, end_a, start_b, tuple(c), corner.plane, not left,  # type: ignore[arg-type]
-                    a.feed, a.feed_line, exact_stop=a.exact_stop, feed_per_rev=a.feed_per_rev)
+                    a.feed, a.feed_line, exact_stop=a.exact_stop, feed_per_rev=a.feed_per_rev,
+                    lookahead_limit=a.lookahead_limit)
     return block, end_a, start_b  # type: ignore[return-value]
 
 

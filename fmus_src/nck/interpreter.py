@@ -5,9 +5,10 @@ full circles), G4 (dwell), G9 (exact stop, one block), G17/G18/G19, G20/G21,
 G28/G30 (1st/2nd-4th reference position return), G40/G41/G42 with D (cutter radius
 compensation, see :mod:`.compensation` and :mod:`.radius_offset`), G43/G44/G49 with H, G53
 (machine coordinates), G52 (local coordinate system), G92/G92.1/G92.2/G92.3 (workpiece coordinate
-system setting), G54-G59, G54.1 P1-P48 (also written G54 Pn), G10
+system setting), G54-G59, G54.1 P1-P48 (also written G54 Pn), Haas G154 P1-P99 and G110-G129, G10
 L2/L20/L10-L13 (programmable data input), G5.1 Q0/Q1, G8 P0/P1, G5
-P0/P10000 (look-ahead modes, accepted), G61/G64 (exact stop mode / cutting
+P0/P10000 and Haas G187 (look-ahead and accuracy modes, accepted), Haas G103 P0-P15 (look-ahead limit),
+G61/G64 (exact stop mode / cutting
 mode; LinuxCNC G64 P Q, see :mod:`.path_blending`), canned cycles G73 G74 G76 G81-G87 G89
 with G98/G99 and G80 (see :mod:`.cycles`; tapping and M29: :mod:`.tapping`), G90/G91,
 G90.1/G91.1 (arc centre I/J/K absolute/incremental), G94/G95, G51.1/G50.1 (programmable mirror image),
@@ -29,9 +30,10 @@ Conventions (each topic in the module that implements it)
 * Input ranges of the numbers: :mod:`.input_ranges`; G4 dwell: :mod:`.dwell`.
 * G94/G95 feed (feed per revolution): :mod:`.feed`.
 * S, T, M3-M9 (spindle, tool, coolant): :mod:`.auxiliary_functions`.
-* G54-G59, G54.1 Pn, the external offset, G10 data input: :mod:`.offsets`.
+* G54-G59, G54.1 Pn, Haas G154 Pn and G110-G129, the external offset, G10 data input: :mod:`.offsets`.
 * G43/G44/G49 tool length, G40/G41/G42 cutter radius compensation: :mod:`.compensation`.
-* G5.1/G8/G5 look-ahead mode codes: :mod:`.lookahead_codes`.
+* G5.1/G8/G5 look-ahead mode codes and Haas G187 accuracy control: :mod:`.lookahead_codes`; Haas G103 block
+  buffering limit: :mod:`.block_buffering`.
 * G0-G3 motion, G61/G9 exact stop: :mod:`.motion`.
 * G28/G30 reference position return, G53 machine coordinates: :mod:`.machine_moves`.
 * G52 local coordinate system, G92/G92.1/G92.2/G92.3 workpiece coordinate system setting:
@@ -64,6 +66,7 @@ Kept here, as the driver implements them:
 from __future__ import annotations
 
 from .auxiliary_functions import auxiliary_blocks, read_speed_and_tool
+from .block_buffering import block_buffering
 from .blocks import Block, Program, ProgramEnd, ProgramStop
 from .call_stack import Frame, called_subprogram, return_target, subprogram_words
 from .codes import check_sequence_words, check_stray_words, group_words
@@ -76,7 +79,7 @@ from .errors import GCodeError
 from .feed import read_feed_words
 from .input_ranges import check_coordinates
 from .lexer import LexedLine, LexError, Word, lex_line, split_lines
-from .lookahead_codes import check_look_ahead
+from .lookahead_codes import check_accuracy_control, check_look_ahead
 from .macro.calls import MacroCall
 from .macro.runtime import Jump, MacroRuntime
 from .machine_moves import machine_move
@@ -256,8 +259,13 @@ def _block(st: ModalState, words: tuple[Word, ...], line: int, text: str, file: 
 
     gs, ms, vals = group_words(words, err, st.settings.m_codes)  # m_codes: the machine builder's M codes
     begin = len(out)  # index of this block's first typed block
-    if "look-ahead" in gs:
-        check_look_ahead(gs["look-ahead"], words, err)
+    if "look-ahead" in gs or "accuracy control" in gs or "block buffering" in gs:
+        if "look-ahead" in gs:
+            check_look_ahead(gs["look-ahead"], words, err)
+        elif "accuracy control" in gs:
+            check_accuracy_control(gs["accuracy control"][1], words, err)  # Haas G187: no effect on the plan
+        else:
+            block_buffering(st, gs["block buffering"][1], words, err)  # Haas G103: the look-ahead window
         close_corner(st, out, begin, line, text, file)  # no move after a ,C/,R block: error
         return None
     corner = corner_word(vals, err)  # ,C / ,R: optional chamfer / corner R (see .corners)
@@ -290,7 +298,7 @@ def _block(st: ModalState, words: tuple[Word, ...], line: int, text: str, file: 
     consumed = transform_modes(st, gs, vals, err)  # G15/G16, G69/G68, G50/G51, G50.1/G51.1 (see .transforms)
     check_transform_block(st, gs, err)
     if "work offset" in gs:
-        select_work_offset(st, gs, vals, call is not None, err)
+        select_work_offset(st, gs, vals, None if call is None else "M97" if call.local else "M98", err)
     tool_length_words(st, gs, vals, err)
     cutter_compensation(st, gs, vals, err, unit_name)
     if "path mode" in gs:

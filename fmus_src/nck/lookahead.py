@@ -9,10 +9,20 @@ The tool must always be able to stop at the end of the look-ahead window of
 ``lookahead_blocks`` blocks (including the executing block); a backward pass
 from the window end and a forward pass from the chain start give the
 junction speeds. The chain starts and ends at rest.
+
+The window may differ from block to block (Haas ``G103 P<n>``:
+:func:`block_windows`, :mod:`.block_buffering`): each block's own window W_i
+bounds the speed at its end (stop at the end of block i + W_i - 1). When the
+windows differ, a last backward pass keeps every junction speed within reach
+of the next one, so that the stop constraints of the later blocks (e.g. the
+first block read after ``G103 P1``) are kept too. With one window for all
+blocks that pass changes nothing and is skipped, so the result is the same as
+without per-block windows, bit for bit.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Sequence
 
 import numpy as np
 
@@ -56,8 +66,29 @@ def corner_limits(geo: ChainGeometry, velocity_difference: float) -> np.ndarray:
         return np.where(dt > 1e-12, velocity_difference / np.maximum(dt, 1e-300), np.inf)
 
 
+def block_windows(limits: Sequence[int], lookahead_blocks: int) -> list[int]:
+    """Look-ahead window of each block (blocks, including the executing one) under Haas ``G103 P<n>`` limits.
+
+    Parameters
+    ----------
+    limits : sequence of int
+        ``G103 P<n>`` of each block (:attr:`.blocks.Linear.lookahead_limit`): n blocks may be read beyond it;
+        0 means no limit.
+    lookahead_blocks : int
+        The machine's window W (>= 1, FANUC-style: including the executing block).
+
+    Returns
+    -------
+    list of int
+        ``min(W, n + 1)`` for a limited block, ``W`` otherwise.
+    """
+    w = max(int(lookahead_blocks), 1)
+    return [min(w, int(n) + 1) if n > 0 else w for n in limits]
+
+
 def plan_chain_speeds(geo: ChainGeometry, feed: np.ndarray, sc: SpeedChange, *, max_cutting_feed: float,
-                      arc_accel: float, corner_velocity_difference: float, lookahead_blocks: int) -> ChainSpeeds:
+                      arc_accel: float, corner_velocity_difference: float,
+                      lookahead_blocks: int | Sequence[int]) -> ChainSpeeds:
     """Junction speeds of a chain with a look-ahead window.
 
     Parameters
@@ -70,8 +101,8 @@ def plan_chain_speeds(geo: ChainGeometry, feed: np.ndarray, sc: SpeedChange, *, 
         Tangential acc/dec law.
     max_cutting_feed, arc_accel, corner_velocity_difference : float
         NC parameters (m/s, m/s2, m/s).
-    lookahead_blocks : int
-        Window length W (>= 1).
+    lookahead_blocks : int or sequence of int (n,)
+        Window length W (>= 1), one for all blocks or one per block (:func:`block_windows`).
 
     Returns
     -------
@@ -89,12 +120,17 @@ def plan_chain_speeds(geo: ChainGeometry, feed: np.ndarray, sc: SpeedChange, *, 
     b = [0.0] * n
     for i in range(n - 2, -1, -1):
         b[i] = min(J[i], sc.reach(b[i + 1], L[i + 1]))
-    W = max(int(lookahead_blocks), 1)
+    if isinstance(lookahead_blocks, (int, np.integer)):
+        windows = [max(int(lookahead_blocks), 1)] * n
+    else:
+        windows = [max(int(w), 1) for w in lookahead_blocks]
+        if len(windows) != n:
+            raise ValueError(f"plan_chain_speeds: {len(windows)} look-ahead windows for {n} blocks")
     bw = list(b)
     for i in range(n - 1):
-        last = i + W - 1
+        last = i + windows[i] - 1
         if last >= n - 1:
-            break
+            continue  # the window reaches the chain end: the unwindowed limit b[i]
         x = 0.0  # must be able to stop at the end of block `last`
         for k in range(last - 1, i - 1, -1):
             x = min(J[k], sc.reach(x, L[k + 1]))
@@ -102,6 +138,9 @@ def plan_chain_speeds(geo: ChainGeometry, feed: np.ndarray, sc: SpeedChange, *, 
                 x = b[i]  # joined the unwindowed solution: identical from here back to i
                 break
         bw[i] = min(x, b[i])
+    if len(set(windows)) > 1:  # a shorter window later in the chain also bounds the junctions before it
+        for i in range(n - 3, -1, -1):
+            bw[i] = min(bw[i], sc.reach(bw[i + 1], L[i + 1]))
     v = [0.0] * (n + 1)
     for i in range(n):
         v[i + 1] = min(bw[i], sc.reach(v[i], L[i]))

@@ -1,4 +1,4 @@
-"""The look-ahead / contour-control mode codes G5.1, G8 and G5: checked, accepted, without effect on the plan.
+"""The look-ahead / contour-control mode codes G5.1, G8, G5 and Haas G187: checked, accepted, no effect on the plan.
 
 Conventions
 -----------
@@ -14,6 +14,17 @@ Conventions
   No. 1660/1772 etc.) and the machining quality levels R are not modelled.
   Other Q/P values (e.g. nano smoothing ``G5.1 Q3``) and other words in the
   block are errors.
+* Haas accuracy control ``G187 [P1|P2|P3] [E<tol>]`` (Haas mill operator's
+  manual, G187, group 00): P sets the smoothness level (1 rough, 2 medium,
+  3 finish; overrides Setting 191), E the largest corner rounding in the
+  program's unit (overrides Setting 85), ``G187`` alone returns to the
+  settings. The Autodesk Haas posts write ``G187 P<level>`` (some forks
+  ``G187 P<level> E<tol>``) before each operation and ``G187`` after it.
+  Accepted alone in its block (an N number allowed), without effect on the
+  plan, for the reason above: the twin always keeps the programmed path and
+  plans with the machine file's acc/dec. P must be an integer 1..3 written
+  without a decimal point and E a number >= 0; anything else in the block is
+  an error. The E word is read only in a G187 block (:data:`.codes.BLOCK_LETTERS`).
 """
 from __future__ import annotations
 
@@ -24,6 +35,56 @@ from .lexer import Word
 
 #: Allowed modes of the look-ahead / contour-control codes: G code -> (address, values).
 LOOK_AHEAD_MODES = {5.1: ("Q", (0, 1)), 8: ("P", (0, 1)), 5: ("P", (0, 10000))}
+#: Smoothness levels of Haas G187 P (1 rough, 2 medium, 3 finish).
+G187_LEVELS = (1, 2, 3)
+G187_FORMS = "G187, G187 P1/P2/P3, G187 E<corner rounding >= 0> or G187 P<level> E<corner rounding>"
+
+
+def alone_in_block(gw: Word, words: Sequence[Word], letters: str, forms: str, err: ErrorFactory) -> None:
+    """Raise the error of ``err`` for a word other than ``gw``, N and the addresses ``letters`` in the block.
+
+    Parameters
+    ----------
+    gw : Word
+        The block's G word that must stand alone (with its own addresses).
+    words : sequence of Word
+        All words of the block.
+    letters : str
+        The addresses that belong to ``gw`` (e.g. ``"PE"``).
+    forms : str
+        The accepted forms, quoted in the message.
+    err : ErrorFactory
+        Builds the error for this block.
+    """
+    gname = "G" + gw.text
+    for w in words:
+        if w is gw or w.letter == "N" or w.letter in letters:
+            continue
+        word = w.letter + w.text
+        raise err(word, f"{word} in the {gname} block (the twin reads {gname} alone in its block, as the Haas "
+                  "posts write it)", f"{forms} alone in a block (an N number allowed)")
+
+
+def check_accuracy_control(gw: Word, words: Sequence[Word], err: ErrorFactory) -> None:
+    """Check a Haas ``G187 [P1|P2|P3] [E<tol>]`` block (accuracy control); it changes nothing in the plan.
+
+    Parameters
+    ----------
+    gw : Word
+        The block's G187 word.
+    words : sequence of Word
+        All words of the block.
+    err : ErrorFactory
+        Builds the error for this block.
+    """
+    alone_in_block(gw, words, "PE", G187_FORMS, err)
+    for w in words:
+        if w.letter == "P" and (w.has_point or w.value not in G187_LEVELS):
+            raise err("P" + w.text, f"G187 P{w.text} is not a smoothness level (Haas: P1 rough, P2 medium, "
+                      "P3 finish)", "P1, P2 or P3 (an integer without a decimal point)")
+        if w.letter == "E" and w.value < 0.0:
+            raise err("E" + w.text, f"G187 E{w.text}: the corner rounding is negative",
+                      "E >= 0 (the largest corner rounding, in the program's unit)")
 
 
 def check_look_ahead(entry: tuple[int | float, Word], words: Sequence[Word], err: ErrorFactory) -> None:

@@ -69,6 +69,7 @@ class ModalState:
         off = self.work_offset()
         self.prog = [self.machine[a] - off[a] for a in range(3)]
         self.exact_stop = False  # G61 (True) / G64
+        self.lookahead_limit = 0  # Haas G103 P<n>: blocks read ahead of the executing one, 0: no limit
         self.return_initial = True  # G98 (True) / G99
         self.cycle: int | None = None  # active canned cycle, None under G80
         self.cycle_initial = 0.0  # initial level (work Z, m)

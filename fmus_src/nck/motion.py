@@ -95,7 +95,8 @@ def programmed_move(st: ModalState, vals: ValueWords, g9: bool, line: int, err: 
         return
     feed, per_rev = block_feed(st, err, f"G{st.motion}", f"G{st.motion} feed move")
     if st.motion == 1:
-        out.append(Linear(line, start, end, feed, st.feed_line, exact, per_rev))
+        out.append(Linear(line, start, end, feed, st.feed_line, exact, per_rev,
+                          lookahead_limit=st.lookahead_limit))
         return
     i1, i2, i3 = PLANE_AXES[st.plane]
     plane_letters = {"XY": "IJ", "ZX": "KI", "YZ": "JK"}[st.plane]
@@ -125,7 +126,7 @@ def programmed_move(st: ModalState, vals: ValueWords, g9: bool, line: int, err: 
         c[i2] = start[i2] + 0.5 * d2 + side * h * d1 / chord
         c[i3] = start[i3]
         out.append(Arc(line, start, end, tuple(c), st.plane, clockwise, feed, st.feed_line,  # type: ignore[arg-type]
-                       exact_stop=exact, feed_per_rev=per_rev))
+                       exact_stop=exact, feed_per_rev=per_rev, lookahead_limit=st.lookahead_limit))
         return
     if not centre:
         raise err(gname, f"{gname} without R or I/J/K", f"R or {plane_letters[0]}/{plane_letters[1]} for the centre")
@@ -168,4 +169,4 @@ def programmed_move(st: ModalState, vals: ValueWords, g9: bool, line: int, err: 
                   f"{fmt_number(r1 * u)} {unit_name} (difference {fmt_number(abs(r2 - r1) * u)} {unit_name})",
                   f"start and end radii equal within {fmt_number(ARC_RADIUS_TOLERANCE * u)} {unit_name}")
     out.append(Arc(line, start, end, tuple(c), st.plane, clockwise, feed, st.feed_line,  # type: ignore[arg-type]
-                   exact_stop=exact, feed_per_rev=per_rev))
+                   exact_stop=exact, feed_per_rev=per_rev, lookahead_limit=st.lookahead_limit))

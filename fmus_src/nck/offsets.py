@@ -1,4 +1,4 @@
-"""Work offsets of a block: G54-G59, G54.1 Pn (G54 Pn) and G10 programmable data input of work and tool offsets.
+"""Work offsets of a block: G54-G59, G54.1 Pn (G54 Pn), Haas G154 Pn / G110-G129 and G10 data input.
 
 Conventions
 -----------
@@ -10,12 +10,23 @@ Conventions
   G54.1 in a block where P means something else (G4, G10, M98, a canned
   cycle) are errors (FANUC takes G54.1 without P as P1; the twin asks for
   it). ``G54 P<n>`` in such a block is plain G54 (P keeps its meaning there).
+* Haas additional work offsets (Haas mill operator's manual, G154, group
+  12): ``G154 P<n>``, n = 1..99, and its aliases G110..G129 (= G154
+  P1..P20) select the additional work offset n. They share one table with
+  FANUC's G54.1 Pn: G154 Pn, G54.1 Pn (n <= 48) and G110 + n - 1 (n <= 20)
+  are the same offset, key 1000 + n (:func:`.settings.g154_offset_key`).
+  G54.1 keeps FANUC's 48 (the 0i-MF option the twin models; P49 is an
+  alarm there); G154 takes Haas' 99, and ``G10 L20 P<n>`` sets n = 1..99
+  (on a Haas G10 L20 sets the G154 offsets; on FANUC P49..P99 would need
+  the 300-set option). G154 without P, P outside 1..99 or with a decimal
+  point, and G154 in a block where P means something else are errors, as
+  for G54.1.
 * External workpiece zero point offset (``work_offsets[EXTERNAL_OFFSET]``,
   key 0, set by ``G10 L2 P0``): added to every work coordinate system
   (G54-G59 and G54.1 Pn), never to G53/G28 machine positions.
 * G10 programmable data input (non-modal, no motion; tool offset memory C):
   ``G10 L2 P<p> X Y Z`` sets the work offset G54..G59 (p = 1..6) or the
-  external offset (p = 0); ``G10 L20 P<n> X Y Z`` sets G54.1 Pn;
+  external offset (p = 0); ``G10 L20 P<n> X Y Z`` sets G54.1 Pn / G154 Pn;
   ``G10 L10/L11 P<n> R`` the geometry/wear of tool length offset Hn and
   ``G10 L12/L13 P<n> R`` the geometry/wear of tool radius offset Dn (the
   offset used is geometry + wear; :attr:`InterpreterSettings.tool_lengths`
@@ -35,30 +46,36 @@ from .blocks import AXIS_INDEX
 from .codes import GWords, ValueWords
 from .errors import ErrorFactory
 from .modal import ModalState
-from .settings import EXTERNAL_OFFSET, N_ADDITIONAL_OFFSETS, additional_offset_key
+from .settings import EXTERNAL_OFFSET, N_ADDITIONAL_OFFSETS, N_HAAS_OFFSETS, g154_offset_key
+
+#: Haas aliases G110..G129 of G154 P1..P20 (first, last code).
+HAAS_ALIASES = (110, 129)
 
 #: G10 L numbers: L -> what it sets.
-G10_L = {2: "work offset G54-G59 (P1-P6) or the external offset (P0)", 20: "additional work offset G54.1 Pn",
+G10_L = {2: "work offset G54-G59 (P1-P6) or the external offset (P0)",
+         20: "additional work offset G54.1 Pn / G154 Pn",
          10: "tool length geometry H", 11: "tool length wear H", 12: "tool radius geometry D",
          13: "tool radius wear D"}
 
 
-def select_work_offset(st: ModalState, gs: GWords, vals: ValueWords, m98: bool, err: ErrorFactory) -> None:
-    """Make the block's G54-G59 / G54.1 Pn / G54 Pn the active work offset (``m98``: the block calls M98).
+def select_work_offset(st: ModalState, gs: GWords, vals: ValueWords, call: str | None, err: ErrorFactory) -> None:
+    """Make the block's G54-G59 / G54.1 Pn / G54 Pn / G154 Pn / G110-G129 the active work offset (``call``:
+    ``"M98"`` or ``"M97"`` when the block calls a subprogram, else None).
 
     A change shifts the programmed coordinates of the current position (:meth:`ModalState.shift_work`).
     """
-    new = work_key(st, gs, vals, m98, err)
+    new = work_key(st, gs, vals, call, err)
     if new != st.work:
         st.work = new
         st.shift_work()
 
 
-def work_key(st: ModalState, gs: GWords, vals: ValueWords, m98: bool, err: ErrorFactory) -> int:
-    """Work-offset key selected by the block's G54-G59 / G54.1 Pn / G54 Pn (pops the P word it uses).
+def work_key(st: ModalState, gs: GWords, vals: ValueWords, call: str | None, err: ErrorFactory) -> int:
+    """Work-offset key selected by the block's G54-G59 / G54.1 Pn / G54 Pn / G154 Pn / G110-G129 (pops the P
+    word it uses).
 
-    ``G54 P<n>`` is the alternate form of ``G54.1 P<n>`` unless P belongs to G4, G10, M98 or a canned cycle in
-    the block; G54.1 needs its P and may not share the block with them.
+    ``G54 P<n>`` is the alternate form of ``G54.1 P<n>`` unless P belongs to G4, G10, M97/M98 or a canned cycle
+    in the block; G54.1 and G154 need their P and may not share the block with them. G110..G129 take no P.
     """
     code, gw = gs["work offset"]
     other = None
@@ -66,26 +83,30 @@ def work_key(st: ModalState, gs: GWords, vals: ValueWords, m98: bool, err: Error
     cancel = "motion" in gs or gs.get("canned cycle", (None,))[0] == 80
     if "non-modal" in gs:
         other = "G" + gs["non-modal"][1].text
-    elif m98:
-        other = "M98"
+    elif call is not None:
+        other = call
     elif drill:
         other = "G" + gs["canned cycle"][1].text
     elif st.cycle is not None and not cancel:
         other = f"canned-cycle mode G{st.cycle}"
-    if code == 54.1:
+    if HAAS_ALIASES[0] <= code <= HAAS_ALIASES[1]:  # G110..G129 = G154 P1..P20
+        return g154_offset_key(int(code) - HAAS_ALIASES[0] + 1)
+    top = N_HAAS_OFFSETS if code == 154 else N_ADDITIONAL_OFFSETS
+    if code in (54.1, 154):
+        name = "G" + gw.text
         if other is not None:
-            raise err("G" + gw.text, f"G54.1 and {other} in one block (the P word would have two meanings)",
-                      "G54.1 P<n> in a block without G4, G10, M98 or a canned cycle")
+            raise err(name, f"{name} and {other} in one block (the P word would have two meanings)",
+                      f"{name} P<n> in a block without G4, G10, M97/M98 or a canned cycle")
         if "P" not in vals:
-            raise err("G" + gw.text, "G54.1 without P (the number of the additional work coordinate system)",
-                      f"G54.1 P1 .. G54.1 P{N_ADDITIONAL_OFFSETS}")
+            raise err(name, f"{name} without P (the number of the additional work coordinate system)",
+                      f"{name} P1 .. {name} P{top}")
     elif code != 54 or "P" not in vals or other is not None:
         return int(code)
     p = vals.pop("P")
-    if p.has_point or not 1 <= p.value <= N_ADDITIONAL_OFFSETS:
+    if p.has_point or not 1 <= p.value <= top:
         raise err("P" + p.text, f"additional work coordinate system P{p.text} does not exist",
-                  f"P1..P{N_ADDITIONAL_OFFSETS} (integers) with G{gw.text}")
-    return additional_offset_key(int(p.value))
+                  f"P1..P{top} (integers) with G{gw.text}")
+    return g154_offset_key(int(p.value))
 
 
 def program_data(st: ModalState, gs: GWords, vals: ValueWords, err: ErrorFactory) -> None:
@@ -94,7 +115,7 @@ def program_data(st: ModalState, gs: GWords, vals: ValueWords, err: ErrorFactory
     if "motion" in gs:
         raise err("G" + gs["motion"][1].text, "G10 and a motion G code in one block",
                   "G10 with L, P and its data words only")
-    forms = "G10 L2 P0-P6 X Y Z, G10 L20 P1-P48 X Y Z, G10 L10/L11/L12/L13 P<n> R"
+    forms = f"G10 L2 P0-P6 X Y Z, G10 L20 P1-P{N_HAAS_OFFSETS} X Y Z, G10 L10/L11/L12/L13 P<n> R"
     if "L" not in vals:
         raise err("G10", "G10 without L (which data to set)", forms)
     lw = vals["L"]
@@ -114,8 +135,8 @@ def program_data(st: ModalState, gs: GWords, vals: ValueWords, err: ErrorFactory
         raise err(f"L{lw.text}", f"G10 L{ell} without data", f"G10 L{ell} P<n> with {' or '.join(data)}")
     if ell == 2:
         top, first = 6, 0
-    elif ell == 20:
-        top, first = N_ADDITIONAL_OFFSETS, 1
+    elif ell == 20:  # G54.1 Pn (FANUC, n <= 48) and Haas G154 Pn (n <= 99): one table
+        top, first = N_HAAS_OFFSETS, 1
     else:
         top, first = len(st.lengths if ell in (10, 11) else st.radii), 1
     if pw.has_point or not first <= pw.value <= top:
@@ -123,7 +144,7 @@ def program_data(st: ModalState, gs: GWords, vals: ValueWords, err: ErrorFactory
                   f"P{first}..P{top} (integers)")
     p = int(pw.value)
     if work:
-        key = additional_offset_key(p) if ell == 20 else (EXTERNAL_OFFSET if p == 0 else 53 + p)
+        key = g154_offset_key(p) if ell == 20 else (EXTERNAL_OFFSET if p == 0 else 53 + p)
         xyz = list(st.offsets.get(key, (0.0, 0.0, 0.0)))
         for a in given:
             v = vals[a].value * st.scale

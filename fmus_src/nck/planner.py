@@ -8,9 +8,11 @@ kernel plans everything at setup, sampled at the interpolation period Ts:
    ``exact_stop`` — G61 mode, G9, canned-cycle feeds — ends its chain),
    single rapids, dwells, spindle commands, tool changes, M0 program stops
    and the program end;
-2. each chain is planned with look-ahead (:mod:`.lookahead`) and interpolated
-   with acc/dec before interpolation (:mod:`.interpolator`); each rapid is
-   interpolated at its linear-positioning speed;
+2. each chain is planned with look-ahead (:mod:`.lookahead`; the window of
+   ``lookahead_blocks`` blocks, shorter for the blocks read under Haas
+   ``G103 P<n>``: :mod:`.block_buffering`) and interpolated with acc/dec
+   before interpolation (:mod:`.interpolator`); each rapid is interpolated at
+   its linear-positioning speed;
 3. the interpolated increments of feed moves and of rapids are filtered by
    their own acc/dec after interpolation (:mod:`.filters`) and summed;
 4. waits are inserted as a FANUC-like controller does: exact stop after a
@@ -59,7 +61,7 @@ from .errors import GCodeError, NCParameterError
 from .filters import apply_fir, box_lengths, filter_extension
 from .geometry import ChainGeometry, chain_geometry
 from .interpolator import Segment, interpolate_chain, interpolate_rapid
-from .lookahead import plan_chain_speeds
+from .lookahead import block_windows, plan_chain_speeds
 from .params import NCParams
 from .profiles import SpeedChange
 from .spindle import arrival_time, sample_spindle, speed_after
@@ -381,9 +383,13 @@ def plan_member(schedule: Schedule, params: NCParams, feeds: np.ndarray, speeds:
             geo = item.geometry
             assert geo is not None
             f = feeds[list(item.blocks)]
+            limits = [blocks[i].lookahead_limit for i in item.blocks]  # type: ignore[union-attr]
+            window: int | list[int] = params.lookahead_blocks
+            if any(limits):  # Haas G103 P<n> (see .block_buffering)
+                window = block_windows(limits, params.lookahead_blocks)
             sp = plan_chain_speeds(geo, f, sc, max_cutting_feed=params.max_cutting_feed, arc_accel=params.arc_accel,
                                    corner_velocity_difference=params.corner_velocity_difference,
-                                   lookahead_blocks=params.lookahead_blocks)
+                                   lookahead_blocks=window)
             seg = interpolate_chain(geo, sp, sc, ts)
             for bi, tb in zip(item.blocks, seg.block_start.tolist()):
                 line_cp.append((k0 + _ceil_periods(tb, ts), blocks[bi].line))

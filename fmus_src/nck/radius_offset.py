@@ -429,6 +429,7 @@ def _segments(template: Rapid | Linear | Arc, start: Point, points: tuple[Point,
                 out.append(Rapid(template.line, a, b))
             else:
                 out.append(Linear(template.line, a, b, template.feed, template.feed_line,
-                                  isinstance(template, Linear) and template.exact_stop, template.feed_per_rev))
+                                  isinstance(template, Linear) and template.exact_stop, template.feed_per_rev,
+                                  lookahead_limit=template.lookahead_limit))
         p = q
     return out

@@ -7,8 +7,8 @@ Conventions
   :data:`RPM` is rad/s; the writer and the optimiser use the same factors, so their numbers match the
   interpreter's bit for bit.
 * Work-offset keys of :attr:`InterpreterSettings.work_offsets`: 54..59 for G54..G59,
-  :func:`additional_offset_key` for G54.1 Pn, :data:`EXTERNAL_OFFSET` for the external offset (what G54.1 and
-  the external offset do: :mod:`.offsets`).
+  :func:`additional_offset_key` for G54.1 Pn, :func:`g154_offset_key` for Haas G154 Pn (the same keys),
+  :data:`EXTERNAL_OFFSET` for the external offset (what G54.1, G154 and the external offset do: :mod:`.offsets`).
 """
 from __future__ import annotations
 
@@ -34,6 +34,8 @@ DEFAULT_REFERENCE: Vec3 = (0.380, 0.225, 0.300)
 EXTERNAL_OFFSET = 0
 #: Number of additional work coordinate systems G54.1 P1..P48 (FANUC 0i-MF/31i-B option).
 N_ADDITIONAL_OFFSETS = 48
+#: Number of Haas additional work offsets G154 P1..P99 (the same table: G154 Pn is G54.1 Pn for n <= 48).
+N_HAAS_OFFSETS = 99
 
 
 def additional_offset_key(n: int) -> int:
@@ -49,6 +51,22 @@ def additional_offset_key(n: int) -> int:
     return 1000 + n
 
 
+def g154_offset_key(n: int) -> int:
+    """Key of Haas G154 P``n`` in :attr:`InterpreterSettings.work_offsets`: ``1000 + n`` (1001..1099).
+
+    One table with G54.1 Pn: ``g154_offset_key(n) == additional_offset_key(n)`` for n = 1..48, and G110..G129
+    are G154 P1..P20.
+
+    Parameters
+    ----------
+    n : int
+        Number of the additional work offset, 1..99.
+    """
+    if not 1 <= n <= N_HAAS_OFFSETS:
+        raise ValueError(f"G154 P{n}: expected P1..P{N_HAAS_OFFSETS}")
+    return 1000 + n
+
+
 @dataclass(frozen=True)
 class InterpreterSettings:
     """Machine data the interpreter needs (SI).
@@ -59,7 +77,8 @@ class InterpreterSettings:
         Machine position before the program (m).
     work_offsets : Mapping[int, Vec3]
         Work offset → (x, y, z) (m). Keys: 54..59 for G54..G59, :func:`additional_offset_key` ``(n)`` = 1000 + n
-        for G54.1 Pn (n = 1..48), :data:`EXTERNAL_OFFSET` = 0 for the external workpiece zero point offset,
+        for G54.1 Pn (n = 1..48) and :func:`g154_offset_key` ``(n)`` = 1000 + n for Haas G154 Pn (n = 1..99;
+        G110..G129 = G154 P1..P20), :data:`EXTERNAL_OFFSET` = 0 for the external workpiece zero point offset,
         which is added to every work coordinate system. Missing keys are zero. ``G10 L2``/``G10 L20`` in the
         program change a copy (these stay untouched).
     tool_lengths : Sequence[float]
