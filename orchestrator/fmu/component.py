@@ -689,9 +689,14 @@ class FMUComponent:
             block.unpack()
 
     def _get_discrete_outputs(self) -> None:
-        """Read the Integer, Boolean and String outputs (used by :class:`~.fast_loop.FastFMULoop`)."""
+        """Read the outputs :class:`~.fast_loop.FastFMULoop` does not read every step.
+
+        Those are the Integer, Boolean and String outputs, and for FMI 3.0 also the
+        ``Float32`` ones (the compiled loop reads Real outputs with ``fmi2GetReal`` or
+        ``fmi3GetFloat64`` only).
+        """
         for block in self._out_blocks:
-            if block.native.ours != "Real":
+            if block.native.getter not in ("fmi2GetReal", "fmi3GetFloat64"):
                 self._fmi(block.native.getter, *block.args)
                 block.unpack()
 
@@ -756,14 +761,9 @@ class FMUComponent:
         flags.early_return.value = False
         # noSetFMUStatePriorToCurrentPoint = true: the master never rolls back
         self._fmi("fmi3DoStep", t, h, True, *flags.args)
-        if flags.early_return.value:
-            raise self._end("fmi3DoStep", f"returned earlyReturn = true (lastSuccessfulTime = "
-                            f"{flags.last_successful_time.value:.6f} s, expected a full step to t + h = "
-                            f"{t + h:.6f} s); early return is not supported (the instance was made with "
-                            "earlyReturnAllowed = false)", None)
-        if flags.terminate_simulation.value:
-            raise self._end("fmi3DoStep", "returned terminateSimulation = true (the FMU asks to end the "
-                            "simulation)", None)
+        problem = fmi3.step_problem(flags, t, h)  # earlyReturn or terminateSimulation (also FastFMULoop's text)
+        if problem is not None:
+            raise self._end("fmi3DoStep", problem, None)
 
     def reset(self) -> None:
         """Back to the instantiated state with start values and the constructor's parameters."""

@@ -1,4 +1,4 @@
-"""A compiled stepping loop over FMI 2.0 co-simulation FMUs (:class:`FastFMULoop`).
+"""A compiled stepping loop over FMI 2.0 and FMI 3.0 co-simulation FMUs (:class:`FastFMULoop`).
 
 The Python :class:`~orchestrator.master.Master` pays some 10 µs of
 interpreter work per FMI call (ctypes marshalling, numpy views, the wire
@@ -6,9 +6,11 @@ loop). :class:`FastFMULoop` resolves the connections once into arrays of
 value references, slot indices and unit factors, and then runs N
 communication steps entirely in C: a small loop compiled at first use with
 the system C compiler (``gcc``/``cc``) and called through :mod:`ctypes`. The
-C loop calls ``fmi2SetReal`` / ``fmi2DoStep`` / ``fmi2GetReal`` through the
+C loop calls ``fmi2SetReal`` / ``fmi2DoStep`` / ``fmi2GetReal`` (FMI 3.0:
+``fmi3SetFloat64`` / ``fmi3DoStep`` / ``fmi3GetFloat64``) through the
 function pointers of the FMUs' loaded shared libraries, checks every status
-and records chosen outputs into a preallocated array.
+and records chosen outputs into a preallocated array. One system may mix
+FMI 2.0 and FMI 3.0 FMUs.
 
 Semantics are those of the Python master over :class:`FMUComponent`, call for
 call and operation for operation, so recordings are bit-identical:
@@ -21,23 +23,33 @@ call and operation for operation, so recordings are bit-identical:
   start of the tick;
 * before ``fmi2DoStep`` *all* Real inputs of a component are set in one
   ``fmi2SetReal`` (unconnected ones keep the value they had when the run
-  started), after it *all* Real outputs are read in one ``fmi2GetReal``;
+  started), after it *all* Real outputs are read in one ``fmi2GetReal``
+  (FMI 3.0: the Float64 ones, ``fmi3SetFloat64`` / ``fmi3GetFloat64``, and
+  ``fmi3DoStep`` with ``noSetFMUStatePriorToCurrentPoint = true``);
 * an output value in our units is ``raw × from_fmu``; an input receives
   ``(source × connection factor) × to_fmu`` (as :class:`FMUComponent` and
   :class:`~orchestrator.system.System` do).
 
-Only Real variables can be connected. Recorded outputs and stop signals may
-also be Boolean or Integer (read with ``fmi2GetBoolean`` / ``fmi2GetInteger``
-after every step of their component); the other discrete outputs of an
-:class:`FMUComponent` are refreshed once after each run, and its unconnected
-discrete inputs keep the values set at initialisation. A run can end early:
+Only Real variables can be connected (of an FMI 3.0 FMU: ``Float64``
+variables). Recorded outputs and stop signals of an FMI 2.0 FMU may also be
+Boolean or Integer (read with ``fmi2GetBoolean`` / ``fmi2GetInteger`` after
+every step of their component); its other discrete outputs are refreshed
+once after each run. The other outputs of an FMI 3.0 :class:`FMUComponent`
+(``Float32``, integers, Boolean) are read after every step, one getter call
+per type as :class:`FMUComponent` does, into its own buffers, unpacked after
+each run; String outputs are refreshed once after each run. Unconnected
+inputs of those types keep the values set at initialisation. A run can end early:
 after the first step at which every stop signal is non-zero, or at a check
 step at which a checked output is not finite or outside its bounds (what
 :meth:`orchestrator.master.Master.run` needs to stop where its Python loop
 would, :mod:`orchestrator.fmu.master_loop`). A status worse than
-``fmi2Warning`` ends the loop; :class:`FMUError` then names the component,
-the FMI function and the time, as :class:`FMUComponent` does, and
-:attr:`FastFMULoop.partial` holds the steps completed before it.
+``fmi2Warning`` (``fmi3Warning``) ends the loop, and so does an
+``fmi3DoStep`` that returns ``earlyReturn`` or ``terminateSimulation``
+(:func:`~orchestrator.fmu.fmi3.step_problem`; the C loop writes the
+component's own :class:`~orchestrator.fmu.fmi3.StepFlags`). :class:`FMUError`
+then names the component, the FMI function and the time, with the message
+and clean-up of :class:`FMUComponent`, and :attr:`FastFMULoop.partial` holds
+the steps completed before it.
 """
 from __future__ import annotations
 
@@ -55,8 +67,10 @@ from typing import TYPE_CHECKING, Mapping, Sequence
 import numpy as np
 from fmpy import read_model_description
 from fmpy.fmi2 import FMU2Slave
+from fmpy.fmi3 import FMU3Slave
 
-from .component import FMUComponent
+from . import fmi3
+from .component import FMUComponent, _Block
 from .errors import FMUError, status_name
 
 if TYPE_CHECKING:
@@ -64,9 +78,12 @@ if TYPE_CHECKING:
 
 #: FMI functions the loop calls, by the code the C loop reports in a failure.
 FUNCTIONS = ("fmi2SetReal", "fmi2DoStep", "fmi2GetReal", "fmi2GetBoolean", "fmi2GetInteger")
+#: The same for an FMI 3.0 FMU (code 3: the getter of one of its other output blocks, named by the block).
+FUNCTIONS3 = ("fmi3SetFloat64", "fmi3DoStep", "fmi3GetFloat64")
 
 _C_SOURCE = r"""
 #include <math.h>
+#include <stdbool.h>
 #include <stddef.h>
 #include <string.h>
 
@@ -77,6 +94,12 @@ typedef fmi2Status (*SetRealF)(fmi2Component, const fmi2ValueReference *, size_t
 typedef fmi2Status (*GetRealF)(fmi2Component, const fmi2ValueReference *, size_t, double *);
 typedef fmi2Status (*DoStepF)(fmi2Component, double, double, int);
 typedef fmi2Status (*GetIntF)(fmi2Component, const fmi2ValueReference *, size_t, int *);
+/* FMI 3.0 (fmi3Status has the same values as fmi2Status; fmi3Boolean is bool) */
+typedef fmi2Status (*SetFloat64F)(void *, const fmi2ValueReference *, size_t, const double *, size_t);
+typedef fmi2Status (*GetFloat64F)(void *, const fmi2ValueReference *, size_t, double *, size_t);
+typedef fmi2Status (*DoStep3F)(void *, double, double, bool, bool *, bool *, bool *, double *);
+/* any fmi3GetXXX but Binary: the value array is only passed on, so its element type does not matter */
+typedef fmi2Status (*Get3F)(void *, const fmi2ValueReference *, size_t, void *, size_t);
 
 typedef struct {
     int n_comp;
@@ -104,8 +127,9 @@ typedef struct {
     int n_rec;
     const int *rec_slot;
     double *rec;                  /* (n_steps + 1) x n_rec, row 0 written by the caller */
-    int err[4];                   /* component, function (0 set, 1 step, 2 get, 3 getBoolean, 4 getInteger),
-                                     tick, status */
+    int err[4];                   /* component, function (0 set, 1 step, 2 get, 3 getBoolean, 4 getInteger;
+                                     FMI 3.0: 3 the getter of other block err_block), tick,
+                                     status (-1: fmi3DoStep set earlyReturn or terminateSimulation) */
     long err_step;
     /* discrete outputs read after each step (recorded or stop signals): slots n_real + i */
     int n_real;
@@ -125,18 +149,43 @@ typedef struct {
     const double *check_lo;
     const double *check_hi;
     long k_end;                   /* steps done when cnct_run returned 2 (stop) or 3 (check) */
+    const int *fmi3;              /* component c is an FMI 3.0 FMU: set/get/do_step are fmi3SetFloat64,
+                                     fmi3GetFloat64, fmi3DoStep */
+    void **step_flags;            /* FMI 3.0 component c: step_flags[4c .. 4c+3] -> eventHandlingNeeded,
+                                     terminateSimulation, earlyReturn (bool), lastSuccessfulTime (double) */
+    /* FMI 3.0: the other outputs but String (Float32, integers, Boolean), read after every step into the
+       FMUComponent's own buffers, one getter call per block, as FMUComponent does */
+    const int *other_start;       /* blocks of component c: other_start[c] .. other_start[c+1]-1 */
+    void **other_get;
+    void **other_vr;              /* const fmi3ValueReference * */
+    const int *other_n;
+    void **other_buf;
+    int err_block;
 } Loop;
+
+static fmi2Status set_real(Loop *L, int c, const fmi2ValueReference *vr, size_t n) {
+    if (L->fmi3[c]) return ((SetFloat64F)L->set_real[c])(L->comp[c], vr, n, L->buffer, n);
+    return ((SetRealF)L->set_real[c])(L->comp[c], vr, n, L->buffer);
+}
 
 static int get_outputs(Loop *L, int c) {
     int a = L->out_start[c], b = L->out_start[c + 1];
     if (b == a) return 0;
-    fmi2Status s = ((GetRealF)L->get_real[c])(L->comp[c], L->out_vr + a, (size_t)(b - a), L->buffer);
+    const size_t n = (size_t)(b - a);
+    fmi2Status s = L->fmi3[c] ? ((GetFloat64F)L->get_real[c])(L->comp[c], L->out_vr + a, n, L->buffer, n)
+                              : ((GetRealF)L->get_real[c])(L->comp[c], L->out_vr + a, n, L->buffer);
     if (s > 1) { L->err[1] = 2; L->err[3] = s; return 1; }
     for (int i = a; i < b; ++i) L->slots[i] = L->buffer[i - a] * L->out_from[i];
     return 0;
 }
 
 static int get_discrete(Loop *L, int c) {
+    for (int i = L->other_start[c]; i < L->other_start[c + 1]; ++i) {
+        const size_t n = (size_t)L->other_n[i];
+        fmi2Status s = ((Get3F)L->other_get[i])(L->comp[c], (const fmi2ValueReference *)L->other_vr[i], n,
+                                                L->other_buf[i], n);
+        if (s > 1) { L->err[1] = 3; L->err[3] = s; L->err_block = i; return 1; }
+    }
     int a = L->bool_start[c], b = L->bool_start[c + 1];
     const int n_bool = L->bool_start[L->n_comp];
     if (b > a) {
@@ -180,14 +229,28 @@ int cnct_run(Loop *L, long k0, long n_steps, double t0, double h) {
                         L->in_last[i] = v;
                         L->buffer[i - a] = v * L->in_to[i];
                     }
-                    s = ((SetRealF)L->set_real[c])(L->comp[c], L->in_vr + a, (size_t)(b - a), L->buffer);
+                    s = set_real(L, c, L->in_vr + a, (size_t)(b - a));
                     if (s > 1) {
                         L->err[0] = c; L->err[1] = 0; L->err[2] = j; L->err[3] = s; L->err_step = k;
                         return 1;
                     }
                 }
-                s = ((DoStepF)L->do_step[c])(L->comp[c], t, L->tick_h[e], 1);
-                if (s > 1) { L->err[0] = c; L->err[1] = 1; L->err[2] = j; L->err[3] = s; L->err_step = k; return 1; }
+                int flagged = 0;
+                if (L->fmi3[c]) {
+                    /* as FMUComponent: terminateSimulation and earlyReturn cleared, the other two kept */
+                    void **f = L->step_flags + 4 * (size_t)c;
+                    *(bool *)f[1] = false;
+                    *(bool *)f[2] = false;
+                    s = ((DoStep3F)L->do_step[c])(L->comp[c], t, L->tick_h[e], true, (bool *)f[0], (bool *)f[1],
+                                                  (bool *)f[2], (double *)f[3]);
+                    flagged = s <= 1 && (*(bool *)f[2] || *(bool *)f[1]);
+                } else {
+                    s = ((DoStepF)L->do_step[c])(L->comp[c], t, L->tick_h[e], 1);
+                }
+                if (s > 1 || flagged) {
+                    L->err[0] = c; L->err[1] = 1; L->err[2] = j; L->err[3] = flagged ? -1 : s; L->err_step = k;
+                    return 1;
+                }
                 if (get_outputs(L, c) || get_discrete(L, c)) {
                     L->err[0] = c; L->err[2] = j; L->err_step = k; return 1;
                 }
@@ -261,6 +324,14 @@ class _Loop(ctypes.Structure):
         ("check_lo", ctypes.POINTER(ctypes.c_double)),
         ("check_hi", ctypes.POINTER(ctypes.c_double)),
         ("k_end", ctypes.c_long),
+        ("fmi3", ctypes.POINTER(ctypes.c_int)),
+        ("step_flags", ctypes.POINTER(ctypes.c_void_p)),
+        ("other_start", ctypes.POINTER(ctypes.c_int)),
+        ("other_get", ctypes.POINTER(ctypes.c_void_p)),
+        ("other_vr", ctypes.POINTER(ctypes.c_void_p)),
+        ("other_n", ctypes.POINTER(ctypes.c_int)),
+        ("other_buf", ctypes.POINTER(ctypes.c_void_p)),
+        ("err_block", ctypes.c_int),
     ]
 
 
@@ -315,68 +386,122 @@ class _Port:
 
 
 class _Instance:
-    """An FMU instance as the loop sees it: slave, component pointer, Real ports by name."""
+    """An FMU instance as the loop sees it: slave, component pointer, Real ports by name.
 
-    def __init__(self, name: str, obj: FMU2Slave | FMUComponent) -> None:
+    The ports are the Real variables of an FMI 2.0 FMU and the ``Float64`` ones of an
+    FMI 3.0 FMU (:attr:`v3`); every other input and output is in :attr:`discrete`.
+    """
+
+    def __init__(self, name: str, obj: FMU2Slave | FMU3Slave | FMUComponent) -> None:
         self.name = name
         self.owner: FMUComponent | None = obj if isinstance(obj, FMUComponent) else None
-        if self.owner is not None and self.owner.fmi_version != "2.0":
-            raise FMUError(f"FastFMULoop: {name!r} is an FMI {self.owner.fmi_version} FMU; the compiled loop calls "
-                           "the FMI 2.0 API only (the Python master runs it)", component=name)
+        #: FMI 3.0: the output flags of fmi3DoStep, written by the C loop (an FMUComponent's own).
+        self.flags: fmi3.StepFlags | None = None
+        #: FMI 3.0 FMUComponent: its output blocks other than Float64 and String, read by the C loop after
+        #: every step into their own buffers (unpacked by :meth:`FastFMULoop._write_back`).
+        self.other_blocks: list[_Block] = []
         if self.owner is not None:
-            self.slave: FMU2Slave = obj._slave  # noqa: SLF001 - same package; the instance FMUComponent drives
+            self.v3 = fmi3.is_fmi3(self.owner.fmi_version)
+            self.slave: FMU2Slave | FMU3Slave = obj._slave  # noqa: SLF001 - same package; the instance it drives
+            self.flags = obj._step_flags  # noqa: SLF001
+            real_getter = "fmi3GetFloat64" if self.v3 else "fmi2GetReal"
             self.inputs: dict[str, _Port] = {}
             self.outputs: dict[str, _Port] = {}
+            self.discrete: set[str] = set()
             for b in obj._bindings:  # noqa: SLF001
-                if b.ours.type != "Real":
+                if b.native.getter != real_getter:
+                    self.discrete.add(b.ours.name)
                     continue
                 port = _Port(int(b.theirs.valueReference), float(b.to_fmu))
                 if b.ours.causality == "input":
                     self.inputs[b.ours.name] = port
                 elif b.ours.causality == "output":
                     self.outputs[b.ours.name] = port
-            self.discrete = {b.ours.name for b in obj._bindings if b.ours.type != "Real"}  # noqa: SLF001
-            self.discrete_outputs: dict[str, tuple[int, str]] = {
+            if self.v3:
+                self.other_blocks = [block for block in obj._out_blocks  # noqa: SLF001
+                                     if block.native.getter != real_getter and block.native.ours != "String"]
+            self.discrete_outputs: dict[str, tuple[int, str]] = {} if self.v3 else {
                 b.ours.name: (int(b.theirs.valueReference), b.ours.type)
                 for b in obj._bindings  # noqa: SLF001
                 if b.ours.causality == "output" and b.ours.type in ("Boolean", "Integer")}
-        elif isinstance(obj, FMU2Slave):
+        elif isinstance(obj, (FMU2Slave, FMU3Slave)):
+            self.v3 = isinstance(obj, FMU3Slave)
             self.slave = obj
+            self.flags = fmi3.StepFlags() if self.v3 else None
             md = read_model_description(obj.unzipDirectory, validate=False)
+            real = "Float64" if self.v3 else "Real"
             self.inputs, self.outputs, self.discrete = {}, {}, set()
             self.discrete_outputs = {}
             for v in md.modelVariables:
                 if v.causality not in ("input", "output"):
                     continue
-                if v.type != "Real":
+                if v.type != real:
                     self.discrete.add(v.name)
-                    if v.causality == "output" and v.type in ("Boolean", "Integer", "Enumeration"):
+                    if (not self.v3 and v.causality == "output"
+                            and v.type in ("Boolean", "Integer", "Enumeration")):
                         kind = "Boolean" if v.type == "Boolean" else "Integer"
                         self.discrete_outputs[v.name] = (int(v.valueReference), kind)
                     continue
                 (self.inputs if v.causality == "input" else self.outputs)[v.name] = _Port(int(v.valueReference), 1.0)
         else:
-            raise FMUError(f"FastFMULoop: {name!r} is a {type(obj).__name__}; expected an fmpy FMU2Slave or an "
-                           f"FMUComponent")
+            raise FMUError(f"FastFMULoop: {name!r} is a {type(obj).__name__}; expected an fmpy FMU2Slave or "
+                           f"FMU3Slave, or an FMUComponent")
         if not self.slave.component:
-            raise FMUError(f"FastFMULoop: {name!r} is not instantiated (fmi2Instantiate first)", component=name)
+            function = "fmi3InstantiateCoSimulation" if self.v3 else "fmi2Instantiate"
+            raise FMUError(f"FastFMULoop: {name!r} is not instantiated ({function} first)", component=name)
+
+    @property
+    def functions(self) -> tuple[str, ...]:
+        """The FMI functions of the loop's failure codes (:data:`FUNCTIONS` or :data:`FUNCTIONS3`)."""
+        return FUNCTIONS3 if self.v3 else FUNCTIONS
 
     def pointers(self) -> tuple[int, ...]:
-        """(component, fmi2SetReal, fmi2GetReal, fmi2DoStep, fmi2GetBoolean, fmi2GetInteger) as addresses."""
+        """(component, set Real, get Real, do step, fmi2GetBoolean, fmi2GetInteger) as addresses.
+
+        FMI 3.0: ``fmi3SetFloat64``, ``fmi3GetFloat64``, ``fmi3DoStep``, and 0 for the
+        two discrete getters (its other outputs are read through :meth:`other_pointers`).
+        """
         dll = self.slave.dll
         comp = self.slave.component
         comp = comp.value if isinstance(comp, ctypes.c_void_p) else int(comp)
-        return (comp, *(ctypes.cast(getattr(dll, f), ctypes.c_void_p).value
-                        for f in ("fmi2SetReal", "fmi2GetReal", "fmi2DoStep", "fmi2GetBoolean", "fmi2GetInteger")))
+        names = (("fmi3SetFloat64", "fmi3GetFloat64", "fmi3DoStep") if self.v3
+                 else ("fmi2SetReal", "fmi2GetReal", "fmi2DoStep", "fmi2GetBoolean", "fmi2GetInteger"))
+        addresses = [ctypes.cast(getattr(dll, f), ctypes.c_void_p).value for f in names]
+        return (comp, *addresses, *([0, 0] if self.v3 else []))
+
+    def other_pointers(self) -> list[tuple[int, int, int, int]]:
+        """(getter, value references, count, buffer) addresses of :attr:`other_blocks`."""
+        return [(ctypes.cast(getattr(self.slave.dll, b.native.getter), ctypes.c_void_p).value,
+                 ctypes.addressof(b.vr), b.n, ctypes.addressof(b.buffer)) for b in self.other_blocks]
+
+    def flag_pointers(self) -> list[int]:
+        """Addresses of the four fmi3DoStep output flags (FMI 3.0), else four zeros."""
+        f = self.flags
+        if f is None:
+            return [0, 0, 0, 0]
+        return [ctypes.addressof(x) for x in (f.event_handling_needed, f.terminate_simulation, f.early_return,
+                                              f.last_successful_time)]
+
+    def get_real(self, vr: int) -> float:
+        """One Real (FMI 3.0: Float64) value straight from the FMU, in its units (fmpy checks the status)."""
+        raw = (ctypes.c_double * 1)()
+        vrs = (ctypes.c_uint * 1)(vr)
+        if self.v3:
+            self.slave.fmi3GetFloat64(self.slave.component, vrs, 1, raw, 1)
+        else:
+            self.slave.fmi2GetReal(self.slave.component, vrs, 1, raw)
+        return raw[0]
 
     def port(self, variable: str, causality: str) -> _Port:
         ports = self.inputs if causality == "input" else self.outputs
         if variable in ports:
             return ports[variable]
+        real = "Float64" if self.v3 else "Real"
         if variable in self.discrete:
-            raise FMUError(f"FastFMULoop: {self.name}.{variable} is not a Real variable; the compiled loop connects "
-                           f"and records Real variables only", component=self.name)
-        raise FMUError(f"FastFMULoop: {self.name} has no Real {causality} {variable!r}; it has {sorted(ports)}",
+            what = "an FMI 3.0 FMU's variable other than Float64" if self.v3 else "not a Real variable"
+            raise FMUError(f"FastFMULoop: {self.name}.{variable} is {what}; the compiled loop connects and records "
+                           f"{real} variables only", component=self.name)
+        raise FMUError(f"FastFMULoop: {self.name} has no {real} {causality} {variable!r}; it has {sorted(ports)}",
                        component=self.name)
 
 
@@ -424,10 +549,11 @@ class FastFMULoop:
 
     Parameters
     ----------
-    instances : Mapping[str, FMU2Slave | FMUComponent]
-        The instances by name, in the default execution (Gauss–Seidel) order.
-        fmpy ``FMU2Slave`` objects must be instantiated and initialised by the
-        caller; :class:`FMUComponent` objects are set up by :meth:`run` when
+    instances : Mapping[str, FMU2Slave | FMU3Slave | FMUComponent]
+        The instances by name, in the default execution (Gauss–Seidel) order,
+        FMI 2.0 and FMI 3.0 alike. fmpy ``FMU2Slave`` / ``FMU3Slave`` objects
+        must be instantiated (FMI 3.0: with ``earlyReturnAllowed = false``) and
+        initialised by the caller; :class:`FMUComponent` objects are set up by :meth:`run` when
         still in state ``"instantiated"`` (along the execution order, with
         their connected inputs first, as the master does).
     connections : sequence of (str, str) or Connection
@@ -454,14 +580,17 @@ class FastFMULoop:
     check_every : int
         Period of those checks, communication steps (>= 1 when ``checks``).
 
-    Record and stop references may name Boolean or Integer outputs too (read
-    with ``fmi2GetBoolean`` / ``fmi2GetInteger`` after every step of their
-    component, recorded as 0.0/1.0 or the integer as a float).
+    Record and stop references may name Boolean or Integer outputs of FMI 2.0
+    FMUs too (read with ``fmi2GetBoolean`` / ``fmi2GetInteger`` after every step
+    of their component, recorded as 0.0/1.0 or the integer as a float). Of an
+    FMI 3.0 FMU, only ``Float64`` variables can be connected, recorded, stop
+    signals or checked.
 
     Raises
     ------
     FMUError
-        Unknown names, non-Real connected variables, an input connected twice, no C compiler.
+        Unknown names, non-Real (FMI 3.0: non-Float64) connected or recorded variables, an input
+        connected twice, no C compiler.
 
     Examples
     --------
@@ -471,7 +600,7 @@ class FastFMULoop:
 
     def __init__(
         self,
-        instances: Mapping[str, FMU2Slave | FMUComponent],
+        instances: Mapping[str, FMU2Slave | FMU3Slave | FMUComponent],
         connections: Sequence[tuple[str, str] | object] = (),
         record: Sequence[str] = (),
         order: Sequence[str] | None = None,
@@ -524,6 +653,7 @@ class FastFMULoop:
         self._k = 0
         #: Result of the steps completed before an FMI call failed in the last :meth:`run` (else None).
         self.partial: FastLoopResult | None = None
+        self._failed_block = None  # FMI 3.0: the output block whose getter failed in the last run
 
     @classmethod
     def from_system(cls, system: System, record: Sequence[str] = (), method: str = "gauss-seidel",
@@ -572,10 +702,7 @@ class FastFMULoop:
                 src = self._unit(source)
                 value = (src.owner.values[_split(source)[1]] if src.owner is not None else None)
                 if value is None:
-                    raw = (ctypes.c_double * 1)()
-                    vr = (ctypes.c_uint * 1)(src.outputs[_split(source)[1]].vr)
-                    src.slave.fmi2GetReal(src.slave.component, vr, 1, raw)
-                    value = np.array([raw[0]])
+                    value = np.array([src.get_real(src.outputs[_split(source)[1]].vr)])
                 dst = owner.values[_split(target)[1]]
                 if factor == 1.0:
                     np.copyto(dst, value, casting="unsafe")
@@ -653,6 +780,11 @@ class FastFMULoop:
         self._in_connected = [src >= 0 for src in in_src]
         keep += [self._slots, self._rec, self._in_last]
         checks = list(self.checks.items())
+        others, other_start = [], [0]
+        for u in self.units:
+            others += u.other_pointers()
+            other_start.append(len(others))
+        self._other_blocks = [(u, b) for u in self.units for b in u.other_blocks]
         dptr = ctypes.POINTER(ctypes.c_double)
         loop = _Loop(
             n_comp=len(self.units),
@@ -690,6 +822,14 @@ class FastFMULoop:
             check_lo=arr([lo for _, (lo, _) in checks], ctypes.c_double),
             check_hi=arr([hi for _, (_, hi) in checks], ctypes.c_double),
             k_end=0,
+            fmi3=arr([int(u.v3) for u in self.units], ctypes.c_int),
+            step_flags=arr([a for u in self.units for a in u.flag_pointers()], ctypes.c_void_p),
+            other_start=arr(other_start, ctypes.c_int),
+            other_get=arr([o[0] for o in others], ctypes.c_void_p),
+            other_vr=arr([o[1] for o in others], ctypes.c_void_p),
+            other_n=arr([o[2] for o in others], ctypes.c_int),
+            other_buf=arr([o[3] for o in others], ctypes.c_void_p),
+            err_block=-1,
         )
         self._slot_of = slot_of
         return loop, keep
@@ -699,10 +839,7 @@ class FastFMULoop:
         """Value (our units) an unconnected input keeps over the run."""
         if u.owner is not None:
             return float(u.owner.values[name][0])
-        raw = (ctypes.c_double * 1)()
-        vr = (ctypes.c_uint * 1)(port.vr)
-        u.slave.fmi2GetReal(u.slave.component, vr, 1, raw)
-        return raw[0] / port.to_fmu
+        return u.get_real(port.vr) / port.to_fmu
 
     # ------------------------------------------------------------------ run
     def run(self, n_steps: int, h: float, t0: float = 0.0) -> FastLoopResult:
@@ -727,7 +864,8 @@ class FastFMULoop:
         Raises
         ------
         FMUError
-            A status worse than ``fmi2Warning``, naming component, function and time;
+            A status worse than ``fmi2Warning`` / ``fmi3Warning``, or an ``fmi3DoStep`` returning
+            ``earlyReturn`` or ``terminateSimulation``, naming component, function and time;
             :attr:`partial` then holds the rows of the steps completed before it.
         """
         if int(n_steps) != n_steps or n_steps < 0:
@@ -736,6 +874,7 @@ class FastFMULoop:
             raise FMUError(f"FastFMULoop: step must be positive and finite, got {h!r}")
         n_steps = int(n_steps)
         self.partial = None
+        self._failed_block = None
         if self._k == 0:
             self._initialize(t0)
         loop, keep = self._build(h, n_steps)
@@ -762,7 +901,8 @@ class FastFMULoop:
         """Hand the current values to the FMUComponents still initialised.
 
         Real outputs from the loop, each connected input the value it received
-        at its component's last step, discrete outputs read once.
+        at its component's last step, discrete outputs read once (those of a
+        failed FMI 3.0 instance but String from the reads after its last step).
         """
         for (u, name), connected, value in zip(self._in_refs, self._in_connected, self._in_last):
             if connected and u.owner is not None:
@@ -773,6 +913,11 @@ class FastFMULoop:
             for name in u.outputs:  # a failed instance keeps the outputs of its last good step
                 u.owner.values[name][0] = self._slots[self._slot_of[f"{u.name}.{name}"]]
             if u.owner.state != "initialized":
+                # a failed FMI 3.0 instance is freed: its other outputs from the buffers of its last reads,
+                # except a block whose getter failed (FMUComponent unpacks neither)
+                for block in u.other_blocks:
+                    if block is not self._failed_block:
+                        block.unpack()
                 continue
             u.owner.time = t_end
             if u.discrete:
@@ -781,13 +926,25 @@ class FastFMULoop:
     def _error(self, loop: _Loop, t0: float, h: float) -> FMUError:
         c, fn, j, status = (int(x) for x in loop.err)
         u = self.units[c]
-        function = FUNCTIONS[fn]
+        if u.v3 and fn == 3:  # the getter of one of its other output blocks
+            self._failed_block = self._other_blocks[int(loop.err_block)][1]
+            function = self._failed_block.native.getter
+        else:
+            function = u.functions[fn]
         n_fine = math.lcm(*self.rates.values())
         t = t0 + (int(loop.err_step) * n_fine + max(j, 0)) * (h / n_fine)
-        if fn >= 2 and j >= 0:  # reading outputs after fmi2DoStep: FMUComponent's time is the step's end
+        if fn >= 2 and j >= 0:  # reading outputs after the step: FMUComponent's time is the step's end
             t = t + h / self.rates[u.name]
+        if status < 0:  # fmi3DoStep returned earlyReturn or terminateSimulation, in the flags u.flags
+            what = fmi3.step_problem(u.flags, t, h / self.rates[u.name])
+            if u.owner is not None:
+                u.owner.time = t
+                return u.owner._end(function, what, None)  # noqa: SLF001 - FMUComponent's message and clean-up
+            return FMUError(f"{u.name}: {function} {what} at t = {t:.6f} s (FastFMULoop)", component=u.name,
+                            function=function, time=t)
         if u.owner is not None:
             u.owner.time = t
             return u.owner._failure(function, status)  # noqa: SLF001 - same message and clean-up as FMUComponent
-        return FMUError(f"{u.name}: {function} returned {status_name(status)} at t = {t:.6f} s (FastFMULoop)",
+        name = fmi3.status_name(status) if u.v3 else status_name(status)
+        return FMUError(f"{u.name}: {function} returned {name} at t = {t:.6f} s (FastFMULoop)",
                         component=u.name, function=function, time=t, status=status)

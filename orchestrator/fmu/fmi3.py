@@ -125,3 +125,32 @@ class StepFlags:
         self.last_successful_time = ctypes.c_double(0.0)
         self.args = (ctypes.byref(self.event_handling_needed), ctypes.byref(self.terminate_simulation),
                      ctypes.byref(self.early_return), ctypes.byref(self.last_successful_time))
+
+
+def step_problem(flags: StepFlags, t: float, h: float) -> str | None:
+    """What is wrong with a ``fmi3DoStep(t, h)`` that returned a good status, from its output flags; None if nothing.
+
+    The text completes ``"<instance>: fmi3DoStep ..."``; used by
+    :class:`~orchestrator.fmu.component.FMUComponent` and the compiled
+    :class:`~orchestrator.fmu.fast_loop.FastFMULoop` (which writes the same flags).
+
+    Parameters
+    ----------
+    flags : StepFlags
+        The flags as the call left them.
+    t, h : float
+        Communication point and step size of the call, s.
+
+    Returns
+    -------
+    str or None
+        For ``earlyReturn = true`` (checked first: not allowed, the instance was made with
+        ``earlyReturnAllowed = false``) or ``terminateSimulation = true``.
+    """
+    if flags.early_return.value:
+        return (f"returned earlyReturn = true (lastSuccessfulTime = {flags.last_successful_time.value:.6f} s, "
+                f"expected a full step to t + h = {t + h:.6f} s); early return is not supported (the instance was "
+                "made with earlyReturnAllowed = false)")
+    if flags.terminate_simulation.value:
+        return "returned terminateSimulation = true (the FMU asks to end the simulation)"
+    return None

@@ -1,9 +1,11 @@
 """``run_fast_fmu``: :meth:`Master.run` over FMUs with the step loop of :class:`~.fast_loop.FastFMULoop`.
 
 When every component of the system is an :class:`~.component.FMUComponent`
-and the run asks only for what the compiled loop can do (Real connections;
-probes and stop signals on Real, Boolean or Integer outputs; limits on Real
-outputs), the master hands its step loop to :class:`FastFMULoop` (issue 9).
+(FMI 2.0 or FMI 3.0, mixed or not) and the run asks only for what the
+compiled loop can do (Real connections; probes and stop signals on Real,
+Boolean or Integer outputs; limits on Real outputs; of an FMI 3.0 FMU only
+``Float64`` variables), the master hands its step loop to
+:class:`FastFMULoop` (issue 9).
 The Python side does what the master does around its loop, with the
 master's own methods: set-up along the execution order, the stop and
 time-limit messages, divergence checks (:meth:`Master._check_divergence` on
@@ -21,9 +23,10 @@ the values the components hold afterwards are the Python loop's, bit for bit
 (tested). An FMI call that fails ends the run with the master's message and
 the recording of the steps completed before it.
 
-Everything else (other component types, FMI 3.0 FMUs, discrete connections,
-probes on inputs or parameters, no C compiler) runs on the Python loop;
-:func:`fast_fmu_support` says why.
+Everything else (other component types, discrete connections, probes on
+inputs or parameters, FMI 3.0 variables other than ``Float64`` in a
+connection, probe, stop signal or limit, no C compiler) runs on the Python
+loop; :func:`fast_fmu_support` says why.
 """
 from __future__ import annotations
 
@@ -38,6 +41,7 @@ from fmus_src.units import conversion_factor
 from ..errors import CncTwinError
 from ..recording import Recording
 from ..system import split_reference
+from . import fmi3
 from .component import FMUComponent
 from .errors import FMUError
 from .fast_loop import FastFMULoop, FastLoopResult, compiler
@@ -65,9 +69,6 @@ def fast_fmu_support(master: "Master") -> str | None:
     others = [f"{n} ({type(c).__name__})" for n, c in comps.items() if not isinstance(c, FMUComponent)]
     if others:
         return f"not every component is an FMUComponent: {', '.join(others)}"
-    fmi3_fmus = [n for n, c in comps.items() if c.fmi_version != "2.0"]
-    if fmi3_fmus:
-        return f"FMI 3.0 FMU(s) {fmi3_fmus}: the compiled FMU loop calls the FMI 2.0 API only"
     if sorted(master.order) != sorted(comps):
         return f"the execution order {master.order} does not name every component once: {sorted(comps)}"
     not_new = [n for n, c in comps.items() if c.state != "instantiated"]
@@ -79,6 +80,10 @@ def fast_fmu_support(master: "Master") -> str | None:
             declared = comps[comp].variable(var)
             if declared.type != "Real" or declared.causality != causality:
                 return f"connection {c.source} -> {c.target}: {ref} is a {declared.type} {declared.causality}"
+            fmi3_type = _fmi3_type(comps[comp], var)
+            if fmi3_type not in (None, "Float64"):
+                return (f"connection {c.source} -> {c.target}: {ref} is an FMI 3.0 {fmi3_type} {causality} "
+                        "(the FMU loop connects Float64 variables of FMI 3.0 FMUs only)")
     wanted = ([(p.reference, "probe", _RECORDABLE) for p in master.probes]
               + [(r, "stop signal", _RECORDABLE) for r in master.settings.stop_signals()]
               + [(r, "limit", ("Real",)) for r in master.settings.limits])
@@ -88,6 +93,10 @@ def fast_fmu_support(master: "Master") -> str | None:
         if declared.causality != "output" or declared.type not in types:
             return (f"{what} {ref} is a {declared.type} {declared.causality} "
                     f"(the FMU loop takes {'/'.join(types)} outputs)")
+        fmi3_type = _fmi3_type(comps[comp], var)
+        if fmi3_type not in (None, "Float64"):
+            return (f"{what} {ref} is an FMI 3.0 {fmi3_type} output "
+                    "(the FMU loop takes Float64 outputs of FMI 3.0 FMUs only)")
     if compiler() is None:
         return "no C compiler (gcc or cc on PATH, or $CC)"
     return None
@@ -212,6 +221,13 @@ def run_fast_fmu(master: "Master") -> "RunResult | None":
         units[channel] = unit
     recording = Recording.from_channels(channels, units, success, message, system.name)
     return master._result(recording, success, message, k, t, stopped_at)  # noqa: SLF001
+
+
+def _fmi3_type(component: FMUComponent, variable: str) -> str | None:
+    """FMI 3.0 type of ``variable`` (our name) of ``component`` (``"Float32"``), None for an FMI 2.0 FMU."""
+    if not fmi3.is_fmi3(component.fmi_version):
+        return None
+    return component._by_name[variable].theirs.type  # noqa: SLF001 - same package
 
 
 def _value(comps: dict, reference: str) -> float:
