@@ -23,6 +23,10 @@ _SECTION_KEYS = {
     "machine": {"parameters"},
     "offsets": {"radius_mm", "length_mm"},
 }
+#: Stock coordinates beyond this (mm, work coordinates) are out of any machining center's reach.
+MAX_STOCK_COORDINATE_MM = 10_000.0
+#: Smallest tool diameter, mm: the smallest micro end mills (10 um).
+MIN_TOOL_DIAMETER_MM = 0.01
 #: ``[offsets]`` key -> (NC kernel parameter prefix, address, number of registers).
 _OFFSET_TABLES = {"radius_mm": ("tool_radius", "D", N_TOOL_RADII), "length_mm": ("tool_length", "H", N_TOOL_LENGTHS)}
 
@@ -143,6 +147,8 @@ def load_case(path: str | Path, machine_override: str | Path | None = None) -> C
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise CaseError(f"{toml_path}: not valid TOML: {exc}") from None
+    except RecursionError:  # tomllib parses nested arrays and tables recursively
+        raise CaseError(f"{toml_path}: arrays or tables nested too deeply to read; expected a TOML case file") from None
     folder = toml_path.parent
     for key, value in raw.items():
         if key not in _TOP_KEYS:
@@ -178,6 +184,10 @@ def load_case(path: str | Path, machine_override: str | Path | None = None) -> C
                 raise CaseError(f"{toml_path}:{_line_of(text, 'stock', None)}: [stock] needs {key!r} = [x, y, z] in mm")
         lo = _vector(toml_path, text, "stock", "min", raw["stock"]["min"])
         hi = _vector(toml_path, text, "stock", "max", raw["stock"]["max"])
+        for key, vec in (("min", lo), ("max", hi)):
+            if not all(abs(v) <= MAX_STOCK_COORDINATE_MM for v in vec):
+                raise CaseError(f"{toml_path}:{_line_of(text, 'stock', key)}: [stock] {key} = {list(vec)} mm lies "
+                                f"beyond +-{MAX_STOCK_COORDINATE_MM:g} mm; expected work coordinates in mm")
         if not all(a < b for a, b in zip(lo, hi)):
             raise CaseError(
                 f"{toml_path}:{_line_of(text, 'stock', 'max')}: [stock] max {hi} must exceed min {lo} on every axis"
@@ -189,10 +199,11 @@ def load_case(path: str | Path, machine_override: str | Path | None = None) -> C
         t = raw["tool"]
         diameter = t.get("diameter_mm", tool.diameter_mm)
         flutes = t.get("flutes", tool.flutes)
-        if isinstance(diameter, bool) or not isinstance(diameter, (int, float)) or not 0 < diameter < 1000:
+        if isinstance(diameter, bool) or not isinstance(diameter, (int, float)) \
+                or not MIN_TOOL_DIAMETER_MM <= diameter < 1000:
             raise CaseError(
                 f"{toml_path}:{_line_of(text, 'tool', 'diameter_mm')}: [tool] diameter_mm must be a number in mm "
-                f"between 0 and 1000, got {diameter!r}"
+                f"from {MIN_TOOL_DIAMETER_MM:g} (the smallest micro end mills) to below 1000, got {diameter!r}"
             )
         if isinstance(flutes, bool) or not isinstance(flutes, int) or not 1 <= flutes <= 24:
             raise CaseError(

@@ -23,7 +23,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
+from fmus_src.nck.cycles import BORING_SHIFTS
 from fmus_src.nck.m_aliases import ALIAS_TARGETS, alias_problem
+from fmus_src.nck.params import FILTER_KINDS
 from fmus_src.units import UnitError, split_unit_suffix, to_si
 
 from .errors import CncTwinError
@@ -99,6 +103,96 @@ OPTIONAL_KEYS: dict[str, set[str]] = {
 
 class MachineFileError(CncTwinError):
     """A machine parameter file is missing, malformed or has unknown keys."""
+
+
+def _positive(v: float) -> bool:
+    return v > 0.0
+
+
+def _non_negative(v: float) -> bool:
+    return v >= 0.0
+
+
+_GT0 = (_positive, "a number > 0")
+_GE0 = (_non_negative, "a number >= 0")
+_GE0_OFF = (_non_negative, "a number >= 0 (0 = off)")
+
+#: Allowed words of the text values, by section kind (``axis.*``: any axis) and key; None: any text.
+TEXT_VALUES: dict[tuple[str, str], tuple[str, ...] | None] = {
+    ("machine", "name"): None,
+    ("machine", "description"): None,
+    ("nck", "cutting_filter"): FILTER_KINDS,
+    ("nck", "rapid_filter"): FILTER_KINDS,
+    ("nck", "rigid_tapping_mode"): ("M29", "always"),
+    ("nck", "boring_shift"): tuple(sorted(BORING_SHIFTS)),
+}
+#: Range of the numeric values (file units) that the components accept (any other key: any finite number),
+#: by section kind and key: (test, what is expected). Checked at load so that the error names the file and line.
+VALUE_RULES: dict[tuple[str, str], tuple[Any, str]] = {
+    **{("nck", k): _GT0 for k in (
+        "interpolation_period_ms", "max_cutting_feed_mm_per_min", "accel_before_interp_mm_per_s2",
+        "corner_velocity_difference_mm_per_min", "arc_accel_mm_per_s2", "in_position_width_mm")},
+    **{("nck", k): _GE0 for k in (
+        "accel_change_time_before_interp_ms", "cutting_time_constant_ms", "rapid_time_constant_ms",
+        "tool_change_time_s", "rigid_tapping_time_constant_ms", "g73_retract_mm", "g83_clearance_mm")},
+    ("nck", "lookahead_blocks"): (lambda v: v >= 1 and float(v).is_integer(), "a whole number >= 1"),
+    **{("spindle", k): _GT0 for k in ("max_speed_rpm", "ramp_rpm_per_s", "power_kW")},
+    ("spindle", "speed_arrival_tolerance_percent"): (lambda v: 0.0 <= v < 100.0, "a percentage in [0, 100)"),
+    **{("servo", k): _GT0 for k in ("position_loop_period_ms", "velocity_loop_period_ms")},
+    **{("axis.*", k): _GT0 for k in (
+        "mass_kg", "torque_constant_Nm_per_A", "screw_lead_mm", "peak_current_A", "rapid_feed_mm_per_min",
+        "position_gain_per_s", "velocity_p_gain_A_per_m_per_s", "position_scale", "velocity_p_scale")},
+    **{("axis.*", k): _GE0 for k in ("velocity_i_gain_A_per_m", "velocity_i_scale")},
+    **{("axis.*", k): _GE0_OFF for k in ("excess_error_in_motion_mm", "excess_error_at_stop_mm")},
+    **{("axis.*.friction.*", k): (_non_negative, "a magnitude >= 0")
+       for k in ("coulomb_N", "static_N", "viscous_Ns_per_m")},
+    ("axis.*.friction.*", "stribeck_velocity_m_per_s"): _GT0,
+    **{("axis.*.effects", k): _GE0_OFF for k in (
+        "reversal_friction_decay_mm", "ripple_period_mm", "screw_stiffness_N_per_um", "backlash_width_um",
+        "pitch_period_mm", "servo_delay_ms")},
+    **{("cutting.effects", k): _GE0_OFF for k in (
+        "eccentricity_um", "kte_N_per_mm", "kre_N_per_mm", "tool_stiffness_N_per_um", "wear_rate_percent_per_min",
+        "spindle_droop_rpm_per_Nm", "chatter_frequency_Hz", "chatter_stiffness_N_per_um")},
+    ("cutting.effects", "helix_deg"): (lambda v: abs(v) < 80.0, "an angle in deg with |helix| < 80"),
+    ("cutting.effects", "chatter_damping_ratio"): (lambda v: 0.0 <= v < 1.0, "a damping ratio in [0, 1)"),
+    ("material.*", "kt_N_per_m2"): _GE0,
+    **{("cost", k): _GE0 for k in ("tool_price_KRW", "tool_change_time_s", "labor_KRW_per_s",
+                                   "depreciation_KRW_per_s")},
+    **{("cost", k): _GT0 for k in ("taylor_n", "taylor_C")},
+}
+#: Shortest internal drive step (s) a machine file may imply (:func:`fmus_src.servo.drive.stribeck_step_cap`):
+#: 25 000 RK4 substeps per 250 us velocity-loop tick. Below it a run takes hours of wall time per second.
+MIN_DRIVE_STEP_S = 1e-8
+
+
+def _section_kind(section: str) -> str:
+    """``axis.x.friction.positive`` -> ``axis.*.friction.*``, ``material.A6061`` -> ``material.*``."""
+    parts = section.split(".")
+    if parts[0] == "axis" and len(parts) >= 2:
+        parts[1] = "*"
+        if len(parts) == 4 and parts[2] == "friction":
+            parts[3] = "*"
+    elif parts[0] == "material" and len(parts) == 2:
+        parts[1] = "*"
+    return ".".join(parts)
+
+
+def _value_problem(section: str, key: str, value: Any) -> str | None:
+    """What is wrong with a leaf value of the schema (None when it is fine)."""
+    kind = (_section_kind(section), key)
+    if kind in TEXT_VALUES:
+        words = TEXT_VALUES[kind]
+        if not isinstance(value, str):
+            return f"must be text in quotes{f' among {list(words)}' if words else ''}, got {value!r}"
+        if words is not None and value not in words:
+            return f"must be one of {list(words)}, got {value!r}"
+        return None
+    if isinstance(value, str):
+        return f"must be a number (a string is not converted to the key's unit), got {value!r}"
+    test, expected = VALUE_RULES.get(kind, (None, ""))
+    if test is not None and not test(value):
+        return f"must be {expected}, got {value!r}"
+    return None
 
 
 @dataclass
@@ -243,6 +337,9 @@ def _flatten(path: Path, text: str, node: dict[str, Any], section: str, provenan
             )
         if isinstance(value, (int, float)) and not math.isfinite(value):
             raise MachineFileError(f"{path}:{_line_of(text, section, key)}: [{section}] {key} is not finite")
+        problem = _value_problem(section, key, value)
+        if problem is not None:
+            raise MachineFileError(f"{path}:{_line_of(text, section, key)}: [{section}] {key} {problem}")
         try:
             split_unit_suffix(key)
         except UnitError as exc:  # pragma: no cover - the schema only holds known suffixes
@@ -288,6 +385,44 @@ def _check_complete(path: Path, text: str, values: dict[str, Any]) -> None:
             raise MachineFileError(
                 f"{path}:{_line_of(text, section, None)}: section [{section}] is missing {missing}"
             )
+
+
+def _check_relations(path: Path, text: str, values: dict[str, Any]) -> None:
+    """Checks between keys: the servo loop periods, the drives' internal step, the chatter mode."""
+    servo = values.get("servo", {})
+    tp, tv = servo.get("position_loop_period_ms"), servo.get("velocity_loop_period_ms")
+    if tp is not None and tv is not None:
+        ratio = round(tp / tv)
+        if ratio < 1 or abs(ratio * tv - tp) > 1e-9 * tp:
+            raise MachineFileError(
+                f"{path}:{_line_of(text, 'servo', 'position_loop_period_ms')}: [servo] position_loop_period_ms = "
+                f"{tp!r} must be a whole multiple (1, 2, ...) of velocity_loop_period_ms = {tv!r}")
+    from fmus_src.servo.drive import stribeck_step_cap
+    from fmus_src.servo.friction import StribeckParameters
+
+    for a in AXES:
+        axis = values.get("axis", {}).get(a, {})
+        friction = axis.get("friction", {})
+        pos, neg = friction.get("positive"), friction.get("negative")
+        if "mass_kg" not in axis or pos is None or neg is None:
+            continue
+        branches = {f"{k}_{d}": np.array([float(table[key])]) for d, table in (("pos", pos), ("neg", neg))
+                    for k, key in (("coulomb", "coulomb_N"), ("static", "static_N"),
+                                   ("stribeck_velocity", "stribeck_velocity_m_per_s"), ("viscous", "viscous_Ns_per_m"))}
+        with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
+            cap = float(stribeck_step_cap(StribeckParameters(**branches), np.array([float(axis["mass_kg"])]))[0])
+        if not cap >= MIN_DRIVE_STEP_S:
+            raise MachineFileError(
+                f"{path}:{_line_of(text, f'axis.{a}', 'mass_kg')}: [axis.{a}] mass_kg = {axis['mass_kg']!r} with the "
+                f"Stribeck friction of [axis.{a}.friction.*] (static - coulomb over stribeck_velocity) needs drive "
+                f"substeps of {cap:.3g} s; expected a moving mass and friction that allow at least "
+                f"{MIN_DRIVE_STEP_S:g} s (a larger mass_kg or stribeck_velocity_m_per_s)")
+    effects = values.get("cutting", {}).get("effects", {})
+    if effects.get("chatter_frequency_Hz", 0.0) > 0.0 and not effects.get("chatter_stiffness_N_per_um", 0.0) > 0.0:
+        raise MachineFileError(
+            f"{path}:{_line_of(text, 'cutting.effects', 'chatter_stiffness_N_per_um')}: [cutting.effects] "
+            f"chatter_frequency_Hz = {effects['chatter_frequency_Hz']!r} needs chatter_stiffness_N_per_um > 0 "
+            f"(the modal stiffness of the chatter mode), got {effects.get('chatter_stiffness_N_per_um', 0.0)!r}")
 
 
 def resolve_machine_path(name_or_path: str | Path, relative_to: Path | None = None) -> Path:
@@ -343,9 +478,12 @@ def load_machine(name_or_path: str | Path = "default", relative_to: Path | None 
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise MachineFileError(f"{path}: not valid TOML: {exc}") from None
+    except RecursionError:  # tomllib parses nested arrays and tables recursively
+        raise MachineFileError(f"{path}: arrays or tables nested too deeply to read; expected a TOML machine file") from None
     provenance: dict[str, str] = {}
     values = _flatten(path, text, raw, "", provenance)
     _check_complete(path, text, values)
+    _check_relations(path, text, values)
     return Machine(path=path, values=values, provenance=provenance)
 
 

@@ -41,7 +41,7 @@ _log = logging.getLogger(__name__)
 CHUNK_BYTES = 4 << 20
 #: A plain decimal number: sign, digits with ``.`` as the decimal point, optional exponent (as written by
 #: loggers and by :func:`write_table`); no thousands separators, underscores, hex, NaN or infinity.
-DECIMAL = r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?"
+DECIMAL = r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?"
 _DECIMAL_RE = re.compile(DECIMAL)
 _BLANKS = str.maketrans("", "", " \t")
 #: The characters of lines of plain numbers.
@@ -121,7 +121,10 @@ def read_table(path: Path, contract: Iterable[str], required: Iterable[str] = ()
     with open(path, encoding="utf-8-sig", newline="") as handle:
         reader = _LineReader(path, handle)
         first = reader.header_line()
-        header = [cell.strip() for cell in next(csv.reader([first]), [])]
+        try:
+            header = [cell.strip() for cell in next(csv.reader([first]), [])]
+        except csv.Error as exc:
+            raise RecordingError(f"{path}:1: {exc}; expected a header row of column names, 't_s' first") from None
         _check_header(path, header, contract, required)
         counts = {name: header.count(name) for name in header}
         ignored = {j for j, name in enumerate(header) if not name or counts[name] > 1}
@@ -155,6 +158,33 @@ def _check_header(path: Path, header: list[str], contract: set[str], required: I
         raise RecordingError(f"{path}:1: missing column(s) {missing} needed here; header is {header}")
 
 
+_LINE_BREAK = re.compile(rb"\r\n|\r|\n")
+
+
+def _not_utf8(path: Path, exc: UnicodeDecodeError) -> RecordingError:
+    """The error for a file that is not UTF-8, naming the line and byte of the first undecodable byte.
+
+    The text reader decodes ahead of the lines it hands out, so the position is found again in the bytes
+    (lines end at CR LF, CR or LF, as the reader counts them).
+    """
+    line, consumed = 1, 0
+    with open(path, "rb") as handle:
+        for raw in handle:  # split at LF only: a CR-only file is one piece, counted below
+            try:
+                raw.decode("utf-8")
+            except UnicodeDecodeError as bad:
+                before = raw[:bad.start]
+                breaks = list(_LINE_BREAK.finditer(before))
+                start = breaks[-1].end() if breaks else 0
+                return RecordingError(
+                    f"{path}: not a UTF-8 text file: line {line + len(breaks)}, byte {bad.start - start + 1} "
+                    f"(byte offset {consumed + bad.start}) is 0x{raw[bad.start]:02x}, not UTF-8 text; expected a "
+                    "CSV recording in UTF-8 (save it as UTF-8, not Latin-1 or UTF-16)")
+            line += len(_LINE_BREAK.findall(raw))
+            consumed += len(raw)
+    return RecordingError(f"{path}: not a UTF-8 text file ({exc.reason}); expected a CSV recording in UTF-8")
+
+
 class _LineReader:
     """The lines of an open CSV file: the header line, then chunks of about CHUNK_BYTES characters."""
 
@@ -167,8 +197,7 @@ class _LineReader:
         try:
             lines = self.handle.readlines(hint) if hint else [self.handle.readline()]
         except UnicodeDecodeError as exc:
-            raise RecordingError(f"{self.path}: not a UTF-8 text file ({exc.reason} after line "
-                                 f"{self.count})") from None
+            raise _not_utf8(self.path, exc) from None
         return [line for line in lines if line]
 
     def header_line(self) -> str:
@@ -277,8 +306,15 @@ class _ChunkParser:
     def _strict(self, first_line: int, lines: list[str]) -> tuple[np.ndarray, np.ndarray]:
         header, width = self.header, len(self.header)
         rows: list[tuple[int, list[str]]] = []
-        for row in csv.reader(lines):
+        reader = csv.reader(lines)
+        while True:
             lineno = first_line + len(rows)
+            try:
+                row = next(reader, None)
+            except csv.Error as exc:  # e.g. a cell longer than csv.field_size_limit()
+                raise RecordingError(f"{self.path}:{lineno}: {exc}; expected comma-separated cells of numbers") from None
+            if row is None:
+                break
             rows.append((lineno, row))
         body = [(lineno, row) for lineno, row in rows if any(cell.strip() for cell in row)]
         values = np.full((len(body), width), np.nan)

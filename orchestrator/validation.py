@@ -30,7 +30,7 @@ import numpy as np
 from fmus_src.nck import GCodeError, NCKernel
 from fmus_src.nck.lexer import LexError, lex_line, split_lines
 
-from .case import Case, CaseError
+from .case import MAX_STOCK_COORDINATE_MM, Case, CaseError
 from .recording import Recording, RecordingError
 
 
@@ -217,8 +217,6 @@ def validate_recording(
     _check_duration(recording, text, name, dict(nc_parameters or {}))
 
 
-#: Stock coordinates beyond this (mm, work coordinates) are out of any machining center's reach.
-MAX_STOCK_COORDINATE_MM = 10_000.0
 
 
 def validate_case(case: Case) -> None:

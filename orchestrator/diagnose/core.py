@@ -130,14 +130,25 @@ def as_case(item: str | Path | Case) -> Case:
     return item if isinstance(item, Case) else load_case(item)
 
 
+#: Fewest samples a recording needs to be diagnosed (the clock alignment differentiates positions).
+MIN_SAMPLES = 3
+
+
 def _read(case: Case) -> Recording:
-    if case.recording is None or not Path(case.recording).is_file():
+    if case.recording is None:
         raise DiagnosisError(f"{case.source or case.folder}: the case needs a recording (recording = \"...\" in "
                              "case.toml, columns per shared/spec/recording.md)")
+    if not Path(case.recording).is_file():
+        raise DiagnosisError(f"{case.recording}: recording file not found; the case needs a recording there "
+                             f"(named by recording = \"...\" in {case.source or case.folder})")
     try:
-        return Recording.read_csv(case.recording)
+        recording = Recording.read_csv(case.recording)
     except RecordingError as exc:
         raise DiagnosisError(str(exc)) from None
+    if len(recording) < MIN_SAMPLES:
+        raise DiagnosisError(f"{case.recording}: the recording has {len(recording)} sample(s); a diagnosis needs at "
+                             f"least {MIN_SAMPLES} (rows below the header)")
+    return recording
 
 
 def _lead_mm(machine: Machine, axis: str) -> float:

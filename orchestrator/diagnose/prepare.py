@@ -25,6 +25,8 @@ WARM_UP_S = 0.02
 SAME_COMMANDS_MM = 1e-3
 #: An axis whose command spans less than this is not diagnosed, m.
 MIN_STROKE_M = 1e-5
+#: Grid of the cross-correlation that aligns a recording without 'line' transitions with the program, s.
+ALIGN_GRID_S = 1e-3
 
 
 @dataclass
@@ -377,7 +379,13 @@ def prepare(case: Case, recording: Recording, machine: Machine, axes: list[str] 
                 # with the twin's actual positions, which lag the commands by the servo's following error
                 # (about 1/Kp, tens of ms), a lag that would otherwise become a clock offset
                 twin = f"{a}_ref_mm" if suffix == "_ref_mm" else f"{a}_mm"
-                offset = time_offset_from_signal(t, recording[f"{a}{suffix}"], nc.t, nc[twin])
+                measured = np.asarray(t, float)[np.isfinite(np.asarray(recording[f"{a}{suffix}"], float))]
+                if measured.size < 3 or measured[-1] - measured[0] <= 2 * ALIGN_GRID_S:
+                    raise DiagnosisError(
+                        f"{src}: column '{a}{suffix}' is measured at {measured.size} sample(s) over "
+                        f"{measured[-1] - measured[0] if measured.size else 0.0:.3g} s; aligning the recording with "
+                        f"the program needs at least 3 samples over more than {2e3 * ALIGN_GRID_S:g} ms")
+                offset = time_offset_from_signal(t, recording[f"{a}{suffix}"], nc.t, nc[twin], grid_s=ALIGN_GRID_S)
                 method = (f"cross-correlation of {a}{suffix} with the twin's "
                           + ("command" if suffix == "_ref_mm" else "position"))
                 if suffix == "_mm":  # the correlation peak is good to a fraction of its 1 ms grid: refine

@@ -168,8 +168,12 @@ def _smoke(
 ) -> tuple[bool, str, dict[str, object]]:
     md = load_fmu(path).model_description
     experiment = md.defaultExperiment
-    h = float(experiment.stepSize) if experiment is not None and experiment.stepSize else SMOKE_STEP
-    t0 = float(experiment.startTime) if experiment is not None and experiment.startTime else 0.0
+    try:
+        h = float(experiment.stepSize) if experiment is not None and experiment.stepSize else SMOKE_STEP
+        t0 = float(experiment.startTime) if experiment is not None and experiment.startTime else 0.0
+    except ValueError:
+        return False, (f"<DefaultExperiment startTime={experiment.startTime!r} stepSize={experiment.stepSize!r}> "
+                       "is not a number; expected times in s"), {}
     try:
         component = FMUComponent(path, name="smoke", mapping=mapping, parameters=parameters)
     except FMUError as exc:

@@ -52,6 +52,7 @@ from . import fmi3
 from fmus_src.component import Variable
 from fmus_src.units import UnitError, conversion_factor
 
+from .binary_check import shared_library_problem
 from .errors import FMUError, status_name
 from .roles import Role, get_role
 
@@ -190,7 +191,7 @@ def load_fmu(path: str | Path) -> LoadedFMU:
         raise FMUError(f"{path}: no binary {binary} for this platform (the FMU has {platforms})", path=str(path))
     try:
         md = read_model_description(str(path), validate=False)
-    except (ValueError, KeyError, TypeError) as exc:
+    except Exception as exc:  # fmpy raises a plain Exception for an illegal description (e.g. a causality)
         raise FMUError(f"{path}: cannot read modelDescription.xml ({exc})", path=str(path)) from None
     stat = path.stat()
     key = (str(path), stat.st_mtime_ns, stat.st_size)
@@ -416,6 +417,7 @@ class FMUComponent:
         self._worst_logged = 0
         self.time = float("nan")
         self.state = "instantiated"
+        self._check_binary()
         self._instantiate()
 
     # ------------------------------------------------------------------ binding
@@ -467,7 +469,13 @@ class FMUComponent:
                     except UnitError as exc:
                         problems.append(f"{ours!r} (FMU {v.name!r} [{their_unit}]): {exc}")
                         continue
-            start = _start(v, type_)
+            try:
+                start = _start(v, type_)
+            except ValueError:
+                raise FMUError(
+                    f"{where}: modelDescription.xml: variable {v.name!r}: start={v.start!r} is not a {v.type} "
+                    f"value; expected a number", path=str(self.path), component=self.name,
+                ) from None
             if type_ == "Real" and factor != 1.0:
                 start = start / factor
             declared = Variable(ours, v.causality, our_unit, start, v.description or "", type_)  # type: ignore[arg-type]
@@ -616,6 +624,16 @@ class FMUComponent:
         frees = not tool.startswith(NO_FREE_TOOLS)
         self._finalizer = weakref.finalize(self, _free_instance, self._slave, self._alive, frees,
                                            f"{self._prefix}FreeInstance")
+
+    def _check_binary(self) -> None:
+        """Refuse a binary that is not a complete shared library before it is loaded (a truncated one would
+        kill the process with SIGBUS inside ``dlopen``; see :mod:`.binary_check`)."""
+        platform = fmi3.PLATFORM if self._v3 else PLATFORM
+        member = f"binaries/{platform}/{self.model_description.coSimulation.modelIdentifier}{_SUFFIX}"
+        problem = shared_library_problem((self._fmu.unzip_dir / member).read_bytes(), platform)
+        if problem is not None:
+            raise FMUError(f"{self.path}: {member} {problem}; expected a shared library for this platform "
+                           f"({platform}) that the FMU's tool built", path=str(self.path), component=self.name)
 
     def _instantiate_failed(self) -> FMUError:
         detail = "; FMU log: " + " | ".join(self.messages) if self.messages else ""
