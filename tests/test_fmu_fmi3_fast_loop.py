@@ -33,12 +33,13 @@ from orchestrator import Master, MasterSettings, Probe, System
 from orchestrator.bench.cfmu import build_lag_fmu, lag_ring
 from orchestrator.bench.systems import ring_exact as lag_ring_exact
 from orchestrator.fmu import FMUComponent, FMUError, fmi3, load_fmu
-from orchestrator.fmu import fast_loop
 from orchestrator.fmu.fast_loop import FastFMULoop
 from orchestrator.fmu.master_loop import fast_fmu_support
 
 sys.path.insert(0, str(Path(__file__).resolve().parent / "fixtures" / "fmu"))
 import cfmu  # noqa: E402
+from tests.test_master_fast_fmu import _both as _same_runs  # noqa: E402
+from tests.test_master_fast_fmu import fast_runs  # noqa: E402,F401 (fixture)
 
 needs_cc = pytest.mark.skipif(cfmu.compiler() is None, reason="no C compiler")
 pytestmark = needs_cc  # every test builds a C FMU (and the compiled loop needs the compiler too)
@@ -65,20 +66,6 @@ def foreign(tmp_path_factory):
 @pytest.fixture(scope="module")
 def lag_fmu(tmp_path_factory):
     return build_lag_fmu(tmp_path_factory.mktemp("lag2"))
-
-
-@pytest.fixture
-def fast_runs(monkeypatch):
-    """Counts FastFMULoop.run calls (the compiled path was taken)."""
-    calls = []
-    original = fast_loop.FastFMULoop.run
-
-    def run(self, *args, **kwargs):
-        calls.append(args)
-        return original(self, *args, **kwargs)
-
-    monkeypatch.setattr(fast_loop.FastFMULoop, "run", run)
-    return calls
 
 
 def lag3_ring(fmu: Path, **extra: dict) -> System:
@@ -116,40 +103,9 @@ def ring_exact(n: int, h: float, jacobi: bool = False) -> dict[str, np.ndarray]:
     return out
 
 
-def _run(make, probes, compiled, expected_duration=None, **settings):
-    calls = []
-    system = make()
-    master = Master(system, MasterSettings(step=H, compiled=compiled, **settings), probes,
-                    progress=lambda t, total: calls.append((t, total)), expected_duration=expected_duration)
-    result = master.run()
-    held = {(n, v): np.array(c.values[v]) if not isinstance(c.values[v], str) else c.values[v]
-            for n, c in system.components.items() for v in c.names("output") + c.names("input")}
-    return result, calls, held
-
-
 def _both(make, probes, fast_runs, expected_duration=None, **settings):
-    """Python loop and default master on fresh systems; everything must be equal. Returns the default's result."""
-    py, py_calls, py_held = _run(make, probes, False, expected_duration, **settings)
-    assert not fast_runs
-    fast, fast_calls, fast_held = _run(make, probes, True, expected_duration, **settings)
-    assert fast_runs, "the compiled FMU path was not taken"
-    for name in ("success", "message", "steps", "t_end", "failures"):
-        assert getattr(fast, name) == getattr(py, name), name
-    np.testing.assert_array_equal(fast.stopped_at, py.stopped_at)
-    np.testing.assert_array_equal(fast.failed, py.failed)
-    assert fast.recording.channels == py.recording.channels
-    assert fast.recording.units == py.recording.units
-    assert (fast.recording.success, fast.recording.message) == (py.recording.success, py.recording.message)
-    for ch in py.recording.channels:
-        assert np.array_equal(fast.recording[ch], py.recording[ch], equal_nan=True), ch
-    assert fast_calls == py_calls
-    assert fast_held.keys() == py_held.keys()
-    for key in py_held:
-        if isinstance(py_held[key], str):
-            assert fast_held[key] == py_held[key], key
-        else:
-            assert np.array_equal(fast_held[key], py_held[key], equal_nan=True), key
-    return fast
+    """The Python loop and the compiled FMU loop give the same everything, String values included."""
+    return _same_runs(make, probes, fast_runs, expected_duration, strings=True, **settings)[0]
 
 
 # ----------------------------------------------------------------------------- same results, exact numbers
