@@ -214,10 +214,44 @@ def test_endless_while_names_the_line():
 
 
 def test_runaway_loop_stops_at_the_line_cap(monkeypatch):
-    # the counter changes every pass, so only the cap of executed lines ends it: 5 lines + 1000 beyond the file
+    # the counter decides the condition and changes every pass, so only the cap of executed lines ends it:
+    # 4 lines + 1000 beyond the file
     monkeypatch.setattr(macro_runtime, "MAX_LOOP_LINES", 1000)
-    err = _error("#1 = 0\nN1 #1 = #1 + 1\nGOTO 1\nM30\n")
+    err = _error("#1 = 0\nN1 #1 = #1 + 1\nIF [#1 GT -1] GOTO 1\nM30\n")
     assert err.line == 3 and "more than 1004 lines executed" in str(err) and "back to line 2" in str(err)
+
+
+@pytest.mark.parametrize("text, line, shown", [
+    # the WHILE tests #1, the body counts #2 (which drives X): #1 never changes
+    ("#1 = 0\n#2 = 0\nWHILE [#1 LT 10] DO1\n#2 = #2 + 1\nG91 G1 X#2 F100\nEND1\nM30\n", 6, "#1 = 0"),
+    # a GOTO loop whose exit tests #1 through #3, while #2 grows
+    ("#1 = 1\nN5 #3 = #1 * 2\n#2 = #2 + 1\nIF [#3 LT 10] GOTO 5\nM30\n", 4, "#1 = 1, #3 = 2"),
+    # no condition at all: DO without WHILE and no GOTO out, a counter inside
+    ("DO1\n#2 = #2 + 1\nEND1\nM30\n", 3, "lines 1-3 have no condition and no GOTO that could leave"),
+])
+def test_loop_whose_deciding_variables_never_change_is_endless_at_its_second_pass(monkeypatch, text, line, shown):
+    # other variables change every pass, so the whole state never repeats; the variables that decide the
+    # branches (the loop's slice) do not change, so the second pass over the back jump is the proof
+    monkeypatch.setattr(macro_runtime, "MAX_LOOP_LINES", 50)  # found long before the cap
+    err = _error(text)
+    assert err.line == line and "endless loop" in str(err) and shown in str(err)
+
+
+@pytest.mark.parametrize("text, x_ends", [
+    # nested loops, the outer condition's variable changed in the inner loop
+    ("#1 = 0\nWHILE [#1 LT 2] DO1\n#2 = 0\nWHILE [#2 LT 2] DO2\n#2 = #2 + 1\n#1 = #1 + 0.5\n"
+     "G90 G1 X[#1 * 10] F100\nEND2\nEND1\nM30\n", [5.0, 10.0, 15.0, 20.0]),
+    # the condition's variable is counted by a subprogram the loop calls (lines outside the loop run)
+    ("#100 = 0\nWHILE [#100 LT 3] DO1\nM98 P200\nEND1\nM30\nO200\n#100 = #100 + 1\nG90 G1 X#100 F100\n"
+     "M99\n", [1.0, 2.0, 3.0]),
+    # the condition reads a system variable (the end point X), which only the NC blocks move
+    ("G90 G0 X0\nWHILE [#5001 LT 3.] DO1\nG91 G1 X1. F100\nEND1\nM30\n", [0.0, 1.0, 2.0, 3.0]),
+    # the condition's variable is counted through an indirect assignment #[#1]
+    ("#1 = 2\n#2 = 0\nWHILE [#2 LT 3] DO1\n#[#1] = #2 + 1\nG90 G1 X#2 F100\nEND1\nM30\n", [1.0, 2.0, 3.0]),
+])
+def test_loops_that_end_are_not_called_endless(text, x_ends):
+    program = interpret(text, file="m.nc")
+    assert [p[0] for _, p in _moves(program)] == x_ends
 
 
 @pytest.mark.parametrize("text, line, needle", [

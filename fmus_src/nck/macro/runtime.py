@@ -14,12 +14,15 @@ Conventions
   repeats exactly: a backward jump taken a second time with every local and common variable and every active
   call as before cannot end (conditions depend on variables only). Once a system variable (modal codes,
   positions) has been read, only the cap applies. ``M99 P<seq>`` returns count as repeats only with equal
-  variables too.
+  variables too. A loop that changes other variables (``#2 = #2 + 1`` under a ``WHILE [#1 LT 10]`` that never
+  counts #1) is found at its second pass too: the variables that decide its branches (its *slice*,
+  :mod:`.loop_slice`) are as in the pass before, and only the loop's own lines ran in between.
 * ``#3000 = n (MESSAGE)`` stops the program with a :class:`~..errors.GCodeError` naming the line, n and the
   message (FANUC macro alarm 3000 + n).
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Sequence
 
@@ -31,6 +34,7 @@ from ..settings import INCH
 from ..subprograms import MAX_CALLED_LINES
 from .calls import MAX_MACRO_NESTING, MacroCall, read_macro_call
 from .expressions import condition, evaluate, node_text, round_half_away, variable_number
+from .loop_slice import loop_slice
 from .loops import MAX_SEQUENCE, ProgramIndex, index_program, main_program_last
 from .statements import Assign, Goto, IfThen, Loop, MacroLine, NCBlock, parse_line
 from .system import read_system
@@ -97,6 +101,10 @@ class MacroRuntime:
         self.executed = 0
         self.limit = len(lines) + MAX_LOOP_LINES
         self.last_jump: tuple[int, int] | None = None  # (line, target line) of the last backward jump
+        self._slices: dict[tuple[int, int], frozenset[int] | None] = {}
+        # loops watched for a repeat: key -> (first line, last line, slice values at the last pass)
+        self._watched: dict[tuple, tuple[int, int, tuple]] = {}
+        self._lo, self._hi = math.inf, -math.inf  # lines run since the last backward jump
 
     # ------------------------------------------------------------------------------------------- parsing
     def parse(self, number: int) -> MacroLine | None:
@@ -127,6 +135,10 @@ class MacroRuntime:
     def count(self, number: int) -> None:
         """Count one executed line; raise past the cap (naming the loop that does not end)."""
         self.executed += 1
+        if number < self._lo:
+            self._lo = number
+        if number > self._hi:
+            self._hi = number
         if self.executed <= self.limit:
             return
         line, target = self.last_jump or (number, number)
@@ -267,8 +279,39 @@ class MacroRuntime:
                                      f"endless loop: jumping back to line {target + 1} again with every variable "
                                      "and call as in an earlier pass, so the program never ends", text)
                 self._states.add(key)
+            self._check_slice(number, target, stack)
             self.last_jump = (number, target + 1)
         return Jump(target)
+
+    def _check_slice(self, number: int, target: int, stack: Sequence) -> None:
+        """Raise when the loop of lines ``target + 1 .. number`` passes its back jump with its slice as at the
+        previous pass and only its own lines ran in between (see the module conventions)."""
+        lo, hi = self._lo, self._hi
+        self._lo, self._hi = math.inf, -math.inf
+        self._watched = {key: w for key, w in self._watched.items() if w[0] <= lo and hi <= w[1]}
+        first = target + 1
+        span = (first, number)
+        if span not in self._slices:
+            self._slices[span] = loop_slice(self.parse, first, number)
+        sliced = self._slices[span]
+        if sliced is None:
+            return
+        names = sorted(sliced)
+        values = tuple(self.store.peek(n) for n in names)
+        key = (number, target, tuple((f.sub.number, f.return_pc, f.remaining) for f in stack))
+        seen = self._watched.get(key)
+        if seen is not None and seen[2] == values:
+            text = self.lines[number - 1].strip()
+            if names:
+                shown = ", ".join(f"#{n} = {'vacant' if v is None else f'{v:g}'}" for n, v in zip(names, values))
+                why = (f"again with {shown} as in the pass before; these decide every condition of lines "
+                       f"{first}-{number} and nothing in the loop changes them")
+            else:
+                why = f"again: lines {first}-{number} have no condition and no GOTO that could leave the loop"
+            raise GCodeError(self.file, number, text, "a loop whose condition changes (a counter such as #1 = #1 + 1 "
+                             "inside it) or a GOTO out of it",
+                             f"endless loop: jumping back to line {first} {why}, so the program never ends", text)
+        self._watched[key] = (first, number, values)
 
     def _program(self, stack: Sequence) -> ProgramIndex:
         if stack:

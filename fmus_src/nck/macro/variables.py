@@ -105,6 +105,13 @@ class VariableStore:
         """Close the innermost G65 level (M99): the caller's locals are back."""
         self.levels.pop()
 
+    def peek(self, n: int) -> float | None:
+        """Value of the local (current level) or common ``#n`` without reading the machine; None when vacant or
+        not such a variable."""
+        if 1 <= n <= N_LOCAL:
+            return self.levels[-1][n]
+        return self.common.get(n) if is_common(n) else None
+
     def snapshot(self) -> tuple:
         """Every local and common value, hashable (two equal snapshots: the same program state)."""
         return tuple(tuple(level) for level in self.levels), tuple(sorted(self.common.items()))
