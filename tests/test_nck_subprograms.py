@@ -306,3 +306,29 @@ def test_a_backward_jump_that_reaches_the_end_is_fine_and_an_endless_one_is_an_e
     with pytest.raises(GCodeError, match="repeats the program endlessly") as info:
         interpret(ok2)
     assert info.value.line == 7 and info.value.word == "P1"
+
+
+def test_repeat_counts_are_projected_after_one_pass_without_macro_lines(monkeypatch):
+    import fmus_src.nck.interpreter as interpreter
+
+    # O2 runs 3 lines a pass (its O line, the move, M99); O1 runs its O line, the M98 P2 line, 9999 * 3 and its
+    # M99 = 30000 lines in its first pass, and its 9998 passes still to come 9998 * 30000 more: far beyond a cap
+    # of 10**6, which the first pass itself does not reach
+    monkeypatch.setattr(interpreter, "MAX_CALLED_LINES", 10**6)
+    text = "G0 X0\nM98 P1 L9999\nM30\nO1\nM98 P2 L9999\nM99\nO2\nG91 G0 X1.\nM99\n"
+    with pytest.raises(GCodeError, match="more than 1000000 lines") as info:
+        interpret(text)
+    assert info.value.line == 2
+    assert "O1 (called at line 2) ran 30000 lines in a pass" in str(info.value)
+    assert f"{9998 * 30000} more" in str(info.value)
+
+
+def test_repeat_counts_with_macro_lines_are_not_projected(monkeypatch):
+    import fmus_src.nck.interpreter as interpreter
+
+    # each pass of O1 counts #100; its passes stop counting once #100 reaches 3 (a GOTO skips the move), so the
+    # lines of later passes are not those of the first: only the cap judges them, and 5 passes stay far below it
+    monkeypatch.setattr(interpreter, "MAX_CALLED_LINES", 40)
+    text = ("M98 P1 L5\nM30\nO1\n#100 = #100 + 1\nIF [#100 GT 3] GOTO 9\nG91 G0 X1.\nN9 M99\n")
+    program = interpret(text)
+    assert _moves(program) == [(6, [1, 0, 0]), (6, [2, 0, 0]), (6, [3, 0, 0])]

@@ -77,6 +77,9 @@ class Frame:
     return_pc: int  # 0-based index of the line after the M98 block
     remaining: int
     macro: MacroCall | None = None  # a G65 macro call (its own local variables, see .macro), None for M98
+    #: (lines run in subprograms, macro lines run) when the current pass started: a pass that ran no macro line
+    #: is run exactly alike by every later pass, so the lines still to come are known (the runaway guard)
+    pass_start: tuple[int, int] = (0, 0)
 
 
 def return_target(sequence: int, lines: Sequence[str], stack: list[Frame], subs: dict[int, Subprogram] | None,

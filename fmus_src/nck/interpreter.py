@@ -146,6 +146,14 @@ def interpret(text: str, file: str = "<text>", settings: InterpreterSettings | N
         return finished(number)
 
     run_total = 0  # blocks of the closed runs (a running sum: macro loops close millions of runs)
+    macro_lines = 0  # macro lines run (a subprogram pass without one repeats exactly)
+
+    def too_many_called_lines(projection: str) -> GCodeError:
+        top = stack[0]
+        return GCodeError(file, top.call_line, f"M98 P{top.sub.number}", f"at most {MAX_CALLED_LINES} lines "
+                          "executed in subprograms (smaller repeat counts L)",
+                          f"the subprogram calls execute more than {MAX_CALLED_LINES} lines{projection}",
+                          lines[top.call_line - 1].strip())
 
     def close_run(number: int) -> None:
         nonlocal run_total
@@ -179,11 +187,9 @@ def interpret(text: str, file: str = "<text>", settings: InterpreterSettings | N
         if stack:
             called_lines += 1
             if called_lines > MAX_CALLED_LINES:
-                top = stack[0]
-                raise GCodeError(file, top.call_line, f"M98 P{top.sub.number}", f"at most {MAX_CALLED_LINES} "
-                                 "lines executed in subprograms (smaller repeat counts L)",
-                                 f"the subprogram calls execute more than {MAX_CALLED_LINES} lines",
-                                 lines[top.call_line - 1].strip())
+                raise too_many_called_lines("")
+        if statement is not None:
+            macro_lines += 1
         macro.count(number)
         step = macro.execute(number, statement, lexed, stack)
         if not isinstance(step, LexedLine):  # a macro statement ran: nothing, a jump or a G65 call
@@ -197,7 +203,7 @@ def interpret(text: str, file: str = "<text>", settings: InterpreterSettings | N
                 sub = called_subprogram(Call(step.number, step.repeats), subs, stack, number, lexed.text, file, "G65")
                 macro.enter(step, stack, number)
                 close_run(number)
-                stack.append(Frame(sub, number, pc, step.repeats, step))
+                stack.append(Frame(sub, number, pc, step.repeats, step, (called_lines, macro_lines)))
                 pc = sub.start
                 seg_start = pc + 1
             continue
@@ -215,7 +221,7 @@ def interpret(text: str, file: str = "<text>", settings: InterpreterSettings | N
                 subs = index_subprograms(lines, number - 1, file, settings.block_delete)
             sub = called_subprogram(action, subs, stack, number, lexed.text, file, lines=lines,
                                     block_delete=settings.block_delete)  # lines: M97's block N<n>
-            stack.append(Frame(sub, number, pc, action.repeats))
+            stack.append(Frame(sub, number, pc, action.repeats, pass_start=(called_lines, macro_lines)))
             pc = sub.start
         else:  # M99
             if not stack:
@@ -232,6 +238,14 @@ def interpret(text: str, file: str = "<text>", settings: InterpreterSettings | N
             frame = stack[-1]
             frame.remaining -= 1
             if frame.remaining > 0:
+                lines_before, macro_before = frame.pass_start
+                per_pass = called_lines - lines_before
+                if macro_lines == macro_before and called_lines + per_pass * frame.remaining > MAX_CALLED_LINES:
+                    raise too_many_called_lines(
+                        f": O{frame.sub.number} (called at line {frame.call_line}) ran {per_pass} lines in a pass "
+                        f"without a macro statement, so its {frame.remaining} passes still to come run "
+                        f"{per_pass * frame.remaining} more")
+                frame.pass_start = (called_lines, macro_lines)
                 pc = frame.sub.start
                 macro.repeat(frame)
             else:
