@@ -323,7 +323,11 @@ class _ChunkParser:
             if len(row) > width and not any(cell.strip() for cell in row[width:]):
                 row = row[:width]  # empty cells after the last column (a trailing comma)
             if len(row) != width:
-                raise RecordingError(f"{self.path}:{lineno}: {len(row)} cells, header has {width} columns")
+                hint = ""
+                if len(row) > width and any(c.strip().isdigit() for c in row):
+                    hint = ("; is ',' the decimal point here (e.g. '0,5')? recording.md asks for '.' as the decimal "
+                            "point and ',' between cells")
+                raise RecordingError(f"{self.path}:{lineno}: {len(row)} cells, header has {width} columns{hint}")
             for j, cell in enumerate(row):
                 cell = cell.strip()
                 if not cell or j in self.ignored:

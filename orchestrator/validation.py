@@ -30,7 +30,7 @@ import numpy as np
 from fmus_src.nck import GCodeError, NCKernel
 from fmus_src.nck.lexer import LexError, lex_line, split_lines
 
-from .case import MAX_STOCK_COORDINATE_MM, Case, CaseError
+from .case import MAX_STOCK_COORDINATE_MM, Case, CaseError, missing_file
 from .recording import Recording, RecordingError
 
 
@@ -228,10 +228,10 @@ def validate_case(case: Case) -> None:
         Naming ``case.toml`` (or the folder) and the field.
     """
     where = str(case.source or case.folder)
-    if not Path(case.program).is_file():
-        raise CaseError(f"{where}: program: file {case.program} not found")
-    if case.recording is not None and not Path(case.recording).is_file():
-        raise CaseError(f"{where}: recording: file {case.recording} not found")
+    for key in ("program", "recording"):
+        problem = missing_file(case, key)
+        if problem is not None:
+            raise CaseError(problem)
     if case.stock is not None:
         for key, vec in (("min", case.stock.min_mm), ("max", case.stock.max_mm)):
             if not all(math.isfinite(v) and abs(v) <= MAX_STOCK_COORDINATE_MM for v in vec):

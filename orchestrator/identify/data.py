@@ -14,7 +14,7 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
-from ..case import Case, load_case
+from ..case import Case, load_case, missing_file
 from ..recording import Recording, RecordingError
 from ..twin import nck_parameters
 from ..validation import validate_recording
@@ -65,6 +65,9 @@ def load_recording(case: Case) -> Recording:
             f"{case.source or case.folder}: the case names no recording; add recording = \"recording.csv\" "
             "to case.toml and put the measured file next to it"
         )
+    problem = missing_file(case, "program")
+    if problem is not None:
+        raise IdentificationError(f"{problem}; the recording is checked against the program that made it")
     if not Path(case.recording).is_file():
         raise IdentificationError(
             f"{case.recording}: recording file not found (run the experiment program on the machine and "

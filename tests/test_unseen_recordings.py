@@ -1,0 +1,157 @@
+"""Recordings and case folders as users bring them: logger artefacts, exports and hand-written case files.
+
+Each test starts from what a user would plausibly hand over (the twin's own ``recording.csv`` transformed like a
+real logger or spreadsheet does, a ``case.toml`` written by hand) and asserts either the right numbers or an error
+naming the file, the line and the field (``shared/spec/recording.md``).
+"""
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from orchestrator.case import CaseError, load_case
+from orchestrator.recording import Recording, RecordingError
+from orchestrator.validation import validate_case
+
+CASE = """program = "program.nc"
+recording = "recording.csv"
+
+[stock]
+min = [0.0, 0.0, -10.0]
+max = [30.0, 20.0, 0.0]
+
+[tool]
+diameter_mm = 6.0
+flutes = 2
+
+[machine]
+parameters = "default"
+"""
+PROGRAM = "G21 G90 G17\nS3000 M3\nG0 X0 Y0 Z5.\nG1 X20. F600\nM5\nM30\n"
+
+
+def write_case(folder: Path, toml: str, recording: str | None = "t_s,x_mm\n0,0\n0.001,0\n") -> Path:
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "program.nc").write_text(PROGRAM, encoding="utf-8")
+    (folder / "case.toml").write_text(toml, encoding="utf-8")
+    if recording is not None:
+        (folder / "recording.csv").write_text(recording, encoding="utf-8")
+    return folder
+
+
+# ----------------------------------------------------------------------------- case.toml as users write it
+def test_a_case_file_saved_with_a_byte_order_mark_loads(tmp_path):
+    """Windows editors save UTF-8 with a BOM; tomllib read it as 'Invalid statement (at line 1, column 1)'."""
+    folder = write_case(tmp_path / "c", CASE)
+    (folder / "case.toml").write_bytes(b"\xef\xbb\xbf" + CASE.replace("\n", "\r\n").encode())
+    case = load_case(folder)
+    assert case.tool.diameter_mm == 6.0 and case.stock is not None and case.stock.max_mm == (30.0, 20.0, 0.0)
+
+
+def test_a_machine_file_saved_with_a_byte_order_mark_loads(tmp_path):
+    from orchestrator.machine import MACHINES_DIR
+
+    folder = write_case(tmp_path / "c", CASE.replace('"default"', '"machines/mine.toml"'))
+    (folder / "machines").mkdir()
+    (folder / "machines" / "mine.toml").write_bytes(b"\xef\xbb\xbf" + (MACHINES_DIR / "default.toml").read_bytes())
+    case = load_case(folder)
+    assert case.machine.path == folder / "machines" / "mine.toml"
+
+
+@pytest.mark.parametrize("value, inner", [
+    ('"nosuch"', r"no machine parameter set named 'nosuch'; shipped sets: \[.*'default'.*\]"),
+    ('"nosuch.toml"', r".*nosuch\.toml: machine parameter file not found"),
+    ('"../elsewhere/m.toml"', r".*elsewhere/m\.toml: machine parameter file not found"),
+])
+def test_a_machine_that_is_not_there_names_case_file_line_and_field(tmp_path, value, inner):
+    """The message named neither case.toml nor [machine] parameters, only the set or file that was not found."""
+    folder = write_case(tmp_path / "c", CASE.replace('"default"', value))
+    with pytest.raises(CaseError, match=rf"^{re.escape(str(folder / 'case.toml'))}:13: \[machine\] parameters = "
+                                        rf"'{re.escape(value[1:-1])}': {inner}; expected a shipped set name or a "
+                                        r"\.toml path \(relative to the case folder\)$"):
+        load_case(folder)
+
+
+def test_an_empty_recording_name_is_a_case_error_not_the_folder(tmp_path):
+    """recording = "" made the case folder itself the recording ('file <folder> not found')."""
+    folder = write_case(tmp_path / "c", CASE.replace('"recording.csv"', '""'))
+    with pytest.raises(CaseError, match=r"case\.toml:2: 'recording' must name the recording file .*got ''"):
+        load_case(folder)
+
+
+@pytest.mark.parametrize("key, line", [("program", 1), ("recording", 2)])
+def test_a_field_naming_a_folder_is_a_case_error(tmp_path, key, line):
+    folder = write_case(tmp_path / "c", CASE.replace('"program.nc"' if key == "program" else '"recording.csv"',
+                                                     '"data"'))
+    (folder / "data").mkdir()
+    with pytest.raises(CaseError, match=rf"case\.toml:{line}: '{key}' names the folder .*data; expected a file"):
+        load_case(folder)
+
+
+def test_a_dotted_key_is_named_by_its_line(tmp_path):
+    """tool.diameter_mm = 0 (a dotted key instead of a [tool] table) was reported at line 0."""
+    text = CASE.replace("[tool]\ndiameter_mm = 6.0\nflutes = 2\n", "").replace(
+        'recording = "recording.csv"\n', 'recording = "recording.csv"\ntool.diameter_mm = 0\n')
+    folder = write_case(tmp_path / "c", text)
+    with pytest.raises(CaseError, match=r"case\.toml:3: \[tool\] diameter_mm must be a number in mm"):
+        load_case(folder)
+
+
+def test_program_in_a_subfolder_and_absolute_paths_load(tmp_path):
+    folder = write_case(tmp_path / "c", CASE.replace('"program.nc"', '"nc/part.nc"'))
+    (folder / "nc").mkdir()
+    (folder / "nc" / "part.nc").write_text(PROGRAM)
+    case = load_case(folder)
+    validate_case(case)
+    assert case.program == folder / "nc" / "part.nc"
+    other = write_case(tmp_path / "d", CASE.replace('"program.nc"', f'"{folder / "nc" / "part.nc"}"'))
+    assert load_case(other).program == folder / "nc" / "part.nc"
+
+
+def test_a_missing_program_is_named_by_case_file_and_line_in_every_command(tmp_path):
+    """diagnose and identify said 'cannot check the recording against the program: …nope.nc: program file not
+    found' and simulate '…nope.nc: program file not found', none naming case.toml or its field."""
+    from orchestrator.diagnose import DiagnosisError, diagnose
+    from orchestrator.identify import IdentificationError
+    from orchestrator.identify.data import load_recording
+    from orchestrator.simulate import simulate
+
+    folder = write_case(tmp_path / "c", CASE.replace('"program.nc"', '"nope.nc"'))
+    expected = (rf"^{re.escape(str(folder / 'case.toml'))}:1: program = 'nope\.nc': file "
+                rf"{re.escape(str(folder / 'nope.nc'))} not found")
+    with pytest.raises(CaseError, match=expected + "$"):
+        validate_case(load_case(folder))
+    with pytest.raises(CaseError, match=expected + "$"):
+        simulate(case=folder, plot=False)
+    with pytest.raises(DiagnosisError, match=expected + "; the diagnosis runs the program"):
+        diagnose(folder)
+    with pytest.raises(IdentificationError, match=expected + "; the recording is checked against the program"):
+        load_recording(load_case(folder))
+
+
+# ----------------------------------------------------------------------------- recordings as exported
+def test_a_comma_decimal_export_names_file_line_and_the_decimal_point(tmp_path):
+    """A European spreadsheet export with ',' as the decimal point: '3 cells, header has 2 columns' only."""
+    path = tmp_path / "recording.csv"
+    path.write_text("t_s,fc_N\n0,12\n0,001,12,5\n", encoding="utf-8")
+    with pytest.raises(RecordingError, match=rf"^{re.escape(str(path))}:3: 4 cells, header has 2 columns; is ',' "
+                                             r"the decimal point here \(e\.g\. '0,5'\)\? recording\.md asks for '\.'"):
+        Recording.read_csv(path)
+
+
+def test_logger_artefacts_of_the_file_itself_read_to_the_same_numbers(tmp_path):
+    """CRLF, a BOM, columns in another order, 'line' written as 12.0, blank lines at the end, an unknown text
+    column and a logger clock that starts late (negative, here) all read to the same table."""
+    t = np.round(np.arange(6) * 0.004 - 3.2, 6)
+    x = np.array([0.0, 0.5, 1.25, 2.0, 2.5, 2.75])
+    plain = Recording.from_channels({"t_s": t, "line": np.array([3, 3, 4, 4, 4, 5.0]), "x_mm": x})
+    rows = [f"{float(x[k])!r},text {k},{[3, 3, 4, 4, 4, 5][k]}.0,{float(t[k])!r}" for k in range(6)]
+    path = tmp_path / "recording.csv"
+    path.write_bytes(("\ufeffx_mm,comment,line,t_s\r\n" + "\r\n".join(rows) + "\r\n\r\n\r\n").encode("utf-8"))
+    rec = Recording.read_csv(path)
+    assert rec.channels == ["t_s", "x_mm", "line"]
+    for name in ("t_s", "x_mm", "line"):
+        np.testing.assert_array_equal(rec[name], plain[name])
