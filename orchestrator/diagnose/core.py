@@ -135,15 +135,15 @@ MIN_SAMPLES = 3
 
 
 def _read(case: Case) -> Recording:
-    problem = missing_file(case, "program")
-    if problem is not None:
-        raise DiagnosisError(f"{problem}; the diagnosis runs the program that made the recording")
     if case.recording is None:
         raise DiagnosisError(f"{case.source or case.folder}: the case needs a recording (recording = \"...\" in "
                              "case.toml, columns per shared/spec/recording.md)")
     if not Path(case.recording).is_file():
         raise DiagnosisError(f"{case.recording}: recording file not found; the case needs a recording there "
                              f"(named by recording = \"...\" in {case.source or case.folder})")
+    problem = missing_file(case, "program")
+    if problem is not None:
+        raise DiagnosisError(f"{problem}; the diagnosis runs the program that made the recording")
     try:
         recording = Recording.read_csv(case.recording)
     except RecordingError as exc:

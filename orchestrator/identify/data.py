@@ -65,14 +65,14 @@ def load_recording(case: Case) -> Recording:
             f"{case.source or case.folder}: the case names no recording; add recording = \"recording.csv\" "
             "to case.toml and put the measured file next to it"
         )
-    problem = missing_file(case, "program")
-    if problem is not None:
-        raise IdentificationError(f"{problem}; the recording is checked against the program that made it")
     if not Path(case.recording).is_file():
         raise IdentificationError(
             f"{case.recording}: recording file not found (run the experiment program on the machine and "
             "save the log there, columns per shared/spec/recording.md)"
         )
+    problem = missing_file(case, "program")
+    if problem is not None:
+        raise IdentificationError(f"{problem}; the recording is checked against the program that made it")
     try:
         recording = Recording.read_csv(case.recording)
         validate_recording(recording, case.program, nc_parameters=nck_parameters(case.machine))
