@@ -160,10 +160,12 @@ def _check_duration(recording: Recording, text: str, program_name: str, nc_param
     span = float(recording.t[-1] - recording.t[0])
     allowed = MAX_DURATION_RATIO * planned + DURATION_SLACK_S
     if span > allowed:
+        unit = " Or is t_s written in ms? recording.md asks for seconds." if span * 1e-3 <= allowed else ""
         raise RecordingError(
             f"{recording.source}: column 't_s': the recording lasts {span:.6g} s but {program_name} runs "
             f"{planned:.6g} s (planned with the given NC parameters); expected at most {allowed:.6g} s "
-            f"({MAX_DURATION_RATIO:g} x the program + {DURATION_SLACK_S:g} s): is this the recording of another program?")
+            f"({MAX_DURATION_RATIO:g} x the program + {DURATION_SLACK_S:g} s): is this the recording of another "
+            f"program?{unit}")
 
 
 def validate_recording(

@@ -241,3 +241,37 @@ def test_servo_identification_on_a_coarse_log_with_commands_is_exact(air_runs, s
     for a in "xyz":
         for symbol in ("Spp", "Svp", "Svi"):
             assert fit.scales_[a][symbol] == pytest.approx(1.0, abs=2e-3), (a, symbol, was)
+
+
+# ----------------------------------------------------------------------------- names and units off the contract
+def test_upper_case_column_names_are_named_as_near_misses(tmp_path, caplog):
+    """'X_MM' is an extra column to the contract, so a log exported in upper case lost every channel and the
+    diagnosis said only that there was no moving position."""
+    from orchestrator.diagnose import DiagnosisError, diagnose
+
+    rows = "".join(f"{0.001 * k},{3 + k // 50},{0.01 * k},{0.01 * k}\n" for k in range(200))
+    folder = write_case(tmp_path / "c", CASE.replace("[stock]", "[stock_]").split("[stock_]")[0],
+                        "t_s,LINE,X_REF_MM,X_MM\n" + rows)
+    with caplog.at_level("WARNING", logger="orchestrator.recording_csv"):
+        with pytest.raises(DiagnosisError, match=r"'LINE' is not 'line', 'X_REF_MM' is not 'x_ref_mm', 'X_MM' is not "
+                                                 r"'x_mm': column names are case-sensitive \(recording\.md\)$"):
+            diagnose(folder)
+    assert "recording.csv:1: column(s) ['LINE', 'X_MM', 'X_REF_MM'] are not recording.md names" in caplog.text
+    with pytest.raises(RecordingError, match=r"missing column\(s\) \['x_mm'\] needed here; .*'X_MM' is not 'x_mm'"):
+        Recording.read_csv(folder / "recording.csv", required=["x_mm"])
+
+
+def test_time_in_milliseconds_is_named(tmp_path):
+    from orchestrator.validation import validate_recording
+
+    path = tmp_path / "recording.csv"
+    path.write_text("t_ms,x_mm\n0,0\n1,0\n", encoding="utf-8")
+    with pytest.raises(RecordingError, match=r":1: no 't_s' column; header is \['t_ms', 'x_mm'\]; expected the time "
+                                             r"in seconds as 't_s' \(case-sensitive\), not 't_ms'$"):
+        Recording.read_csv(path)
+    program = tmp_path / "program.nc"
+    program.write_text(PROGRAM)
+    ms = Recording.from_channels({"t_s": np.arange(0.0, 9000.0, 10.0), "x_mm": np.zeros(900)})
+    with pytest.raises(RecordingError, match=r"the recording lasts 8990 s .* Or is t_s written in ms\? recording\.md "
+                                             r"asks for seconds\.$"):
+        validate_recording(ms, program)

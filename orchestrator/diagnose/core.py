@@ -32,7 +32,8 @@ import numpy as np
 
 from ..case import Case, load_case, missing_file
 from ..machine import Machine, load_machine
-from ..recording import Recording, RecordingError
+from ..recording import SPEC_COLUMNS, Recording, RecordingError
+from ..recording_csv import near_miss_hint
 from .columns import AxisColumns, build
 from .cutting import FORCE_CHANNELS, has_forces
 from .cutting_core import CuttingResult, diagnose_cutting
@@ -458,7 +459,8 @@ def diagnose(
         else:
             hint = "diagnose its cutting process (cutting=True, or leave cutting unset)"
         raise DiagnosisError(f"{case.recording}: the recording has no line and no moving position or command, so "
-                             f"the feed drives cannot be diagnosed (its columns are {recording.channels}); {hint}")
+                             f"the feed drives cannot be diagnosed (its columns are {recording.channels}); {hint}"
+                             f"{near_miss_hint(recording.channels, SPEC_COLUMNS)}")
     if do_cut and needs_force_clock(recording):
         # a dynamometer on its own clock (forces only): aligned by its cutting load, the twin's path added
         say("aligning the dynamometer's clock by the cutting load")
