@@ -275,3 +275,17 @@ def test_time_in_milliseconds_is_named(tmp_path):
     with pytest.raises(RecordingError, match=r"the recording lasts 8990 s .* Or is t_s written in ms\? recording\.md "
                                              r"asks for seconds\.$"):
         validate_recording(ms, program)
+
+
+def test_a_cutting_load_alone_says_which_columns_a_diagnosis_needs(tmp_path):
+    """Only t_s and fc_N, in a case with a [stock]: the message told the user to add a [stock] and cutting=True,
+    which the case already had."""
+    from orchestrator.diagnose import DiagnosisError, diagnose
+
+    rows = "".join(f"{0.001 * k},{40.0 + (k % 5)}\n" for k in range(300))
+    folder = write_case(tmp_path / "c", CASE, "t_s,fc_N\n" + rows)
+    with pytest.raises(DiagnosisError, match=r"so the feed drives cannot be diagnosed \(its columns are \['t_s', "
+                                             r"'fc_N'\]\); a cutting diagnosis needs \['fx_N', 'fy_N'\] too \(at least "
+                                             r"100 samples each\) \('fc_N' is not enough: the cutting diagnosis "
+                                             r"compares the force components\)$"):
+        diagnose(folder)
