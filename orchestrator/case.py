@@ -14,7 +14,7 @@ from typing import Any
 from fmus_src.nck.component import N_TOOL_LENGTHS, N_TOOL_RADII
 
 from .errors import CncTwinError
-from .machine import Machine, _line_of, load_machine
+from .machine import Machine, MachineFileError, _line_of, load_machine, resolve_machine_path
 
 _TOP_KEYS = {"program", "recording", "stock", "tool", "machine", "material", "offsets"}
 _SECTION_KEYS = {
@@ -140,7 +140,7 @@ def load_case(path: str | Path, machine_override: str | Path | None = None) -> C
     if not toml_path.is_file():
         raise CaseError(f"{toml_path}: case file not found (a case folder holds case.toml, program and recording)")
     try:
-        text = toml_path.read_text(encoding="utf-8")
+        text = toml_path.read_text(encoding="utf-8-sig")  # a BOM (Windows editors) is not TOML: dropped
     except UnicodeDecodeError as exc:
         raise CaseError(f"{toml_path}: not a UTF-8 text file (byte offset {exc.start}); expected a TOML case file") from None
     try:
@@ -170,12 +170,13 @@ def load_case(path: str | Path, machine_override: str | Path | None = None) -> C
     program_value = raw.get("program")
     if not isinstance(program_value, str) or not program_value:
         raise CaseError(f"{toml_path}:{_find_top_key(text, 'program')}: 'program' must name the G-code file")
-    program = folder / program_value
+    program = _file_in_case(toml_path, text, "program", folder / program_value)
     recording = None
     if "recording" in raw:
-        if not isinstance(raw["recording"], str):
-            raise CaseError(f"{toml_path}:{_find_top_key(text, 'recording')}: 'recording' must be a file name")
-        recording = folder / raw["recording"]
+        if not isinstance(raw["recording"], str) or not raw["recording"]:
+            raise CaseError(f"{toml_path}:{_find_top_key(text, 'recording')}: 'recording' must name the recording "
+                            f"file (a CSV per recording.md), got {raw['recording']!r}")
+        recording = _file_in_case(toml_path, text, "recording", folder / raw["recording"])
 
     stock = None
     if "stock" in raw:
@@ -216,7 +217,16 @@ def load_case(path: str | Path, machine_override: str | Path | None = None) -> C
         machine_ref = raw["machine"]["parameters"]
         if not isinstance(machine_ref, str):
             raise CaseError(f"{toml_path}:{_line_of(text, 'machine', 'parameters')}: [machine] parameters must be a string")
-    machine = load_machine(machine_override or machine_ref, relative_to=folder)
+    if machine_override:
+        machine = load_machine(machine_override, relative_to=folder)
+    else:
+        try:
+            resolve_machine_path(machine_ref, relative_to=folder)
+        except MachineFileError as exc:  # name the case file and field that point nowhere
+            raise CaseError(f"{toml_path}:{_line_of(text, 'machine', 'parameters')}: [machine] parameters = "
+                            f"{machine_ref!r}: {exc}; expected a shipped set name or a .toml path (relative to "
+                            f"the case folder)") from None
+        machine = load_machine(machine_ref, relative_to=folder)
 
     materials = machine.materials()
     material = raw.get("material", materials[0] if materials else "")
@@ -257,6 +267,39 @@ def case_for_program(program: str | Path, machine: str | Path = "default") -> Ca
     m = load_machine(machine)
     materials = m.materials()
     return Case(program.parent, program, None, None, Tool(), m, materials[0] if materials else "")
+
+
+def missing_file(case: Case, key: str) -> str | None:
+    """Why the file that ``key`` (``"program"`` or ``"recording"``) of a case names cannot be read, or None.
+
+    The message names case.toml, the line of the field and the file, e.g.
+    ``case.toml:1: program = "part.nc": file /cases/a/part.nc not found``.
+    """
+    path = case.program if key == "program" else case.recording
+    if path is None or Path(path).is_file():
+        return None
+    where = str(case.source or case.folder)
+    if case.source is not None and Path(case.source).is_file():
+        try:
+            text = Path(case.source).read_text(encoding="utf-8-sig")
+            value = tomllib.loads(text).get(key)
+        except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
+            text, value = "", None
+        if isinstance(value, str) and (Path(case.folder) / value) == Path(path):
+            return f"{where}:{_find_top_key(text, key)}: {key} = {value!r}: file {path} not found"
+    return f"{where}: {key}: file {path} not found"
+
+
+def _file_in_case(toml_path: Path, text: str, key: str, path: Path) -> Path:
+    """``path``, named by the top-level ``key`` of case.toml; a folder there is an error naming file, line and field.
+
+    A missing file is not an error here: ``simulate --case DIR PROGRAM`` replaces the case's program, and a
+    command that needs a file says so when it reads it.
+    """
+    if path.is_dir():
+        raise CaseError(f"{toml_path}:{_find_top_key(text, key)}: {key!r} names the folder {path}; expected a file "
+                        f"(a path relative to the case folder, or absolute)")
+    return path
 
 
 def _find_top_key(text: str, key: str) -> int:

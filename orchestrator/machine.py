@@ -288,8 +288,11 @@ def _line_of(text: str, section: str, key: str | None) -> int:
     lines = text.splitlines()
     header = re.compile(r"^\s*\[\s*" + re.escape(section) + r"\s*\]\s*(#.*)?$")
     start = next((i for i, line in enumerate(lines) if header.match(line)), None)
-    if start is None:
-        return 0
+    if start is None:  # a dotted key (tool.flutes = 2) or an inline table (tool = { flutes = 2 })
+        dotted = re.compile(r"^\s*" + re.escape(section).replace(r"\.", r"\s*\.\s*")
+                            + (r"\s*\.\s*" + re.escape(key) if key else r"\s*[.=]"))
+        inline = re.compile(r"^\s*" + re.escape(section) + r"\s*=\s*\{" + (r".*\b" + re.escape(key) + r"\s*=" if key else ""))
+        return next((i + 1 for i, line in enumerate(lines) if dotted.match(line) or inline.match(line)), 0)
     if key is None:
         return start + 1
     pattern = re.compile(r"^\s*" + re.escape(key) + r"\s*=")
@@ -471,7 +474,7 @@ def load_machine(name_or_path: str | Path = "default", relative_to: Path | None 
     """
     path = resolve_machine_path(name_or_path, relative_to)
     try:
-        text = path.read_text(encoding="utf-8")
+        text = path.read_text(encoding="utf-8-sig")  # a BOM (Windows editors) is not TOML: dropped
     except UnicodeDecodeError as exc:
         raise MachineFileError(f"{path}: not a UTF-8 text file (byte offset {exc.start}); expected a TOML machine file") from None
     try:

@@ -149,13 +149,39 @@ def _check_header(path: Path, header: list[str], contract: set[str], required: I
                           if len(header) == 1 and sep in header[0]), None)
         hint = (f": its columns are separated by {separator}; recording.md asks for ',' (and '.' as the "
                 "decimal point)") if separator else ""
+        other_time = [name for name in header if re.fullmatch(r"(?i)t(ime)?(_?\(?(s|ms|us|min)\)?)?", name)]
+        if not hint and other_time:
+            hint = f"; expected the time in seconds as 't_s' (case-sensitive), not {other_time[0]!r}"
         raise RecordingError(f"{path}:1: no 't_s' column; header is {header}{hint}")
     for name in header:
         if name in contract and header.count(name) > 1:
             raise RecordingError(f"{path}:1: column {name!r} appears twice")
     missing = [c for c in required if c not in header]
     if missing:
-        raise RecordingError(f"{path}:1: missing column(s) {missing} needed here; header is {header}")
+        raise RecordingError(f"{path}:1: missing column(s) {missing} needed here; header is {header}"
+                             f"{near_miss_hint(header, contract)}")
+    misses = near_misses(header, contract)
+    if misses:
+        _log.warning("%s:1: column(s) %s are not recording.md names and are read as extra columns%s", path,
+                     sorted(misses), near_miss_hint(header, contract))
+
+
+def near_misses(names: Iterable[str], contract: Iterable[str]) -> dict[str, str]:
+    """Names that are a contract column but for upper/lower case or blanks (``'X_MM'`` -> ``'x_mm'``)."""
+    known = {re.sub(r"\s+", "", c).lower(): c for c in contract}
+    names = list(names)
+    return {n: known[re.sub(r"\s+", "", n).lower()] for n in names
+            if n not in known.values() and re.sub(r"\s+", "", n).lower() in known
+            and known[re.sub(r"\s+", "", n).lower()] not in names}
+
+
+def near_miss_hint(names: Iterable[str], contract: Iterable[str]) -> str:
+    """``"; 'X_MM' is not 'x_mm' ..."`` for the names of :func:`near_misses` (empty when there are none)."""
+    misses = near_misses(names, contract)
+    if not misses:
+        return ""
+    pairs = ", ".join(f"{n!r} is not {c!r}" for n, c in list(misses.items())[:4])
+    return f"; {pairs}{' ...' if len(misses) > 4 else ''}: column names are case-sensitive (recording.md)"
 
 
 _LINE_BREAK = re.compile(rb"\r\n|\r|\n")
@@ -323,7 +349,11 @@ class _ChunkParser:
             if len(row) > width and not any(cell.strip() for cell in row[width:]):
                 row = row[:width]  # empty cells after the last column (a trailing comma)
             if len(row) != width:
-                raise RecordingError(f"{self.path}:{lineno}: {len(row)} cells, header has {width} columns")
+                hint = ""
+                if len(row) > width and any(c.strip().isdigit() for c in row):
+                    hint = ("; is ',' the decimal point here (e.g. '0,5')? recording.md asks for '.' as the decimal "
+                            "point and ',' between cells")
+                raise RecordingError(f"{self.path}:{lineno}: {len(row)} cells, header has {width} columns{hint}")
             for j, cell in enumerate(row):
                 cell = cell.strip()
                 if not cell or j in self.ignored:

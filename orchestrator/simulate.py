@@ -11,7 +11,7 @@ import numpy as np
 from fmus_src.nck.blocks import ToolChange
 
 from .atomic import atomic_write_json
-from .case import Case, CaseError, case_for_program, load_case
+from .case import Case, CaseError, case_for_program, load_case, missing_file
 from .cost import CostModel
 from .master import Master, MasterSettings
 from .plots import overview_png
@@ -95,7 +95,8 @@ def resolve_case(
     if program is not None:
         resolved.program = Path(program)
     if not resolved.program.is_file():
-        raise CaseError(f"{resolved.program}: program file not found")
+        problem = missing_file(resolved, "program") if program is None else None
+        raise CaseError(problem or f"{resolved.program}: program file not found")
     return resolved
 
 

@@ -30,7 +30,7 @@ import numpy as np
 from fmus_src.nck import GCodeError, NCKernel
 from fmus_src.nck.lexer import LexError, lex_line, split_lines
 
-from .case import MAX_STOCK_COORDINATE_MM, Case, CaseError
+from .case import MAX_STOCK_COORDINATE_MM, Case, CaseError, missing_file
 from .recording import Recording, RecordingError
 
 
@@ -160,10 +160,12 @@ def _check_duration(recording: Recording, text: str, program_name: str, nc_param
     span = float(recording.t[-1] - recording.t[0])
     allowed = MAX_DURATION_RATIO * planned + DURATION_SLACK_S
     if span > allowed:
+        unit = " Or is t_s written in ms? recording.md asks for seconds." if span * 1e-3 <= allowed else ""
         raise RecordingError(
             f"{recording.source}: column 't_s': the recording lasts {span:.6g} s but {program_name} runs "
             f"{planned:.6g} s (planned with the given NC parameters); expected at most {allowed:.6g} s "
-            f"({MAX_DURATION_RATIO:g} x the program + {DURATION_SLACK_S:g} s): is this the recording of another program?")
+            f"({MAX_DURATION_RATIO:g} x the program + {DURATION_SLACK_S:g} s): is this the recording of another "
+            f"program?{unit}")
 
 
 def validate_recording(
@@ -228,10 +230,10 @@ def validate_case(case: Case) -> None:
         Naming ``case.toml`` (or the folder) and the field.
     """
     where = str(case.source or case.folder)
-    if not Path(case.program).is_file():
-        raise CaseError(f"{where}: program: file {case.program} not found")
-    if case.recording is not None and not Path(case.recording).is_file():
-        raise CaseError(f"{where}: recording: file {case.recording} not found")
+    for key in ("program", "recording"):
+        problem = missing_file(case, key)
+        if problem is not None:
+            raise CaseError(problem)
     if case.stock is not None:
         for key, vec in (("min", case.stock.min_mm), ("max", case.stock.max_mm)):
             if not all(math.isfinite(v) and abs(v) <= MAX_STOCK_COORDINATE_MM for v in vec):

@@ -232,10 +232,10 @@ def test_missing_case_program_and_recording_files(tmp_path, good):
         load_case(tmp_path / "nowhere")
     folder = write_case(tmp_path / "c", CASE, program=False)
     case = load_case(folder)  # the loader reads the manifest only ...
-    with pytest.raises(CaseError, match=r"case.toml: program: file .*program.nc not found"):
+    with pytest.raises(CaseError, match=r"case.toml:1: program = .program.nc.: file .*program.nc not found"):
         validate_case(case)  # ... validation checks the files it names
     folder = write_case(tmp_path / "d", CASE)
-    with pytest.raises(CaseError, match=r"case.toml: recording: file .*recording.csv not found"):
+    with pytest.raises(CaseError, match=r"case.toml:2: recording = .recording.csv.: file .*recording.csv not found"):
         validate_case(load_case(folder))
     folder = write_case(tmp_path / "e", CASE, recording=good.read_text())
     case = load_case(folder)

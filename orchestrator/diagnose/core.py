@@ -30,11 +30,12 @@ from typing import Any, Callable
 
 import numpy as np
 
-from ..case import Case, load_case
+from ..case import Case, load_case, missing_file
 from ..machine import Machine, load_machine
-from ..recording import Recording, RecordingError
+from ..recording import SPEC_COLUMNS, Recording, RecordingError
+from ..recording_csv import near_miss_hint
 from .columns import AxisColumns, build
-from .cutting import has_forces
+from .cutting import FORCE_CHANNELS, has_forces
 from .cutting_core import CuttingResult, diagnose_cutting
 from .cutting_merge import holdout_cutting, merge_cutting
 from .errors import DiagnosisError
@@ -141,6 +142,9 @@ def _read(case: Case) -> Recording:
     if not Path(case.recording).is_file():
         raise DiagnosisError(f"{case.recording}: recording file not found; the case needs a recording there "
                              f"(named by recording = \"...\" in {case.source or case.folder})")
+    problem = missing_file(case, "program")
+    if problem is not None:
+        raise DiagnosisError(f"{problem}; the diagnosis runs the program that made the recording")
     try:
         recording = Recording.read_csv(case.recording)
     except RecordingError as exc:
@@ -445,9 +449,18 @@ def diagnose(
                              f"and a [stock] in {case.source or case.folder}")
     clock, notes = None, []
     if not do_cut and needs_force_clock(recording):
+        missing = [c for c in FORCE_CHANNELS if c not in recording or np.isfinite(recording[c]).sum() <= 100]
+        if missing:
+            hint = f"a cutting diagnosis needs {missing} too (at least 100 samples each)"
+            if "fc_N" in recording:
+                hint += " ('fc_N' is not enough: the cutting diagnosis compares the force components)"
+        elif case.stock is None:
+            hint = f"a cutting diagnosis of its forces needs a [stock] in {case.source or case.folder}"
+        else:
+            hint = "diagnose its cutting process (cutting=True, or leave cutting unset)"
         raise DiagnosisError(f"{case.recording}: the recording has no line and no moving position or command, so "
-                             "the feed drives cannot be diagnosed; "
-                             "diagnose its cutting process (cutting=True, a [stock] in the case)")
+                             f"the feed drives cannot be diagnosed (its columns are {recording.channels}); {hint}"
+                             f"{near_miss_hint(recording.channels, SPEC_COLUMNS)}")
     if do_cut and needs_force_clock(recording):
         # a dynamometer on its own clock (forces only): aligned by its cutting load, the twin's path added
         say("aligning the dynamometer's clock by the cutting load")

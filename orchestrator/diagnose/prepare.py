@@ -106,20 +106,41 @@ class Prepared:
     def twin_commands(self) -> dict[str, Callable[[np.ndarray, float], np.ndarray]]:
         """Axis -> ``f(q, s)``: the twin's command [m] at replay-clock times ``q``, taken ``s`` seconds later.
 
-        For the axes without a recorded command. The replays sample it at their own servo ticks
-        (program time ``q - offset - s``, linear between the twin's 1 ms interpolation samples) rather than
+        For the axes without a recorded command, and for recorded commands sampled more coarsely than the twin's
+        interpolation (:meth:`_coarse_commands`): the twin's command plus the recorded-minus-twin difference,
+        linear between the recording's samples, so that every recorded sample is kept as it is. The replays
+        sample it at their own servo ticks (program time ``q - offset - s``, linear between the twin's 1 ms interpolation samples) rather than
         interpolating ``commands`` between the recording's samples: a logger sampling unevenly or slower
         than the interpolation would otherwise reshape the commands (2.6 µm rms, 157 µm at most on z for a
         random 25 % of a 1 ms log, which read as a feed-forward).
         """
         out = {}
+        t_nc = np.asarray(self.nc.t, float)
         for a in self.axes:
+            ref = np.asarray(self.nc[f"{a}_ref_mm"], float) * 1e-3
             if not self.ref_recorded[a]:
-                t_nc = np.asarray(self.nc.t, float)
-                ref = np.asarray(self.nc[f"{a}_ref_mm"], float) * 1e-3
                 out[a] = (lambda q, s, t_nc=t_nc, ref=ref: np.interp(np.asarray(q, float) - self.offset - s,
                                                                      t_nc, ref))
+            elif self._coarse_commands(a):
+                # recorded commands sampled more coarsely than the interpolation: the twin's command carries them
+                # between the samples, corrected by the recorded-minus-twin difference (exact at every sample)
+                t_rec = np.asarray(self.t, float)
+                diff = self.commands[a] - np.interp(t_rec - self.offset, t_nc, ref)
+                out[a] = (lambda q, s, t_nc=t_nc, ref=ref, t_rec=t_rec, diff=diff:
+                          np.interp(np.asarray(q, float) - self.offset - s, t_nc, ref)
+                          + np.interp(np.asarray(q, float), t_rec, diff))
         return out
+
+    def _coarse_commands(self, a: str) -> bool:
+        """Whether the recorded command of ``a`` has a gap between samples longer than 1.5 twin samples.
+
+        Interpolated between such samples (PCHIP), a command loses the shape of every acceleration: the twin's
+        own run logged every 4 ms or 10 ms, or a random third of its 1 ms samples, read as friction,
+        reversal-friction, feed-forward and inertia effects.
+        """
+        measured = np.asarray(self.t, float)[np.isfinite(np.asarray(self.recording[f"{a}_ref_mm"], float))]
+        period = float(np.median(np.diff(np.asarray(self.nc.t, float)))) if len(self.nc) > 1 else 0.0
+        return measured.size > 1 and period > 0.0 and float(np.max(np.diff(measured))) > 1.5 * period
 
 
 def _finite_fraction(rec: Recording, name: str) -> float:

@@ -14,7 +14,7 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
-from ..case import Case, load_case
+from ..case import Case, load_case, missing_file
 from ..recording import Recording, RecordingError
 from ..twin import nck_parameters
 from ..validation import validate_recording
@@ -70,6 +70,9 @@ def load_recording(case: Case) -> Recording:
             f"{case.recording}: recording file not found (run the experiment program on the machine and "
             "save the log there, columns per shared/spec/recording.md)"
         )
+    problem = missing_file(case, "program")
+    if problem is not None:
+        raise IdentificationError(f"{problem}; the recording is checked against the program that made it")
     try:
         recording = Recording.read_csv(case.recording)
         validate_recording(recording, case.program, nc_parameters=nck_parameters(case.machine))

@@ -44,6 +44,7 @@ uses it.
 """
 from __future__ import annotations
 
+import logging
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -61,6 +62,8 @@ from .errors import IdentificationError
 from .ga import paper_objective, run_ga_lockstep
 from .journal import Journal
 from .segments import SegmentSettings, find_segments
+
+_log = logging.getLogger(__name__)
 
 FACTORS = ("position_scale", "velocity_p_scale", "velocity_i_scale")
 SYMBOLS = ("Spp", "Svp", "Svi")
@@ -89,6 +92,7 @@ class _Series:
     cur: dict[str, np.ndarray]        # A
     source: str = "recorded"
     cmd: dict[str, np.ndarray] = field(default_factory=dict)   # m at t (twin commands)
+    between: dict | None = None       # axis -> f(q) [m]: a coarse recorded reference at the servo ticks
     t_start: float | None = None
     disturbance: dict | None = None
     offset: float = 0.0               # logger clock minus program clock, s
@@ -204,7 +208,7 @@ def _prepare(data: Sequence[CaseData], axes: Sequence[str] | None,
                 {a: float(rec[f"{a}_mm"][0]) * 1e-3 for a in moving},
                 {a: np.asarray(rec.following_error_um(a), dtype=float) for a in moving},
                 {a: np.asarray(rec[f"{a}_tcmd_A"], dtype=float) for a in moving},
-                disturbance=load, forces=forces,
+                disturbance=load, forces=forces, between=_between_samples(d, machine, moving),
             ))
         twin = _twin_series(d, from_twin, machine, explicit=bool(axes)) if from_twin else None
         if twin is not None:
@@ -251,6 +255,34 @@ def _cutting_load(d: CaseData, machine: Machine, axes: list[str]) -> tuple[dict 
             "fx_N and fy_N, or remove [stock] from the case for an air run"
         ) from None
     return prep.disturbance, prep.forces_source
+
+
+def _between_samples(d: CaseData, machine: Machine, axes: list[str]) -> dict | None:
+    """Recorded commands sampled more coarsely than the interpolation, at any time: ``{axis: f(q)}`` [m], or None.
+
+    Interpolated between the logger's samples, such a command loses the shape of every acceleration: the twin's
+    own air run logged every 10 ms gave Svp 0.48 instead of 1, every 4 ms Svi 0.91 on Z. Here the twin's own
+    command carries the recorded one between the samples, corrected by the recorded-minus-twin difference
+    (exact at every sample), placed on the logger clock by the diagnosis's alignment
+    (:meth:`orchestrator.diagnose.prepare.Prepared.twin_commands`). None for a log at the interpolation period
+    (nothing to carry), or when the log cannot be aligned with the twin's run (the samples are interpolated).
+    """
+    from ..diagnose.errors import DiagnosisError  # local: only coarse logs need the diagnosis's alignment
+    from ..diagnose.prepare import prepare as align_with_twin
+
+    t = np.asarray(d.recording.t, dtype=float)
+    period = float(machine.si("nck")["interpolation_period"])
+    gaps = [float(np.max(np.diff(t[np.isfinite(np.asarray(d.recording[f"{a}_ref_mm"], dtype=float))])))
+            for a in axes if np.isfinite(np.asarray(d.recording[f"{a}_ref_mm"], dtype=float)).sum() > 1]
+    if not gaps or max(gaps) <= 1.5 * period:
+        return None
+    try:
+        prep = align_with_twin(d.case, d.recording, machine, axes=list(axes))
+    except DiagnosisError as exc:
+        _log.info("%s: recorded commands interpolated between samples (not aligned with the twin: %s)", d.source, exc)
+        return None
+    twin = prep.twin_commands()
+    return {a: (lambda q, f=twin[a]: f(q, 0.0)) for a in axes if a in twin} or None
 
 
 def _twin_series(d: CaseData, axes: list[str], machine: Machine, explicit: bool) -> _Series | None:
@@ -314,7 +346,8 @@ def _simulate(machine: Machine, series: _Series, scales: dict[str, np.ndarray],
     batch = next(iter(scales.values())).shape[0]
     mcu = {f"{a}_{name}": scales[a][:, j] for a in series.ref for j, name in enumerate(FACTORS) if a in scales}
     if series.source == "recorded":
-        run = replay(machine, series.t, series.ref, batch=batch, mcu_values=mcu, initial_position=series.x0,
+        refs = {a: (series.between or {}).get(a, r) for a, r in series.ref.items()}
+        run = replay(machine, series.t, refs, batch=batch, mcu_values=mcu, initial_position=series.x0,
                      disturbance=series.disturbance)
         e = {a: (series.ref[a][:, None] - run.position[a]) * 1e6 for a in series.ref}
         return e, run.current
