@@ -334,3 +334,34 @@ def test_cli_check_fmu_and_simulate_an_ssd_of_unseen_fmus(fmus, tmp_path, capsys
     recording = Recording.read_csv(out / "recording.csv")
     np.testing.assert_allclose(recording["d.x"], 0.25 * np.exp(-recording["t_s"]), rtol=1e-10)  # 12 digits in CSV
     np.testing.assert_array_equal(recording["st.counter"], np.floor(np.round(recording["t_s"], 9)))
+
+
+# ----------------------------------------------------------------------------- a failed FMU's held values
+@pytest.mark.parametrize("stair", ["stair", "counter3"])
+def test_a_failed_fmu_holds_the_discrete_outputs_of_its_last_good_step(fmus, fast_runs, stair):
+    """Neither recorded nor connected: Integer/Boolean/String outputs of FMI 2.0 and Integer/String of FMI 3.0 after
+    a failure at 7 ms are those after the step to 7 ms (3 events of a 2 ms period), on both loops."""
+    name = "st" if stair == "stair" else "c"
+    parameters = {"period": 0.002, "fail_time": 0.0075}
+    result, _ = _both(lambda: _one(fmus[stair], name, **parameters), [], fast_runs, strings=True, time_limit=0.05)
+    assert not result.success and result.steps == 7
+    system = _one(fmus[stair], name, **parameters)
+    Master(system, MasterSettings(), []).run()
+    held = system.components[name].values
+    assert (int(held["counter"][0]), held["label"]) == (3, "n=3")
+    if stair == "stair":
+        assert bool(held["odd"][0]) is True
+
+
+def test_each_fmi2_instance_gets_its_own_log_lines(fmus):
+    """fmpy's formatting proxy keeps one Python logger per process; the messages must still reach their instance."""
+    a = FMUComponent(fmus["stair"], "a", parameters={"term_status": 1, "period": 0.002})
+    b = FMUComponent(fmus["stair"], "b", parameters={"term_status": 1})
+    for component in (a, b):
+        component.setup()
+    for k in range(3):
+        a.do_step(k * 1e-3, 1e-3)
+    a.terminate()
+    b.terminate()
+    assert list(a.messages) == ["[fmi2Warning] terminating after 1 events"]
+    assert list(b.messages) == ["[fmi2Warning] terminating after 0 events"]
