@@ -32,11 +32,9 @@ from typing import Callable, Literal, Sequence
 
 import numpy as np
 
-from fmus_src.units import conversion_factor
-
 from .errors import CncTwinError, SimulationError, SystemDescriptionError
 from .recording import Recording
-from .system import Connection, System, split_reference
+from .system import Connection, System, split_reference, unit_factor
 
 log = logging.getLogger(__name__)
 
@@ -61,6 +59,20 @@ class Probe:
     channel: str
     reference: str
     unit: str | None = None
+
+
+def probe_factor(system: System, probe: Probe) -> float:
+    """Factor from the probed variable's unit to the probe's channel unit (1 without a channel unit).
+
+    Raises
+    ------
+    SystemDescriptionError
+        The channel unit cannot be converted from the variable's.
+    """
+    comp, var = split_reference(probe.reference)
+    declared = system.component(comp).variable(var)
+    unit = probe.unit or declared.unit
+    return unit_factor(declared.unit, unit, f"probe {probe.channel!r}: {probe.reference} [{declared.unit}] -> [{unit}]")
 
 
 @dataclass
@@ -253,6 +265,8 @@ class Master:
         for reference in [p.reference for p in self.probes] + list(self.settings.limits) + list(self._stop_refs):
             comp, var = split_reference(reference)
             system.component(comp).variable(var)
+        for p in self.probes:  # a channel's unit must be the variable's or convertible from it
+            probe_factor(system, p)
         self._wires: dict[str, list[_Wire]] = {name: [] for name in system.components}
         self._connections_by_target: dict[str, list[Connection]] = {name: [] for name in system.components}
         for c in system.connections:
@@ -362,11 +376,37 @@ class Master:
         if found and raise_when_all:
             self._raise_if_all_failed()
 
-    def _terminate_all(self) -> None:
+    def _terminate_all(self) -> CncTwinError | None:
+        """Terminate every initialised component, the others too when one fails; the first failure is returned.
+
+        A foreign FMU may fail in ``fmi2Terminate`` (a final check, a file it cannot
+        write); that must not leave the components after it running, nor lose the
+        recording of the run (see :meth:`_terminated`).
+        """
+        first: CncTwinError | None = None
         for name in self.order:
             component = self.system.components[name]
             if getattr(component, "state", "") == "initialized":
-                component.terminate()
+                try:
+                    component.terminate()
+                except CncTwinError as exc:
+                    first = first or exc
+        return first
+
+    def _terminated(self, success: bool, message: str, problem: CncTwinError | None, t: float) -> tuple[bool, str]:
+        """Success and message of a run after :meth:`_terminate_all` returned ``problem``.
+
+        A run that succeeded fails with the termination error (every member failed,
+        as for an error while stepping); a run that had failed already keeps its own
+        message, with the termination error appended.
+        """
+        if problem is None:
+            return success, message
+        if success:
+            return False, self._run_failed(problem, t)
+        message = f"{message}; terminating then failed too: {problem}"
+        log.error("%s", message)
+        return False, message
 
     def _stop_flags(self) -> np.ndarray | None:
         if not self._stop_refs:
@@ -468,7 +508,7 @@ class Master:
             comp, var = split_reference(p.reference)
             declared = comps[comp].variable(var)
             unit = p.unit or declared.unit
-            probes.append((p.channel, None, var, conversion_factor(declared.unit, unit), unit, comp))
+            probes.append((p.channel, None, var, probe_factor(system, p), unit, comp))
         batch = system.batch
         t = s.t0
         k = 0
@@ -524,7 +564,8 @@ class Master:
             success = False
             message = self._run_failed(exc, t)
         finally:
-            self._terminate_all()
+            ended = self._terminate_all()
+        success, message = self._terminated(success, message, ended, t)
         return self._result(recorder.recording(success, message, system.name), success, message, k, t, stopped_at)
 
 

@@ -24,6 +24,34 @@ from fmus_src.units import UnitError, conversion_factor
 from .errors import SystemDescriptionError
 
 
+def unit_factor(source: str, target: str, what: str) -> float:
+    """Factor ``k`` with value in ``target`` = k × value in ``source``; 1 for the same symbol, known or not.
+
+    A foreign FMU may declare units this project does not know (``"kV"``,
+    ``"degC"``, ``"bar"``); a value can still be recorded in its own unit and
+    passed to a variable of the same unit. Only a conversion needs both units
+    known and of the same dimension.
+
+    Parameters
+    ----------
+    source, target : str
+        Unit symbols.
+    what : str
+        What is converted, for the message (``"a.y [kV] -> b.u [V]"``).
+
+    Raises
+    ------
+    SystemDescriptionError
+        Different symbols of which one is unknown, or of different dimension.
+    """
+    if source == target:
+        return 1.0
+    try:
+        return conversion_factor(source, target)
+    except UnitError as exc:
+        raise SystemDescriptionError(f"{what}: {exc}") from None
+
+
 class ComponentLike(Protocol):
     """What the master needs from a component (native or FMU)."""
 
@@ -150,10 +178,7 @@ class System:
             raise SystemDescriptionError(f"{target} is a {dst.causality}, not an input")
         if src.type == "String" or dst.type == "String":
             raise SystemDescriptionError(f"{source} -> {target}: string variables cannot be connected")
-        try:
-            factor = conversion_factor(src.unit, dst.unit)
-        except UnitError as exc:
-            raise SystemDescriptionError(f"{source} [{src.unit}] -> {target} [{dst.unit}]: {exc}") from None
+        factor = unit_factor(src.unit, dst.unit, f"{source} [{src.unit}] -> {target} [{dst.unit}]")
         for existing in self.connections:
             if existing.target == target:
                 raise SystemDescriptionError(f"{target} is already connected to {existing.source}")

@@ -37,9 +37,9 @@ from fmus_src.cutting.path_component import PathCuttingLoad
 from fmus_src.nck.component import NCKernel
 from fmus_src.servo.drive import DriveAxis
 from fmus_src.servo.mcu import MCU, TICK_RTOL
-from fmus_src.units import conversion_factor
 
 from ..errors import CncTwinError
+from ..master import probe_factor
 from ..system import split_reference
 from .loop import (CUT_ROWS, DRIVE_ROWS, INTEGRATOR_EXPONENTIAL, INTEGRATOR_RK4,
                    KIND_CUT, KIND_DRIVE, KIND_MCU, KIND_NCK, KIND_ZMAP, MCU_ROWS, NCK_ROWS, ZMAP_ROWS)
@@ -215,7 +215,7 @@ class Layout:
             declared = system.components[comp].variable(var)
             unit = p.unit or declared.unit
             self.probe_rows.append(self._row(p.reference))
-            factors.append(conversion_factor(declared.unit, unit))
+            factors.append(probe_factor(system, p))
             self.channels.append((p.channel, unit))
         self.probe_rows = np.array(self.probe_rows, dtype=np.int64)
         self.probe_factor = np.array(factors, dtype=np.float64)

@@ -206,7 +206,8 @@ def run_compiled(master: "Master") -> "RunResult | None":
             blocks.close()
         if v_current:
             layout.unpack(V)
-        master._terminate_all()  # noqa: SLF001
+        ended = master._terminate_all()  # noqa: SLF001
+    success, message = master._terminated(success, message, ended, t)  # noqa: SLF001
     if n_rec < rows.shape[0] // 2:  # do not keep a mostly unused buffer alive
         rows = rows[:n_rec].copy()
     units = {"t_s": "s", **dict(layout.channels)}

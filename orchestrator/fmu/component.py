@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import atexit
 import ctypes
+import itertools
 import logging
 import shutil
 import tempfile
@@ -188,7 +189,11 @@ def load_fmu(path: str | Path) -> LoadedFMU:
     binary = f"binaries/{platform}/{identifier}{_SUFFIX}"
     if binary not in names:
         platforms = sorted({n.split("/")[1] for n in names if n.startswith("binaries/") and n.count("/") >= 2})
-        raise FMUError(f"{path}: no binary {binary} for this platform (the FMU has {platforms})", path=str(path))
+        has = f"the FMU has binaries for {platforms}" if platforms else "the FMU has no binaries"
+        if any(n.startswith("sources/") and n.endswith(".c") for n in names):
+            has += (f" and C sources: compile them for {platform} first (e.g. "
+                    "fmpy.util.compile_platform_binary, or the exporting tool)")
+        raise FMUError(f"{path}: no binary {binary} for this platform ({has})", path=str(path))
     try:
         md = read_model_description(str(path), validate=False)
     except Exception as exc:  # fmpy raises a plain Exception for an illegal description (e.g. a causality)
@@ -334,6 +339,28 @@ def _free_instance(slave: Any, alive: list[bool], free: bool = True, function: s
             getattr(slave, function)(slave.component)
 
 
+#: Components by the ``componentEnvironment`` key their FMI 2.0 instance logs with (see :func:`_route_fmi2_log`).
+_LOG_TARGETS: weakref.WeakValueDictionary[int, "FMUComponent"] = weakref.WeakValueDictionary()
+_LOG_KEYS = itertools.count(1)
+
+
+def _route_fmi2_log(env: Any, instance: bytes, status: int, category: bytes, message: bytes) -> None:
+    """The FMI 2.0 logger of every instance: hands the message to the component that ``env`` names.
+
+    A message without a living component (an instance freed by the garbage
+    collector logging in ``fmi2FreeInstance``) goes to this module's logger.
+    """
+    target = _LOG_TARGETS.get(int(env or 0))
+    if target is not None:
+        target._log(status, message)  # noqa: SLF001 - same module
+    else:
+        log.debug("%s: [%s] %s", (instance or b"?").decode("utf-8", "replace"), status_name(status),
+                  (message or b"").decode("utf-8", "replace"))
+
+
+_FMI2_LOGGER = fmi2CallbackLoggerTYPE(_route_fmi2_log)
+
+
 class FMUComponent:
     """An FMI 2.0 or FMI 3.0 co-simulation FMU behind the component protocol (batch 1).
 
@@ -433,6 +460,9 @@ class FMUComponent:
                 )
             if not ours.isidentifier():
                 raise FMUError(f"{where}: mapping target name {ours!r} is not an identifier", path=str(self.path))
+            if theirs in reverse:
+                raise FMUError(f"{where}: mapping {reverse[theirs]!r} and {ours!r} both -> {theirs!r}; map each FMU "
+                               "variable to one name", path=str(self.path), component=self.name)
             reverse[theirs] = ours
         bindings: list[_Binding] = []
         problems: list[str] = []
@@ -493,6 +523,17 @@ class FMUComponent:
                     + f" (give mapping={{our_name: their_name}}; the FMU has {sorted(fmu_vars)})",
                     path=str(self.path), component=self.name,
                 )
+        seen: dict[str, str] = {}
+        for b in bindings:
+            first = seen.setdefault(b.ours.name, b.theirs.name)
+            if first != b.theirs.name:
+                # two FMU variables under one name would share one value array (silently wrong values)
+                mapped, own = (first, b.theirs.name) if reverse.get(first) == b.ours.name else (b.theirs.name, first)
+                raise FMUError(
+                    f"{where}: mapping {b.ours.name!r} -> {mapped!r}: the FMU has its own variable {own!r}, which "
+                    f"would share the name; map it to another name too (e.g. mapping={{..., "
+                    f"{own + '_fmu'!r}: {own!r}}})", path=str(self.path), component=self.name,
+                )
         return bindings
 
     # ------------------------------------------------------------------ declarations
@@ -511,10 +552,18 @@ class FMUComponent:
         try:
             return self._by_name[name].ours
         except KeyError:
-            raise FMUError(
-                f"{self.name} ({self.path.name}): no variable {name!r}; it has {sorted(self._by_name)}",
-                path=str(self.path), component=self.name,
-            ) from None
+            pass
+        theirs = {v.name: v for v in self.model_description.modelVariables}.get(name)
+        if theirs is not None and theirs.causality in ("parameter", "input", "output"):
+            # an FMU name the twin cannot address (structured names "gain.k", "der(x)", "a[1]")
+            why = (f"the FMU's {theirs.causality} {name!r} is not an identifier; give it one through "
+                   f"mapping={{'your_name': {name!r}}}")
+        elif theirs is not None:
+            why = f"the FMU's {name!r} is a {theirs.causality} variable, which the twin does not exchange"
+        else:
+            why = "no such variable"
+        raise FMUError(f"{self.name} ({self.path.name}): no variable {name!r} ({why}); it has {sorted(self._by_name)}",
+                       path=str(self.path), component=self.name)
 
     def names(self, causality: str) -> list[str]:
         """Names of the exposed variables of one causality, in model-description order."""
@@ -607,14 +656,13 @@ class FMUComponent:
         self.messages.append(f"[{label}] {text}")
         log.debug("%s: [%s] %s", self.name, label, text)
 
-    def _logger(self, env: Any, instance: bytes, status: int, category: bytes, message: bytes) -> None:
-        self._log(status, message)
-
     def _logger3(self, env: Any, status: int, category: bytes, message: bytes) -> None:
         self._log(status, message)
 
     def _instantiate(self) -> None:
         md = self.model_description
+        self._log_key = next(_LOG_KEYS)
+        _LOG_TARGETS[self._log_key] = self
         if self._v3:
             self._instantiate3()
         else:
@@ -665,8 +713,11 @@ class FMUComponent:
             raise FMUError(f"{self.path}: cannot load the FMU's shared library ({exc})", path=str(self.path),
                            component=self.name) from None
         callbacks = fmi2CallbackFunctions()
-        self._log_callback = fmi2CallbackLoggerTYPE(self._logger)
-        callbacks.logger = self._log_callback
+        # one process-wide logger, routed by componentEnvironment: fmpy's variadic-formatting proxy keeps a single
+        # Python logger for the whole process (the last one added), so per-instance loggers would send every
+        # FMI 2.0 instance's messages to the instance made last
+        callbacks.logger = _FMI2_LOGGER
+        callbacks.componentEnvironment = self._log_key
         callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
         callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
         try:

@@ -33,12 +33,14 @@ call and operation for operation, so recordings are bit-identical:
 Only Real variables can be connected (of an FMI 3.0 FMU: ``Float64``
 variables). Recorded outputs and stop signals of an FMI 2.0 FMU may also be
 Boolean or Integer (read with ``fmi2GetBoolean`` / ``fmi2GetInteger`` after
-every step of their component); its other discrete outputs are refreshed
-once after each run. The other outputs of an FMI 3.0 :class:`FMUComponent`
-(``Float32``, integers, Boolean) are read after every step, one getter call
-per type as :class:`FMUComponent` does, into its own buffers, unpacked after
-each run; String outputs are refreshed once after each run. Unconnected
-inputs of those types keep the values set at initialisation. A run can end early:
+every step of their component). The other outputs of an :class:`FMUComponent`
+(FMI 2.0: Integer, Boolean, String; FMI 3.0: all but ``Float64``) are read
+after every step, one getter call per type as :class:`FMUComponent` does,
+into its own buffers (String values copied, as the FMU's pointers are valid
+only until its next call). After a run a component still initialised reads
+them once more; one that failed gets those of its last good step, as on the
+Python loop. Unconnected inputs of those types keep the values set at
+initialisation. A run can end early:
 after the first step at which every stop signal is non-zero, or at a check
 step at which a checked output is not finite or outside its bounds (what
 :meth:`orchestrator.master.Master.run` needs to stop where its Python loop
@@ -60,6 +62,7 @@ import os
 import shutil
 import subprocess
 import tempfile
+import weakref
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Mapping, Sequence
@@ -85,6 +88,7 @@ _C_SOURCE = r"""
 #include <math.h>
 #include <stdbool.h>
 #include <stddef.h>
+#include <stdlib.h>
 #include <string.h>
 
 typedef void *fmi2Component;
@@ -100,6 +104,8 @@ typedef fmi2Status (*GetFloat64F)(void *, const fmi2ValueReference *, size_t, do
 typedef fmi2Status (*DoStep3F)(void *, double, double, bool, bool *, bool *, bool *, double *);
 /* any fmi3GetXXX but Binary: the value array is only passed on, so its element type does not matter */
 typedef fmi2Status (*Get3F)(void *, const fmi2ValueReference *, size_t, void *, size_t);
+/* fmi2GetInteger, fmi2GetBoolean, fmi2GetString (the same) */
+typedef fmi2Status (*Get2F)(void *, const fmi2ValueReference *, size_t, void *);
 
 typedef struct {
     int n_comp;
@@ -153,15 +159,39 @@ typedef struct {
                                      fmi3GetFloat64, fmi3DoStep */
     void **step_flags;            /* FMI 3.0 component c: step_flags[4c .. 4c+3] -> eventHandlingNeeded,
                                      terminateSimulation, earlyReturn (bool), lastSuccessfulTime (double) */
-    /* FMI 3.0: the other outputs but String (Float32, integers, Boolean), read after every step into the
-       FMUComponent's own buffers, one getter call per block, as FMUComponent does */
+    /* an FMUComponent's other outputs (FMI 2.0: Integer, Boolean, String; FMI 3.0: all but Float64), read after
+       every step into its own buffers, one getter call per block, as FMUComponent does; so a failed instance
+       keeps the values of its last good step */
     const int *other_start;       /* blocks of component c: other_start[c] .. other_start[c+1]-1 */
     void **other_get;
-    void **other_vr;              /* const fmi3ValueReference * */
+    void **other_vr;              /* const fmi2ValueReference * */
     const int *other_n;
     void **other_buf;
     int err_block;
+    const int *other_kind;        /* bit 0: FMI 3.0 getter (nValues after the array); bit 1: String block, the
+                                     strings (valid until the FMU's next call) copied into other_text */
+    void **other_text;            /* String block i: char *[other_n[i]], grown with realloc (cnct_free_text) */
+    void **other_cap;             /* String block i: size_t[other_n[i]], bytes allocated for each copy */
 } Loop;
+
+static int copy_texts(char **text, size_t *cap, const char *const *src, size_t n) {
+    for (size_t k = 0; k < n; ++k) {
+        const char *s = src[k] ? src[k] : "";
+        const size_t len = strlen(s) + 1;
+        if (len > cap[k]) {
+            char *grown = (char *)realloc(text[k], len);
+            if (!grown) return 1;
+            text[k] = grown;
+            cap[k] = len;
+        }
+        memcpy(text[k], s, len);
+    }
+    return 0;
+}
+
+void cnct_free_text(char **text, size_t *cap, size_t n) {
+    for (size_t k = 0; k < n; ++k) { free(text[k]); text[k] = NULL; cap[k] = 0; }
+}
 
 static fmi2Status set_real(Loop *L, int c, const fmi2ValueReference *vr, size_t n) {
     if (L->fmi3[c]) return ((SetFloat64F)L->set_real[c])(L->comp[c], vr, n, L->buffer, n);
@@ -182,9 +212,15 @@ static int get_outputs(Loop *L, int c) {
 static int get_discrete(Loop *L, int c) {
     for (int i = L->other_start[c]; i < L->other_start[c + 1]; ++i) {
         const size_t n = (size_t)L->other_n[i];
-        fmi2Status s = ((Get3F)L->other_get[i])(L->comp[c], (const fmi2ValueReference *)L->other_vr[i], n,
-                                                L->other_buf[i], n);
+        const fmi2ValueReference *vr = (const fmi2ValueReference *)L->other_vr[i];
+        const int kind = L->other_kind[i];
+        fmi2Status s = (kind & 1) ? ((Get3F)L->other_get[i])(L->comp[c], vr, n, L->other_buf[i], n)
+                                  : ((Get2F)L->other_get[i])(L->comp[c], vr, n, L->other_buf[i]);
         if (s > 1) { L->err[1] = 3; L->err[3] = s; L->err_block = i; return 1; }
+        if ((kind & 2) && copy_texts((char **)L->other_text[i], (size_t *)L->other_cap[i],
+                                     (const char *const *)L->other_buf[i], n)) {
+            L->err[1] = 3; L->err[3] = -2; L->err_block = i; return 1;   /* out of memory */
+        }
     }
     int a = L->bool_start[c], b = L->bool_start[c + 1];
     const int n_bool = L->bool_start[L->n_comp];
@@ -332,6 +368,9 @@ class _Loop(ctypes.Structure):
         ("other_n", ctypes.POINTER(ctypes.c_int)),
         ("other_buf", ctypes.POINTER(ctypes.c_void_p)),
         ("err_block", ctypes.c_int),
+        ("other_kind", ctypes.POINTER(ctypes.c_int)),
+        ("other_text", ctypes.POINTER(ctypes.c_void_p)),
+        ("other_cap", ctypes.POINTER(ctypes.c_void_p)),
     ]
 
 
@@ -372,6 +411,8 @@ def _library() -> ctypes.CDLL:
     dll.cnct_run.restype = ctypes.c_int
     dll.cnct_pull.argtypes = [ctypes.POINTER(_Loop)]
     dll.cnct_pull.restype = ctypes.c_int
+    dll.cnct_free_text.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_size_t]
+    dll.cnct_free_text.restype = None
     _LIBRARY = dll
     return dll
 
@@ -397,9 +438,12 @@ class _Instance:
         self.owner: FMUComponent | None = obj if isinstance(obj, FMUComponent) else None
         #: FMI 3.0: the output flags of fmi3DoStep, written by the C loop (an FMUComponent's own).
         self.flags: fmi3.StepFlags | None = None
-        #: FMI 3.0 FMUComponent: its output blocks other than Float64 and String, read by the C loop after
-        #: every step into their own buffers (unpacked by :meth:`FastFMULoop._write_back`).
+        #: FMUComponent: its output blocks other than Real (FMI 2.0) or Float64 (FMI 3.0), read by the C loop
+        #: after every step into their own buffers, String values copied into :attr:`texts` (a failed instance
+        #: gets them in :meth:`FastFMULoop._write_back`).
         self.other_blocks: list[_Block] = []
+        #: String block -> (char *[n], size_t[n]): the C loop's copies of its strings (freed with the instance).
+        self.texts: dict[int, tuple[ctypes.Array, ctypes.Array]] = {}
         if self.owner is not None:
             self.v3 = fmi3.is_fmi3(self.owner.fmi_version)
             self.slave: FMU2Slave | FMU3Slave = obj._slave  # noqa: SLF001 - same package; the instance it drives
@@ -417,9 +461,13 @@ class _Instance:
                     self.inputs[b.ours.name] = port
                 elif b.ours.causality == "output":
                     self.outputs[b.ours.name] = port
-            if self.v3:
-                self.other_blocks = [block for block in obj._out_blocks  # noqa: SLF001
-                                     if block.native.getter != real_getter and block.native.ours != "String"]
+            self.other_blocks = [block for block in obj._out_blocks  # noqa: SLF001
+                                 if block.native.getter != real_getter]
+            for block in self.other_blocks:
+                if block.native.ours == "String":
+                    self.texts[id(block)] = ((ctypes.c_void_p * block.n)(), (ctypes.c_size_t * block.n)())
+            if self.texts:
+                weakref.finalize(self, _free_texts, _library(), list(self.texts.values()))
             self.discrete_outputs: dict[str, tuple[int, str]] = {} if self.v3 else {
                 b.ours.name: (int(b.theirs.valueReference), b.ours.type)
                 for b in obj._bindings  # noqa: SLF001
@@ -469,10 +517,27 @@ class _Instance:
         addresses = [ctypes.cast(getattr(dll, f), ctypes.c_void_p).value for f in names]
         return (comp, *addresses, *([0, 0] if self.v3 else []))
 
-    def other_pointers(self) -> list[tuple[int, int, int, int]]:
-        """(getter, value references, count, buffer) addresses of :attr:`other_blocks`."""
-        return [(ctypes.cast(getattr(self.slave.dll, b.native.getter), ctypes.c_void_p).value,
-                 ctypes.addressof(b.vr), b.n, ctypes.addressof(b.buffer)) for b in self.other_blocks]
+    def other_pointers(self) -> list[tuple[int, int, int, int, int, int, int]]:
+        """(getter, value references, count, buffer, kind, copies, capacities) of :attr:`other_blocks`.
+
+        ``kind``: bit 0 an FMI 3.0 getter, bit 1 a String block (copies and capacities: its :attr:`texts`,
+        else 0).
+        """
+        out = []
+        for b in self.other_blocks:
+            text, cap = self.texts.get(id(b), (None, None))
+            out.append((ctypes.cast(getattr(self.slave.dll, b.native.getter), ctypes.c_void_p).value,
+                        ctypes.addressof(b.vr), b.n, ctypes.addressof(b.buffer),
+                        int(self.v3) | (2 if text is not None else 0),
+                        ctypes.addressof(text) if text is not None else 0,
+                        ctypes.addressof(cap) if cap is not None else 0))
+        return out
+
+    def held_strings(self, block: _Block) -> None:
+        """Put the C loop's copies of String ``block``'s values (those of the last read) into the component."""
+        text, _ = self.texts[id(block)]
+        for i, name in enumerate(block.names):
+            block.values[name] = (ctypes.string_at(text[i]) if text[i] else b"").decode("utf-8")
 
     def flag_pointers(self) -> list[int]:
         """Addresses of the four fmi3DoStep output flags (FMI 3.0), else four zeros."""
@@ -653,7 +718,7 @@ class FastFMULoop:
         self._k = 0
         #: Result of the steps completed before an FMI call failed in the last :meth:`run` (else None).
         self.partial: FastLoopResult | None = None
-        self._failed_block = None  # FMI 3.0: the output block whose getter failed in the last run
+        self._failed_block = None  # the output block whose getter failed in the last run
 
     @classmethod
     def from_system(cls, system: System, record: Sequence[str] = (), method: str = "gauss-seidel",
@@ -830,6 +895,9 @@ class FastFMULoop:
             other_n=arr([o[2] for o in others], ctypes.c_int),
             other_buf=arr([o[3] for o in others], ctypes.c_void_p),
             err_block=-1,
+            other_kind=arr([o[4] for o in others], ctypes.c_int),
+            other_text=arr([o[5] for o in others], ctypes.c_void_p),
+            other_cap=arr([o[6] for o in others], ctypes.c_void_p),
         )
         self._slot_of = slot_of
         return loop, keep
@@ -902,7 +970,7 @@ class FastFMULoop:
 
         Real outputs from the loop, each connected input the value it received
         at its component's last step, discrete outputs read once (those of a
-        failed FMI 3.0 instance but String from the reads after its last step).
+        failed instance from the C loop's reads after its last good step).
         """
         for (u, name), connected, value in zip(self._in_refs, self._in_connected, self._in_last):
             if connected and u.owner is not None:
@@ -913,10 +981,14 @@ class FastFMULoop:
             for name in u.outputs:  # a failed instance keeps the outputs of its last good step
                 u.owner.values[name][0] = self._slots[self._slot_of[f"{u.name}.{name}"]]
             if u.owner.state != "initialized":
-                # a failed FMI 3.0 instance is freed: its other outputs from the buffers of its last reads,
-                # except a block whose getter failed (FMUComponent unpacks neither)
+                # a failed instance is freed: its other outputs from the buffers (String: the copies) of its
+                # last reads, except a block whose getter failed (FMUComponent unpacks neither)
                 for block in u.other_blocks:
-                    if block is not self._failed_block:
+                    if block is self._failed_block:
+                        continue
+                    if block.native.ours == "String":
+                        u.held_strings(block)
+                    else:
                         block.unpack()
                 continue
             u.owner.time = t_end
@@ -926,9 +998,12 @@ class FastFMULoop:
     def _error(self, loop: _Loop, t0: float, h: float) -> FMUError:
         c, fn, j, status = (int(x) for x in loop.err)
         u = self.units[c]
-        if u.v3 and fn == 3:  # the getter of one of its other output blocks
+        if fn == 3 and int(loop.err_block) >= 0:  # the getter of one of its other output blocks
             self._failed_block = self._other_blocks[int(loop.err_block)][1]
             function = self._failed_block.native.getter
+            if status == -2:
+                return FMUError(f"{u.name}: out of memory copying the values of {function} after a step "
+                                "(FastFMULoop)", component=u.name, function=function)
         else:
             function = u.functions[fn]
         n_fine = math.lcm(*self.rates.values())
@@ -948,3 +1023,9 @@ class FastFMULoop:
         name = fmi3.status_name(status) if u.v3 else status_name(status)
         return FMUError(f"{u.name}: {function} returned {name} at t = {t:.6f} s (FastFMULoop)",
                         component=u.name, function=function, time=t, status=status)
+
+
+def _free_texts(library: ctypes.CDLL, texts: list[tuple[ctypes.Array, ctypes.Array]]) -> None:
+    """Free the C loop's copies of an instance's String outputs (finaliser of :class:`_Instance`)."""
+    for text, cap in texts:
+        library.cnct_free_text(ctypes.addressof(text), ctypes.addressof(cap), len(text))

@@ -36,9 +36,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from fmus_src.units import conversion_factor
-
 from ..errors import CncTwinError
+from ..master import probe_factor
 from ..recording import Recording
 from ..system import split_reference
 from . import fmi3
@@ -136,7 +135,7 @@ def run_fast_fmu(master: "Master") -> "RunResult | None":
         unit = p.unit or declared.unit
         if p.reference not in record:
             record.append(p.reference)
-        probes.append((p.channel, record.index(p.reference), conversion_factor(declared.unit, unit), unit))
+        probes.append((p.channel, record.index(p.reference), probe_factor(system, p), unit))
     checks = {c.source: (-math.inf, math.inf) for c in system.connections}
     for ref, (lo, hi) in s.limits.items():
         checks[ref] = (float(lo), float(hi))
@@ -211,7 +210,8 @@ def run_fast_fmu(master: "Master") -> "RunResult | None":
         success = False
         message = master._run_failed(exc, t)  # noqa: SLF001
     finally:
-        master._terminate_all()  # noqa: SLF001
+        ended = master._terminate_all()  # noqa: SLF001
+    success, message = master._terminated(success, message, ended, t)  # noqa: SLF001
     ks = np.concatenate(steps)
     table = np.concatenate(rows, axis=0)
     channels = {"t_s": s.t0 + ks * h}
