@@ -97,6 +97,10 @@ SUPPORTED_M = "M0 M1 M2 M3 M4 M5 M6 M7 M8 M9 M19 M29 M30 M97 M98 M99"
 LETTERS = set("GMXYZIJKRFSTHDPQNOL") | {",C", ",R"}  # ,C / ,R: optional chamfer / corner R (see .corners)
 #: Address letters read only in a block with one of these G codes: E (corner rounding) of Haas G187.
 BLOCK_LETTERS: dict[str, int | float] = {"E": 187}
+#: Axis addresses of machines with more axes than the twin's X Y Z (rotary A B C, parallel U V W), as in
+#: ``G0 G90 G54 X-5. Y-5. A0.`` of 4-axis posts; named as such in the error.
+_EXTRA_AXES = {"A": "rotary axis about X", "B": "rotary axis about Y", "C": "rotary axis about Z",
+               "U": "parallel axis to X", "V": "parallel axis to Y", "W": "parallel axis to Z"}
 
 
 def g_code(w: Word) -> int | float | None:
@@ -154,6 +158,11 @@ def group_words(words: Sequence[Word], err: ErrorFactory, m_codes: Mapping[int, 
     vals: ValueWords = {}
     for w in words:
         if w.letter not in LETTERS and BLOCK_LETTERS.get(w.letter) not in codes:
+            if w.letter in _EXTRA_AXES:
+                raise err(w.letter + w.text, f"axis word {w.letter}{w.text}: {w.letter} is a "
+                          f"{_EXTRA_AXES[w.letter]} (4th/5th axis), and the machine has only X, Y and Z",
+                          "a 3-axis program (post-process it for a 3-axis machine, without "
+                          f"{w.letter} words)")
             raise err(w.letter + w.text, f"address {w.letter} is not supported",
                       "one of the addresses " + " ".join(sorted(LETTERS)))
         if w.letter == "G":

@@ -322,7 +322,10 @@ def _block(st: ModalState, words: tuple[Word, ...], line: int, text: str, file: 
     elif non_modal == 4:
         out.append(dwell_block(gs, vals, line, err))
     else:
-        check_coordinates(vals, unit_name, err)
+        # in a canned-cycle block K is the repeat count (checked by the cycle), not an arc centre
+        cycle_block = cycle not in (None, 80) or (
+            st.cycle is not None and cycle is None and "motion" not in gs and non_modal is None)
+        check_coordinates(vals, unit_name, err, "XYZIJRQ" if cycle_block else "XYZIJKRQ")
         if "motion" in gs:
             st.motion = gs["motion"][0]
             end_cycle_mode(st, "G" + gs["motion"][1].text, err)  # a group 01 code cancels the canned cycle
