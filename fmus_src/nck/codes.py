@@ -159,8 +159,8 @@ def group_words(words: Sequence[Word], err: ErrorFactory, m_codes: Mapping[int, 
     for w in words:
         if w.letter not in LETTERS and BLOCK_LETTERS.get(w.letter) not in codes:
             if w.letter in _EXTRA_AXES:
-                raise err(w.letter + w.text, f"axis word {w.letter}{w.text}: {w.letter} is a "
-                          f"{_EXTRA_AXES[w.letter]} (4th/5th axis), and the machine has only X, Y and Z",
+                raise err(w.letter + w.text, f"axis word {w.letter}{w.text} is not supported: {w.letter} is "
+                          f"a {_EXTRA_AXES[w.letter]} (4th/5th axis), and the machine has only X, Y and Z",
                           "a 3-axis program (post-process it for a 3-axis machine, without "
                           f"{w.letter} words)")
             raise err(w.letter + w.text, f"address {w.letter} is not supported",

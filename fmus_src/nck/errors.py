@@ -48,9 +48,9 @@ class GCodeError(CncTwinError):
         where = f"{file}:{line}" if line else file
         if len(block) > _QUOTE_LIMIT:  # a 1 MB line must not become a 1 MB message
             block = f"{block[:_QUOTE_LIMIT]}... ({len(block)} characters)"
-        block = escape_controls(block)
         quoted = f" '{block}':" if block else ""
-        super().__init__(f"{where}:{quoted} {problem}; expected {expected}")
+        # one printable line: a control character of the block (also inside the quoted word) is escaped
+        super().__init__(escape_controls(f"{where}:{quoted} {problem}; expected {expected}"))
 
 
 def escape_controls(text: str) -> str:
