@@ -13,7 +13,7 @@ import math
 import pytest
 
 from fmus_src.nck import (
-    Arc, Dwell, GCodeError, InterpreterSettings, Linear, NCKernel, ProgramEnd, Rapid, interpret,
+    Arc, Dwell, GCodeError, InterpreterSettings, Linear, NCKernel, ProgramEnd, Rapid, interpret, read_program,
 )
 
 MM = 1e-3
@@ -300,8 +300,11 @@ def test_arc_radius_equal_to_the_tool_radius_prints_no_float_noise(radius):
     assert info.value.line == 3 and "tool-centre arc radius of 0 mm" in message and "e-" not in message
 
 
-@pytest.mark.parametrize("raw, shown", [("G1\x07X1 F100", r"G1\x07X1 F100"), ("G1 X1\x1b[31m F100", r"G1 X1\x1b[31m F100"),
-                                        ("G1\tX1\x0cY2", r"G1\tX1\x0cY2")])
+@pytest.mark.parametrize("raw, shown", [
+    ("G1\x07X1 F100", r"G1\x07X1 F100"),  # BEL
+    ("G1 X1\x1b[31m F100", r"G1 X1\x1b[31m F100"),  # a terminal colour escape sequence
+    ("G1\tX1\x0cY2", r"G1\tX1\x0cY2"),  # tab and form feed
+])
 def test_control_characters_in_quoted_blocks_are_escaped(raw, shown):
     with pytest.raises(GCodeError) as info:
         interpret(f"G0 X0\n{raw}\n", "a.nc")
@@ -317,3 +320,16 @@ def test_work_offset_system_variable_reports_the_code_as_written():
             "G54 P2\n#104=#4014\nG55\n#105=#4014\nG1 X#100 Y#101 Z#102 F100\nX#103 Y#104 Z#105\n")
     ends = [_mm(b.end) for b in interpret(text).blocks if isinstance(b, Linear)]
     assert ends == [(54.0, 54.1, 154.0), (112.0, 54.1, 55.0)]
+
+
+@pytest.mark.parametrize("data, line, offset", [
+    (b"%\nO1000 (\xd86 ENDMILL)\nG0 X1.\nM30\n%\n", 2, 9),  # Windows-1252 diameter sign in a tool comment
+    (b"G0 X1. ; \xc8\xb2\xbb\xe8\r\nM30\r\n", 1, 11),  # a CP949 (Hangul) comment after ';', CRLF lines
+])
+def test_program_in_a_windows_code_page_names_the_comment_and_the_encoding(tmp_path, data, line, offset):
+    path = tmp_path / "part.nc"
+    path.write_bytes(data)
+    with pytest.raises(GCodeError) as info:
+        read_program(path)
+    assert info.value.line == line and f"byte offset {offset}, inside a comment" in str(info.value)
+    assert "saved as UTF-8 or ASCII" in str(info.value) and "binary" not in str(info.value)
