@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 
 from fmus_src.nck import (
@@ -333,3 +334,57 @@ def test_program_in_a_windows_code_page_names_the_comment_and_the_encoding(tmp_p
         read_program(path)
     assert info.value.line == line and f"byte offset {offset}, inside a comment" in str(info.value)
     assert "saved as UTF-8 or ASCII" in str(info.value) and "binary" not in str(info.value)
+
+
+# ----------------------------------------------------------------------------- short CAM segments (planner)
+TS = 1e-3
+
+
+def _motion_end(kernel: NCKernel) -> int:
+    """Sample index from which the reference no longer changes."""
+    pos = kernel.plan_.position[0]
+    moving = np.nonzero(np.any(np.diff(pos, axis=0) != 0.0, axis=1))[0]
+    return int(moving[-1]) + 1
+
+
+def _segments(step_mm: float, length_mm: float, feed: float) -> str:
+    n = int(round(length_mm / step_mm))
+    return f"G90 G0 X0 Y0\nG1 F{feed:g}\n" + "".join(f"X{step_mm * k:.3f}\n" for k in range(1, n + 1)) + "M30\n"
+
+
+@pytest.mark.parametrize("step_mm", [0.1, 0.2])
+def test_short_collinear_segments_run_like_one_line(step_mm):
+    # 50 mm at F3000 (v = 0.05 m/s) cut into 0.1 or 0.2 mm blocks, as a CAM post linearises a surface path.
+    # Bell-shaped acc/dec before interpolation, a = 2 m/s2, tc = 32 ms: v < a tc, so each speed change takes
+    # 2 sqrt(v tc / a) = 56.6 ms and T = L/v + 2 sqrt(v tc / a) = 1.0566 s, plus the 16 ms linear filter after
+    # interpolation: the time of the single 50 mm block. The 40-block window (3.9 mm) is longer than the
+    # 1.43 mm stop from 0.05 m/s, so it does not bind. (Planned block by block, every speed change had to
+    # fit in one block: 2.04 s with 0.1 mm blocks.)
+    kernel = NCKernel(program_text=_segments(step_mm, 50.0, 3000))
+    kernel.setup(0.0)
+    v = 0.05
+    expected = math.ceil((0.05 / v + 2 * math.sqrt(v * 0.032 / 2.0)) / TS - 1e-9) + 16
+    assert abs(_motion_end(kernel) - expected) <= 1
+    assert kernel.plan_.position[0, -1, 0] == pytest.approx(0.05, abs=1e-12)
+
+
+def test_short_segments_keep_their_lines_at_cruise():
+    # 0.1 mm blocks at 0.05 m/s take 2 ms = 2 samples each: at cruise every line runs for 2 samples
+    kernel = NCKernel(program_text=_segments(0.1, 50.0, 3000))
+    kernel.setup(0.0)
+    line = kernel.plan_.line[0]
+    counts = [int((line == n).sum()) for n in range(200, 300)]  # blocks 18-28 mm into the path: cruise
+    assert set(counts) <= {1, 2, 3} and sum(counts) == 200
+
+
+def test_a_corner_between_short_segments_still_slows_the_path():
+    # 25 mm of 0.1 mm blocks along X, then 25 mm along Y at F3000: the 90 deg corner changes both axis
+    # velocities by the full speed, so it is passed at the allowable velocity difference 400 mm/min
+    text = ("G90 G0 X0 Y0\nG1 F3000\n" + "".join(f"X{0.1 * k:.1f}\n" for k in range(1, 251))
+            + "".join(f"Y{0.1 * k:.1f}\n" for k in range(1, 251)) + "M30\n")
+    kernel = NCKernel(program_text=text, cutting_time_constant=0.0)
+    kernel.setup(0.0)
+    pos, feed = kernel.plan_.position[0], kernel.plan_.feed[0]
+    at_corner = int(np.argmin(np.hypot(pos[:, 0] - 0.025, pos[:, 1])))
+    assert feed[at_corner] == pytest.approx(400 / 60e3, rel=0.05)
+    assert feed.max() == pytest.approx(0.05, rel=1e-9)
