@@ -388,3 +388,18 @@ def test_a_corner_between_short_segments_still_slows_the_path():
     at_corner = int(np.argmin(np.hypot(pos[:, 0] - 0.025, pos[:, 1])))
     assert feed[at_corner] == pytest.approx(400 / 60e3, rel=0.05)
     assert feed.max() == pytest.approx(0.05, rel=1e-9)
+
+
+@pytest.mark.parametrize("tail", ["\x1a", "\x1a\r\n", "\r\n\x1a\x1a\r\n  \r\n"])
+def test_dos_end_of_file_mark_ends_the_program(tail):
+    # old DOS editors and DNC programs append Ctrl-Z; the program ends at the end of file as without it
+    text = "G21 G90\r\nG0 X10. Y5.\r\n" + tail
+    program = interpret(text, "dos.nc")
+    assert [_mm(b.end) for b in _moves(program)] == [(10.0, 5.0, 0.0)]
+    assert program.blocks[-1].reason == "end of file"
+
+
+def test_ctrl_z_inside_the_program_is_still_an_unexpected_character():
+    with pytest.raises(GCodeError, match=r"unexpected character '\\x1a'") as info:
+        interpret("G0 X1.\n\x1aG0 X2.\n", "dos.nc")
+    assert info.value.line == 2

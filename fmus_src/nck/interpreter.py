@@ -78,7 +78,7 @@ from .dwell import dwell_block
 from .errors import GCodeError
 from .feed import read_feed_words
 from .input_ranges import check_coordinates
-from .lexer import LexedLine, LexError, Word, lex_line, split_lines
+from .lexer import LexedLine, LexError, Word, lex_line, split_lines, without_dos_eof
 from .lookahead_codes import check_accuracy_control, check_look_ahead
 from .macro.calls import MacroCall
 from .macro.runtime import Jump, MacroRuntime
@@ -130,7 +130,7 @@ def interpret(text: str, file: str = "<text>", settings: InterpreterSettings | N
     st = ModalState(settings)
     radius = RadiusOffset(file)  # cutter radius compensation: the tool-centre path, after the program
     out: list[Block] = []
-    lines = split_lines(text)
+    lines = split_lines(without_dos_eof(text))
     seen_percent = False
     subs: dict[int, Subprogram] | None = None  # indexed at the first M98
     stack: list[Frame] = []
