@@ -403,3 +403,18 @@ def test_ctrl_z_inside_the_program_is_still_an_unexpected_character():
     with pytest.raises(GCodeError, match=r"unexpected character '\\x1a'") as info:
         interpret("G0 X1.\n\x1aG0 X2.\n", "dos.nc")
     assert info.value.line == 2
+
+
+def test_inch_arc_with_four_decimal_rounding_is_accepted():
+    # an inch post rounds end point and centre to 0.0001 in: from (0, 0) with I.3334 the start radius is
+    # .3334 in and the end (.3334, .3333) lies .3333 in from the centre (.3334, 0): 0.0001 in = 0.00254 mm apart,
+    # more than 0.002 mm but within FANUC's No. 3410 tolerance, which is in the input unit (0.002 in here)
+    program = interpret("G20 G90 G17\nG0 X0 Y0\nG3 X.3334 Y.3333 I.3334 J0 F10.\nM30\n", "inch.nc")
+    arc = _moves(program, 3)[0]
+    assert arc.center[:2] == pytest.approx((0.3334 * INCH, 0.0))
+    assert arc.end[:2] == pytest.approx((0.3334 * INCH, 0.3333 * INCH))
+    with pytest.raises(GCodeError, match=r"radii equal within 0\.002 in") as info:  # 0.003 in apart
+        interpret("G20 G90 G17\nG0 X0 Y0\nG3 X.3334 Y.3304 I.3334 J0 F10.\nM30\n", "inch.nc")
+    assert info.value.line == 3
+    with pytest.raises(GCodeError, match=r"radii equal within 0\.002 mm"):  # 0.0025 mm apart under G21
+        interpret("G21 G90 G17\nG0 X0 Y0\nG3 X10. Y9.9975 I10. J0 F100.\nM30\n", "mm.nc")
