@@ -418,3 +418,15 @@ def test_inch_arc_with_four_decimal_rounding_is_accepted():
     assert info.value.line == 3
     with pytest.raises(GCodeError, match=r"radii equal within 0\.002 mm"):  # 0.0025 mm apart under G21
         interpret("G21 G90 G17\nG0 X0 Y0\nG3 X10. Y9.9975 I10. J0 F100.\nM30\n", "mm.nc")
+
+
+@pytest.mark.parametrize("text, line", [
+    ("G0 X0 Y0 Z10.\nG91 G81 X10. Z-5. R-3. L3 F100.\n", 2),  # the older FANUC form of the repeat count
+    ("G0 X0 Y0 Z10.\nG81 X1. Z-1. R1. F100.\nX2. L3\n", 3),  # in a modal cycle block
+])
+def test_canned_cycle_repeat_count_written_as_l_names_k(text, line):
+    with pytest.raises(GCodeError, match=r"repeat count of a cycle is K") as info:
+        interpret(text, "a.nc")
+    assert info.value.line == line and info.value.word == "L3"
+    with pytest.raises(GCodeError, match=r"word L outside an M98 block"):  # elsewhere the message is unchanged
+        interpret("G0 X0 Y0 Z10.\nG81 X1. Z-1. R1. F100.\nG80 L3\n", "a.nc")

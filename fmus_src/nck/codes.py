@@ -200,9 +200,17 @@ def group_words(words: Sequence[Word], err: ErrorFactory, m_codes: Mapping[int, 
     return gs, ms, vals
 
 
-def check_stray_words(gs: GWords, vals: ValueWords, err: ErrorFactory) -> None:
-    """L outside M98/G10 and G50 with X/Y/Z/I/J/K/P/S (the lathe's G50) are errors; call after M98 took its P/L."""
+def check_stray_words(gs: GWords, vals: ValueWords, err: ErrorFactory, cycle_mode: bool = False) -> None:
+    """L outside M98/G10 and G50 with X/Y/Z/I/J/K/P/S (the lathe's G50) are errors; call after M98 took its P/L.
+
+    ``cycle_mode``: a canned cycle is modal before the block; an L there (or in a cycle block) is read as the
+    older FANUC form of the repeat count, and the message names K.
+    """
     if "L" in vals and gs.get("non-modal", (None,))[0] != 10:
+        cycle = gs.get("canned cycle", (None,))[0]
+        if (cycle_mode or cycle is not None) and cycle != 80 and "motion" not in gs:
+            raise err("L" + vals["L"].text, "word L in a canned-cycle block: the repeat count of a cycle is K on "
+                      "the FANUC 0i/31i (L is the older form)", "K<n> for the number of repeats, e.g. G81 ... K3")
         raise err("L" + vals["L"].text, "word L outside an M98 block", "L only as the repeat count of M98 P<n> L<k>")
     if gs.get("scaling", (None,))[0] == 50:
         for a in "XYZIJKPS":

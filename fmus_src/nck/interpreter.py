@@ -271,7 +271,7 @@ def _block(st: ModalState, words: tuple[Word, ...], line: int, text: str, file: 
     corner = corner_word(vals, err)  # ,C / ,R: optional chamfer / corner R (see .corners)
     moved = False
     call, ret = subprogram_words(gs, ms, vals, err)
-    check_stray_words(gs, vals, err)
+    check_stray_words(gs, vals, err, st.cycle is not None)
 
     # 1. units first: they apply to every number of the block
     if "units" in gs:
