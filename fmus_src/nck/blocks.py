@@ -113,7 +113,7 @@ class Arc:
 
     @property
     def radius_end(self) -> float:
-        """Radius at the end point (m); equals ``radius_start`` within 0.002 mm."""
+        """Radius at the end point (m); equals ``radius_start`` within 0.002 mm (0.002 in under G20)."""
         i, j, _ = self.axes
         return math.hypot(self.end[i] - self.center[i], self.end[j] - self.center[j])
 

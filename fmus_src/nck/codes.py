@@ -97,6 +97,10 @@ SUPPORTED_M = "M0 M1 M2 M3 M4 M5 M6 M7 M8 M9 M19 M29 M30 M97 M98 M99"
 LETTERS = set("GMXYZIJKRFSTHDPQNOL") | {",C", ",R"}  # ,C / ,R: optional chamfer / corner R (see .corners)
 #: Address letters read only in a block with one of these G codes: E (corner rounding) of Haas G187.
 BLOCK_LETTERS: dict[str, int | float] = {"E": 187}
+#: Axis addresses of machines with more axes than the twin's X Y Z (rotary A B C, parallel U V W), as in
+#: ``G0 G90 G54 X-5. Y-5. A0.`` of 4-axis posts; named as such in the error.
+_EXTRA_AXES = {"A": "rotary axis about X", "B": "rotary axis about Y", "C": "rotary axis about Z",
+               "U": "parallel axis to X", "V": "parallel axis to Y", "W": "parallel axis to Z"}
 
 
 def g_code(w: Word) -> int | float | None:
@@ -154,6 +158,11 @@ def group_words(words: Sequence[Word], err: ErrorFactory, m_codes: Mapping[int, 
     vals: ValueWords = {}
     for w in words:
         if w.letter not in LETTERS and BLOCK_LETTERS.get(w.letter) not in codes:
+            if w.letter in _EXTRA_AXES:
+                raise err(w.letter + w.text, f"axis word {w.letter}{w.text} is not supported: {w.letter} is "
+                          f"a {_EXTRA_AXES[w.letter]} (4th/5th axis), and the machine has only X, Y and Z",
+                          "a 3-axis program (post-process it for a 3-axis machine, without "
+                          f"{w.letter} words)")
             raise err(w.letter + w.text, f"address {w.letter} is not supported",
                       "one of the addresses " + " ".join(sorted(LETTERS)))
         if w.letter == "G":
@@ -191,9 +200,17 @@ def group_words(words: Sequence[Word], err: ErrorFactory, m_codes: Mapping[int, 
     return gs, ms, vals
 
 
-def check_stray_words(gs: GWords, vals: ValueWords, err: ErrorFactory) -> None:
-    """L outside M98/G10 and G50 with X/Y/Z/I/J/K/P/S (the lathe's G50) are errors; call after M98 took its P/L."""
+def check_stray_words(gs: GWords, vals: ValueWords, err: ErrorFactory, cycle_mode: bool = False) -> None:
+    """L outside M98/G10 and G50 with X/Y/Z/I/J/K/P/S (the lathe's G50) are errors; call after M98 took its P/L.
+
+    ``cycle_mode``: a canned cycle is modal before the block; an L there (or in a cycle block) is read as the
+    older FANUC form of the repeat count, and the message names K.
+    """
     if "L" in vals and gs.get("non-modal", (None,))[0] != 10:
+        cycle = gs.get("canned cycle", (None,))[0]
+        if (cycle_mode or cycle is not None) and cycle != 80 and "motion" not in gs:
+            raise err("L" + vals["L"].text, "word L in a canned-cycle block: the repeat count of a cycle is K on "
+                      "the FANUC 0i/31i (L is the older form)", "K<n> for the number of repeats, e.g. G81 ... K3")
         raise err("L" + vals["L"].text, "word L outside an M98 block", "L only as the repeat count of M98 P<n> L<k>")
     if gs.get("scaling", (None,))[0] == 50:
         for a in "XYZIJKPS":

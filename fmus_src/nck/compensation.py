@@ -35,6 +35,21 @@ from .settings import INCH, MM
 RADIUS_ZERO = 1e-9
 
 
+def _register_note(kind: str, setting: str, n: int) -> str:
+    """The part of the message saying that no register of ``kind`` is set (empty when some are)."""
+    if n:
+        return ""
+    return f" (no {kind} offsets are set: InterpreterSettings.{setting} is empty, so only the zero register 0 exists)"
+
+
+def _register_range(letter: str, setting: str, n: int) -> str:
+    """What a register word may be: ``H0..H20 (integers)``, or with no registers set, how to set them."""
+    if n:
+        return f"{letter}0..{letter}{n} (integers)"
+    return (f"{letter}0, or the offsets given in InterpreterSettings.{setting} ({letter}1 is index 0; "
+            "the NCKernel component and cnctwin simulate have 20)")
+
+
 def tool_length_words(st: ModalState, gs: GWords, vals: ValueWords, err: ErrorFactory) -> None:
     """H word and G43/G44/G49 of a block.
 
@@ -44,15 +59,18 @@ def tool_length_words(st: ModalState, gs: GWords, vals: ValueWords, err: ErrorFa
         h = vals["H"]
         n_tools = len(st.settings.tool_lengths)
         if h.has_point or h.value < 0 or h.value > n_tools:
-            raise err("H" + h.text, f"tool length offset number H{h.text} does not exist",
-                      f"H0..H{n_tools} (integers)")
+            raise err("H" + h.text, f"tool length offset number H{h.text} does not exist"
+                      + _register_note("tool length", "tool_lengths", n_tools),
+                      _register_range("H", "tool_lengths", n_tools))
         st.h = int(h.value)
     if "tool length" in gs:
         code = gs["tool length"][0]
         st.tool_sign = {43: 1, 44: -1, 49: 0}[code]
         if code != 49 and "H" not in vals and st.h == 0:
+            n_tools = len(st.settings.tool_lengths)
             raise err(f"G{code}", f"G{code} without an H word",
-                      f"G{code} H<n> with n in 1..{len(st.settings.tool_lengths)}")
+                      f"G{code} H<n> with n in 1..{n_tools}" if n_tools else
+                      f"G{code} H<n>, with the tool lengths given in InterpreterSettings.tool_lengths")
 
 
 def cutter_compensation(st: ModalState, gs: GWords, vals: ValueWords, err: ErrorFactory, unit_name: str) -> None:
@@ -65,7 +83,9 @@ def cutter_compensation(st: ModalState, gs: GWords, vals: ValueWords, err: Error
         d = vals["D"]
         n_radii = len(st.settings.tool_radii)
         if d.has_point or d.value < 0 or d.value > n_radii:
-            raise err("D" + d.text, f"tool radius offset number D{d.text} does not exist", f"D0..D{n_radii} (integers)")
+            raise err("D" + d.text, f"tool radius offset number D{d.text} does not exist"
+                      + _register_note("tool radius", "tool_radii", n_radii),
+                      _register_range("D", "tool_radii", n_radii))
         st.d = int(d.value)
     switched = False
     if "cutter compensation" in gs:

@@ -49,7 +49,19 @@ class GCodeError(CncTwinError):
         if len(block) > _QUOTE_LIMIT:  # a 1 MB line must not become a 1 MB message
             block = f"{block[:_QUOTE_LIMIT]}... ({len(block)} characters)"
         quoted = f" '{block}':" if block else ""
-        super().__init__(f"{where}:{quoted} {problem}; expected {expected}")
+        # one printable line: a control character of the block (also inside the quoted word) is escaped
+        super().__init__(escape_controls(f"{where}:{quoted} {problem}; expected {expected}"))
+
+
+def escape_controls(text: str) -> str:
+    r"""``text`` with every non-printable character (control characters, tab, DEL, U+2028...) as a Python escape.
+
+    A block quoted in a one-line message must not carry a bell, a form feed or a terminal escape sequence
+    into the user's terminal or log: a BEL between ``G1`` and ``X1`` is shown as ``G1\x07X1``.
+    """
+    if text.isprintable():
+        return text
+    return "".join(ch if ch.isprintable() else repr(ch)[1:-1] for ch in text)
 
 
 #: Builds the :class:`GCodeError` of one block from ``(word, problem, expected)``; the interpreter makes one per
@@ -60,6 +72,29 @@ ErrorFactory = Callable[[str, str, str], GCodeError]
 def fmt_number(value: float) -> str:
     """A number as quoted in messages: 6 significant digits (``0.5``, ``99999.9``, ``1e-06``)."""
     return f"{value:.6g}"
+
+
+#: Resolution of a length quoted in messages, m (1 nm: far below the 0.001 mm least input increment).
+LENGTH_RESOLUTION = 1e-9
+
+
+def fmt_length(metres: float, per_metre: float) -> str:
+    """A length (m) as quoted in messages in the program's unit, without floating-point noise.
+
+    Parameters
+    ----------
+    metres : float
+        The length, m.
+    per_metre : float
+        Program units per metre (1e3 for mm, 1/0.0254 for inch).
+
+    Returns
+    -------
+    str
+        :func:`fmt_number` of the length rounded to :data:`LENGTH_RESOLUTION` (``-6.9e-15`` mm is ``0``).
+    """
+    snapped = round(metres / LENGTH_RESOLUTION) * LENGTH_RESOLUTION
+    return fmt_number(snapped * per_metre + 0.0)  # + 0.0: no "-0"
 
 
 class NCParameterError(CncTwinError):

@@ -21,10 +21,23 @@ MAX_DWELL = 99999.999
 MAX_TOOL = 99999999
 
 
-def check_coordinates(vals: ValueWords, unit_name: str, err: ErrorFactory) -> None:
-    """X Y Z I J K R Q words within :data:`MAX_COORDINATE` of the unit in effect (``"mm"`` or ``"in"``)."""
+def check_coordinates(vals: ValueWords, unit_name: str, err: ErrorFactory, letters: str = "XYZIJKRQ") -> None:
+    """Length words within :data:`MAX_COORDINATE` of the unit in effect (``"mm"`` or ``"in"``).
+
+    Parameters
+    ----------
+    vals : ValueWords
+        The block's value words.
+    unit_name : str
+        ``"mm"`` (G21) or ``"in"`` (G20).
+    err : ErrorFactory
+        Builds the error of the block.
+    letters : str
+        The words that are lengths in this block: X Y Z I J K R Q, without K in a canned-cycle block (there
+        K is the repeat count, whose range the cycle checks).
+    """
     limit = MAX_COORDINATE[unit_name]
-    for a in "XYZIJKRQ":
+    for a in letters:
         if a in vals and abs(vals[a].value) > limit:
             raise err(a + vals[a].text, f"{a}{vals[a].text} is beyond the input range of {limit} {unit_name}",
                       f"|{a}| <= {limit} {unit_name}")

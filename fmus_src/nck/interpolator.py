@@ -43,18 +43,26 @@ class Segment:
         return len(self.speed) - 1
 
 
+#: Bisection steps of :func:`_times_at` (halves a piece of at most hours down to below 1e-12 s).
+_BISECTIONS = 64
+
+
 def _n_periods(duration: float, period: float) -> int:
     return max(int(math.ceil(duration / period - 1e-9)), 0)
 
 
 def interpolate_chain(geo: ChainGeometry, speeds: ChainSpeeds, sc: SpeedChange, period: float) -> Segment:
-    """Sample a chain of feed blocks with block-wise acc/dec before interpolation.
+    """Sample a chain of feed blocks with acc/dec before interpolation over its acc/dec spans.
+
+    Each span (:mod:`.spans`) runs its entry speed → cruise → exit speed profile as one piece of the path, so
+    a speed change may cross the block ends inside it; the start time of a block inside a span is where the
+    profile reaches the block's start.
 
     Parameters
     ----------
     geo : ChainGeometry
     speeds : ChainSpeeds
-        Junction speeds and block limits from :func:`plan_chain_speeds`.
+        Span boundaries, junction speeds and block limits from :func:`plan_chain_speeds`.
     sc : SpeedChange
         Acc/dec law.
     period : float
@@ -68,22 +76,26 @@ def interpolate_chain(geo: ChainGeometry, speeds: ChainSpeeds, sc: SpeedChange, 
     vmax = speeds.vmax.tolist()
     L = geo.length.tolist()
     cum = geo.cum.tolist()
+    starts = speeds.span_start.tolist()
     t0: list[float] = []
     s0: list[float] = []
     v0: list[float] = []
     a0: list[float] = []
     jk: list[float] = []
-    block_start = []
+    block_start = [0.0] * len(L)
+    inner: list[int] = []  # blocks that start inside a span: their start time is found on the profile below
     t = 0.0
-    for i in range(len(L)):
-        block_start.append(t)
-        va, vb = v[i], v[i + 1]
-        vp = sc.peak(va, vb, L[i], vmax[i])
+    for first, end in zip(starts[:-1], starts[1:]):
+        block_start[first] = t
+        inner.extend(range(first + 1, end))
+        length = cum[end] - cum[first]
+        va, vb = v[first], v[end]
+        vp = sc.peak(va, vb, length, vmax[first])
         up = sc.pieces(va, vp)
         down = sc.pieces(vp, vb)
-        cruise = L[i] - sc.distance(va, vp) - sc.distance(vp, vb)
+        cruise = length - sc.distance(va, vp) - sc.distance(vp, vb)
         plist = up + ([(cruise / vp, 0.0, 0.0)] if cruise > 0.0 and vp > 0.0 else []) + down
-        s, vel = cum[i], va
+        s, vel = cum[first], va
         for dur, acc, jerk in plist:
             t0.append(t)
             s0.append(s)
@@ -101,9 +113,13 @@ def interpolate_chain(geo: ChainGeometry, speeds: ChainSpeeds, sc: SpeedChange, 
         pos = np.repeat(geo.start[:1], n + 1, axis=0)
         return Segment(pos, np.zeros(n + 1), np.array(block_start), duration)
     T0 = np.array(t0)
+    S0, V0, A0, JK = np.array(s0), np.array(v0), np.array(a0), np.array(jk)
+    if inner:
+        times = _times_at(np.array([cum[i] for i in inner]), T0, S0, V0, A0, JK, duration)
+        for i, tb in zip(inner, times.tolist()):
+            block_start[i] = tb
     idx = np.searchsorted(T0, tk, side="right") - 1
     tau = tk - T0[idx]
-    S0, V0, A0, JK = np.array(s0), np.array(v0), np.array(a0), np.array(jk)
     s = S0[idx] + tau * (V0[idx] + tau * (0.5 * A0[idx] + tau * JK[idx] / 6.0))
     vel = V0[idx] + tau * (A0[idx] + 0.5 * tau * JK[idx])
     past = tk >= duration
@@ -118,6 +134,26 @@ def interpolate_chain(geo: ChainGeometry, speeds: ChainSpeeds, sc: SpeedChange, 
     b[-1] = len(L) - 1
     pos = evaluate(geo, b, frac)
     return Segment(pos, vel, np.array(block_start), duration)
+
+
+def _times_at(target: np.ndarray, T0: np.ndarray, S0: np.ndarray, V0: np.ndarray, A0: np.ndarray,
+              JK: np.ndarray, duration: float) -> np.ndarray:
+    """Times (s) at which the piecewise-cubic path profile reaches the arc lengths ``target`` (m).
+
+    The path length grows monotonically within each constant-jerk piece (the speed is >= 0), so the time in
+    the piece is found by bisection to the resolution of a double.
+    """
+    idx = np.clip(np.searchsorted(S0, target, side="right") - 1, 0, len(S0) - 1)
+    ends = np.append(T0[1:], duration)
+    lo = np.zeros(len(target))
+    hi = ends[idx] - T0[idx]
+    for _ in range(_BISECTIONS):
+        mid = 0.5 * (lo + hi)
+        s = S0[idx] + mid * (V0[idx] + mid * (0.5 * A0[idx] + mid * JK[idx] / 6.0))
+        below = s < target
+        lo = np.where(below, mid, lo)
+        hi = np.where(below, hi, mid)
+    return T0[idx] + 0.5 * (lo + hi)
 
 
 def rapid_speed(start: np.ndarray, end: np.ndarray, rapid_feed: tuple[float, float, float]) -> float:

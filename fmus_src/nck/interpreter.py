@@ -78,7 +78,7 @@ from .dwell import dwell_block
 from .errors import GCodeError
 from .feed import read_feed_words
 from .input_ranges import check_coordinates
-from .lexer import LexedLine, LexError, Word, lex_line, split_lines
+from .lexer import LexedLine, LexError, Word, lex_line, split_lines, without_dos_eof
 from .lookahead_codes import check_accuracy_control, check_look_ahead
 from .macro.calls import MacroCall
 from .macro.runtime import Jump, MacroRuntime
@@ -130,7 +130,7 @@ def interpret(text: str, file: str = "<text>", settings: InterpreterSettings | N
     st = ModalState(settings)
     radius = RadiusOffset(file)  # cutter radius compensation: the tool-centre path, after the program
     out: list[Block] = []
-    lines = split_lines(text)
+    lines = split_lines(without_dos_eof(text))
     seen_percent = False
     subs: dict[int, Subprogram] | None = None  # indexed at the first M98
     stack: list[Frame] = []
@@ -285,7 +285,7 @@ def _block(st: ModalState, words: tuple[Word, ...], line: int, text: str, file: 
     corner = corner_word(vals, err)  # ,C / ,R: optional chamfer / corner R (see .corners)
     moved = False
     call, ret = subprogram_words(gs, ms, vals, err)
-    check_stray_words(gs, vals, err)
+    check_stray_words(gs, vals, err, st.cycle is not None)
 
     # 1. units first: they apply to every number of the block
     if "units" in gs:
@@ -336,7 +336,10 @@ def _block(st: ModalState, words: tuple[Word, ...], line: int, text: str, file: 
     elif non_modal == 4:
         out.append(dwell_block(gs, vals, line, err))
     else:
-        check_coordinates(vals, unit_name, err)
+        # in a canned-cycle block K is the repeat count (checked by the cycle), not an arc centre
+        cycle_block = cycle not in (None, 80) or (
+            st.cycle is not None and cycle is None and "motion" not in gs and non_modal is None)
+        check_coordinates(vals, unit_name, err, "XYZIJRQ" if cycle_block else "XYZIJKRQ")
         if "motion" in gs:
             st.motion = gs["motion"][0]
             end_cycle_mode(st, "G" + gs["motion"][1].text, err)  # a group 01 code cancels the canned cycle

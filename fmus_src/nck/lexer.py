@@ -15,6 +15,8 @@ Rules (FANUC milling dialect):
   any other letter is an error; a comma before no letter is an unexpected character.
 * Lines end at LF, CRLF or CR only (form feed, U+2028 etc. stay in the line
   and are rejected as unexpected characters), so line numbers match editors.
+* A DOS end-of-file mark (Ctrl-Z, ``\x1a``) that old editors and DNC programs append ends the text
+  (:func:`without_dos_eof`); a Ctrl-Z followed by more than blanks and Ctrl-Z is an unexpected character.
 """
 from __future__ import annotations
 
@@ -210,3 +212,28 @@ def split_lines(text: str, keepends: bool = False) -> list[str]:
     if pos < len(text):
         out.append(text[pos:])
     return out
+
+
+#: DOS end-of-file mark (Ctrl-Z, ASCII SUB).
+DOS_EOF = "\x1a"
+
+
+def without_dos_eof(text: str) -> str:
+    """``text`` without a trailing DOS end-of-file mark (Ctrl-Z) and what follows it (blanks, line ends).
+
+    Parameters
+    ----------
+    text : str
+        Program source.
+
+    Returns
+    -------
+    str
+        The text up to the first Ctrl-Z when only blanks, line ends and Ctrl-Z follow it; else ``text``
+        unchanged (a Ctrl-Z inside the program stays an unexpected character). The lines before it keep
+        their numbers.
+    """
+    at = text.find(DOS_EOF)
+    if at < 0 or text[at:].replace(DOS_EOF, "").strip():
+        return text
+    return text[:at]

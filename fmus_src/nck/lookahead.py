@@ -6,18 +6,21 @@ speed at which no axis changes its velocity by more than
 ``corner_velocity_difference`` (No. 1783),
 ``v_c = dV / max_axis |t_out - t_in|``, and the lower of the two block feeds.
 The tool must always be able to stop at the end of the look-ahead window of
-``lookahead_blocks`` blocks (including the executing block); a backward pass
-from the window end and a forward pass from the chain start give the
-junction speeds. The chain starts and ends at rest.
+``lookahead_blocks`` blocks (including the executing block): that speed caps
+the junction after each block (:func:`.spans.window_caps`).
+
+The chain is planned over acc/dec spans (:mod:`.spans`): runs of blocks with
+one speed limit and no binding corner or window cap inside, so that one speed
+change of bell-shaped acc/dec may cross block ends as on the control. A
+backward pass from the chain end and a forward pass from its start give the
+speeds at the span boundaries; the chain starts and ends at rest.
 
 The window may differ from block to block (Haas ``G103 P<n>``:
 :func:`block_windows`, :mod:`.block_buffering`): each block's own window W_i
-bounds the speed at its end (stop at the end of block i + W_i - 1). When the
-windows differ, a last backward pass keeps every junction speed within reach
-of the next one, so that the stop constraints of the later blocks (e.g. the
-first block read after ``G103 P1``) are kept too. With one window for all
-blocks that pass changes nothing and is skipped, so the result is the same as
-without per-block windows, bit for bit.
+caps the speed at its end (stop at the end of block i + W_i - 1), and the
+backward pass carries a cap back to the junctions before it. A per-block
+window list equal to one window for all blocks gives the same plan, bit for
+bit.
 """
 from __future__ import annotations
 
@@ -28,6 +31,7 @@ import numpy as np
 
 from .geometry import ChainGeometry
 from .profiles import SpeedChange
+from .spans import span_starts, static_breaks, window_caps
 
 
 @dataclass(frozen=True)
@@ -42,11 +46,16 @@ class ChainSpeeds:
         Speed limit of each block (m/s).
     corner : ndarray (n - 1,)
         Corner speed limit at each inner junction from the velocity-difference rule (m/s, inf when tangent).
+    span_start : ndarray (m + 1,) of int
+        First block of each of the m acc/dec spans (:mod:`.spans`), then n: one speed change may cross the
+        inner junctions of a span. ``junction`` at a span boundary is planned; inside a span it is the speed
+        reachable from both span ends (the speed of trapezoidal acc/dec there).
     """
 
     junction: np.ndarray
     vmax: np.ndarray
     corner: np.ndarray
+    span_start: np.ndarray
 
 
 def block_speed_limits(geo: ChainGeometry, feed: np.ndarray, max_cutting_feed: float, arc_accel: float) -> np.ndarray:
@@ -89,7 +98,7 @@ def block_windows(limits: Sequence[int], lookahead_blocks: int) -> list[int]:
 def plan_chain_speeds(geo: ChainGeometry, feed: np.ndarray, sc: SpeedChange, *, max_cutting_feed: float,
                       arc_accel: float, corner_velocity_difference: float,
                       lookahead_blocks: int | Sequence[int]) -> ChainSpeeds:
-    """Junction speeds of a chain with a look-ahead window.
+    """Junction speeds of a chain with a look-ahead window, planned over acc/dec spans (:mod:`.spans`).
 
     Parameters
     ----------
@@ -109,40 +118,38 @@ def plan_chain_speeds(geo: ChainGeometry, feed: np.ndarray, sc: SpeedChange, *, 
     ChainSpeeds
     """
     n = len(geo.length)
-    L = geo.length.tolist()
     vmax = block_speed_limits(geo, feed, max_cutting_feed, arc_accel)
     corner = corner_limits(geo, corner_velocity_difference)
-    jl = np.zeros(n)
+    jl = np.zeros(max(n - 1, 0))
     if n > 1:
-        jl[:-1] = np.minimum(np.minimum(vmax[:-1], vmax[1:]), corner)
-    J = jl.tolist()
-    # unwindowed backward pass: b[i] = speed limit at the end of block i
-    b = [0.0] * n
-    for i in range(n - 2, -1, -1):
-        b[i] = min(J[i], sc.reach(b[i + 1], L[i + 1]))
+        jl = np.minimum(np.minimum(vmax[:-1], vmax[1:]), corner)
     if isinstance(lookahead_blocks, (int, np.integer)):
         windows = [max(int(lookahead_blocks), 1)] * n
     else:
         windows = [max(int(w), 1) for w in lookahead_blocks]
         if len(windows) != n:
             raise ValueError(f"plan_chain_speeds: {len(windows)} look-ahead windows for {n} blocks")
-    bw = list(b)
-    for i in range(n - 1):
-        last = i + windows[i] - 1
-        if last >= n - 1:
-            continue  # the window reaches the chain end: the unwindowed limit b[i]
-        x = 0.0  # must be able to stop at the end of block `last`
-        for k in range(last - 1, i - 1, -1):
-            x = min(J[k], sc.reach(x, L[k + 1]))
-            if x >= b[k]:
-                x = b[i]  # joined the unwindowed solution: identical from here back to i
-                break
-        bw[i] = min(x, b[i])
-    if len(set(windows)) > 1:  # a shorter window later in the chain also bounds the junctions before it
-        for i in range(n - 3, -1, -1):
-            bw[i] = min(bw[i], sc.reach(bw[i + 1], L[i + 1]))
-    v = [0.0] * (n + 1)
-    for i in range(n):
-        v[i + 1] = min(bw[i], sc.reach(v[i], L[i]))
-    v[n] = 0.0
-    return ChainSpeeds(np.array(v), vmax, corner)
+    breaks = static_breaks(vmax, jl)
+    caps = window_caps(geo.length, geo.cum, vmax, jl, breaks, windows, sc)
+    starts = span_starts(breaks, caps, vmax)
+    m = len(starts) - 1
+    cum = geo.cum
+    Ls = (cum[starts[1:]] - cum[starts[:-1]]).tolist()
+    # limit at each inner span boundary (the junction after the span's last block), window cap included
+    inner = (starts[1:-1] - 1).tolist()
+    J = [min(float(jl[k]), float(caps[k])) for k in inner]
+    b = [0.0] * m  # backward pass: b[i] = speed limit at the end of span i
+    for i in range(m - 2, -1, -1):
+        b[i] = min(J[i], sc.reach(b[i + 1], Ls[i + 1]))
+    vs = [0.0] * (m + 1)  # forward pass: speed at span boundaries
+    for i in range(m):
+        vs[i + 1] = min(b[i], sc.reach(vs[i], Ls[i]))
+    vs[m] = 0.0
+    v = np.zeros(n + 1)
+    v[starts] = vs
+    for i in range(m):  # inner junctions of a span: the speed reachable from both span ends, at most the limit
+        a, e = int(starts[i]), int(starts[i + 1])
+        for k in range(a + 1, e):
+            up, down = sc.reach(vs[i], float(cum[k] - cum[a])), sc.reach(vs[i + 1], float(cum[e] - cum[k]))
+            v[k] = min(float(vmax[a]), up, down)
+    return ChainSpeeds(v, vmax, corner, starts)

@@ -44,6 +44,7 @@ class ModalState:
         self.scale = MM
         self.absolute = True
         self.work = 54
+        self.work_code = 54.0  # the code that selected it: 54-59, 54.1 (also G54 Pn), 154 or 110-129 (#4014)
         self.tool_sign = 0  # +1 G43, -1 G44, 0 G49
         self.h = 0
         self.feed: float | None = None

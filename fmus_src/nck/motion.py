@@ -4,8 +4,9 @@ Conventions
 -----------
 * G0 rapid, G1 linear, G2/G3 arcs (clockwise/counter-clockwise in the plane of G17/G18/G19) by R, negative R
   for > 180 deg, or by I/J/K (incremental from the start point) incl. full circles (end point = start point).
-  The radii at start and end of an I/J/K arc may differ by at most :data:`ARC_RADIUS_TOLERANCE` (FANUC alarm
-  PS0020 style).
+  The radii at start and end of an I/J/K arc may differ by at most :data:`ARC_RADIUS_TOLERANCE_INPUT` in the
+  program's unit (0.002 mm or 0.002 in; FANUC No. 3410, alarm PS0020), and an R at most that much below half
+  the chord.
 * G90.1 (LinuxCNC, modal until G91.1): I/J/K are the centre in work coordinates (plus the work offset, and
   the tool length on Z, as an end point); both centre words of the plane are then required. G91.1 (the
   power-on mode, FANUC's only one): I/J/K are incremental from the start point.
@@ -29,8 +30,13 @@ from .polar import program_targets
 from .settings import INCH, MM
 from .transforms import advance, check_arc
 
-#: Tolerance on the radius difference of an I/J/K arc (FANUC alarm PS0020 style), m.
-ARC_RADIUS_TOLERANCE = 0.002e-3
+#: Tolerance on the radius difference of an I/J/K arc in the program's input unit (FANUC No. 3410 "tolerance of
+#: arc radius", whose unit is the input unit, mm or inch; alarm PS0020): 0.002 mm under G21, 0.002 in under G20.
+#: Posts write inch programs with 4 decimals: rounding the end point and I/J to 0.0001 in alone makes the radii
+#: differ by up to about 0.0002 in (0.005 mm), so a fixed 0.002 mm failed about one inch arc in six.
+ARC_RADIUS_TOLERANCE_INPUT = 0.002
+#: :data:`ARC_RADIUS_TOLERANCE_INPUT` under G21, m.
+ARC_RADIUS_TOLERANCE = ARC_RADIUS_TOLERANCE_INPUT * MM
 #: End points closer than this are the same point (full circle), m.
 SAME_POINT = 1e-9
 #: Index of an arc-centre word in a :data:`Vec3`.
@@ -107,6 +113,7 @@ def programmed_move(st: ModalState, vals: ValueWords, g9: bool, line: int, err: 
         factor = check_arc(st, st.plane, gname, err)
         clockwise = clockwise != (xf.handedness(st.plane) < 0)
     u = 1.0 / (INCH if scale == INCH else MM)  # SI -> program units for messages
+    tolerance = ARC_RADIUS_TOLERANCE_INPUT * scale  # No. 3410 is in the input unit
     d1, d2 = end[i1] - start[i1], end[i2] - start[i2]
     chord = math.hypot(d1, d2)
     if has_r:
@@ -116,7 +123,7 @@ def programmed_move(st: ModalState, vals: ValueWords, g9: bool, line: int, err: 
             raise err("R" + rw.text, "an arc given by R cannot end at its start point",
                       "I/J/K for a full circle, or an end point different from the start")
         half = 0.5 * chord
-        if abs(r) < half - ARC_RADIUS_TOLERANCE:
+        if abs(r) < half - tolerance:
             raise err("R" + rw.text, f"arc radius {fmt_number(abs(r) * u)} {unit_name} is smaller than half the chord "
                       f"({fmt_number(half * u)} {unit_name})", f"R >= {fmt_number(half * u)}")
         h = math.sqrt(max(r * r - half * half, 0.0))
@@ -164,9 +171,10 @@ def programmed_move(st: ModalState, vals: ValueWords, g9: bool, line: int, err: 
         end = tuple(end_l)  # type: ignore[assignment]
         st.machine[i1], st.machine[i2] = start[i1], start[i2]
     r2 = math.hypot(end[i1] - c[i1], end[i2] - c[i2])
-    if abs(r2 - r1) > ARC_RADIUS_TOLERANCE:
+    if abs(r2 - r1) > tolerance:
         raise err(gname, f"end point is {fmt_number(r2 * u)} {unit_name} from the centre but the start is "
                   f"{fmt_number(r1 * u)} {unit_name} (difference {fmt_number(abs(r2 - r1) * u)} {unit_name})",
-                  f"start and end radii equal within {fmt_number(ARC_RADIUS_TOLERANCE * u)} {unit_name}")
+                  f"start and end radii equal within {fmt_number(ARC_RADIUS_TOLERANCE_INPUT)} {unit_name} "
+                  "(FANUC No. 3410, alarm PS0020)")
     out.append(Arc(line, start, end, tuple(c), st.plane, clockwise, feed, st.feed_line,  # type: ignore[arg-type]
                    exact_stop=exact, feed_per_rev=per_rev, lookahead_limit=st.lookahead_limit))

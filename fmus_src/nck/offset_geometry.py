@@ -52,7 +52,7 @@ class Element:
         return 1.0 if self.ccw else -1.0
 
     def radius(self, at_end: bool) -> float:
-        """Programmed arc radius at the start or end point (m; I/J/K arcs may differ by 0.002 mm)."""
+        """Programmed arc radius at the start or end point (m; I/J/K arcs may differ by 0.002 mm, 0.002 in under G20)."""
         assert self.centre is not None
         p = self.end if at_end else self.start
         return math.hypot(p[0] - self.centre[0], p[1] - self.centre[1])

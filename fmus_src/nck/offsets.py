@@ -65,6 +65,8 @@ def select_work_offset(st: ModalState, gs: GWords, vals: ValueWords, call: str |
     A change shifts the programmed coordinates of the current position (:meth:`ModalState.shift_work`).
     """
     new = work_key(st, gs, vals, call, err)
+    code = gs["work offset"][0]
+    st.work_code = 54.1 if code == 54 and new > 1000 else float(code)  # G54 P<n> is G54.1 P<n>
     if new != st.work:
         st.work = new
         st.shift_work()

@@ -10,9 +10,8 @@ A speed change ``dv`` at acceleration ``a`` with acceleration change time
 and, the speed being point-symmetric about its mid-point, covers
 ``(v_lo + v_hi) / 2 × time``. These closed forms are used by the look-ahead
 (speed reachable within a distance) and by the block profile builder.
-Each speed change is confined to one block (a block-wise profile), which is
-exact for trapezoidal acc/dec and slightly conservative for bell-shaped
-acc/dec over many short blocks.
+Each speed change is confined to one acc/dec span (:mod:`.spans`): a run of
+blocks without a binding limit inside, often a single block.
 """
 from __future__ import annotations
 

@@ -55,7 +55,7 @@ from typing import Sequence
 
 from .blocks import Arc, Block, Linear, Rapid
 from .compensation import RADIUS_ZERO
-from .errors import GCodeError, fmt_number
+from .errors import GCodeError, fmt_length, fmt_number
 from .modal import ModalState
 from .offset_geometry import (
     TANGENT_SIN, Element, Point, cross, distance, dot, element_of, left_normal, nearest, offset_intersections,
@@ -363,9 +363,9 @@ class RadiusOffset:
         rec = self.records[m.rec]
         u, unit = self._unit(rec)
         g = "G2" if b.clockwise else "G3"
-        raise self._error(rec, g, f"arc radius {fmt_number(b.radius_start * u)} {unit} with the tool radius offset "
-                          f"D{rec.d} = {fmt_number(abs(m.offset) * u)} {unit} on its inside gives a tool-centre arc "
-                          f"radius of {fmt_number(r_off * u)} {unit} (too small an arc: interference, FANUC alarm "
+        raise self._error(rec, g, f"arc radius {fmt_length(b.radius_start, u)} {unit} with the tool radius offset "
+                          f"D{rec.d} = {fmt_length(abs(m.offset), u)} {unit} on its inside gives a tool-centre arc "
+                          f"radius of {fmt_length(r_off, u)} {unit} (too small an arc: interference, FANUC alarm "
                           "PS0041 style)", "an arc radius larger than the tool radius where the tool is inside the "
                           "arc (G41 on G3, G42 on G2)")
 

@@ -43,6 +43,13 @@ def read_program(path: str | Path) -> str:
         text = data.decode("utf-8", errors="strict")
     except UnicodeDecodeError as exc:
         line = data.count(b"\n", 0, exc.start) + 1
+        if _in_comment(data, exc.start):
+            raise GCodeError(
+                name, line, "", "a program saved as UTF-8 or ASCII (convert the file, e.g. from Windows-1252 or "
+                "CP949, or remove the character from the comment)",
+                f"byte 0x{data[exc.start]:02x} at byte offset {exc.start}, inside a comment, is not UTF-8 text: "
+                "the file was saved in another encoding",
+            ) from None
         raise GCodeError(
             name, line, "", "a text file (ASCII or UTF-8) holding a G-code program",
             f"byte 0x{data[exc.start]:02x} at byte offset {exc.start} is not UTF-8 text: a binary file?",
@@ -50,3 +57,23 @@ def read_program(path: str | Path) -> str:
     if not text.strip():
         raise GCodeError(name, 0, "", "a G-code program (blocks such as G0 X0 Y0)", "the program file is empty")
     return text
+
+
+def _in_comment(data: bytes, offset: int) -> bool:
+    """True when byte ``offset`` of ``data`` lies inside a ``( ... )`` or ``;`` comment of its line.
+
+    A comment with an accented or Hangul character written by a Windows post-processor in its ANSI code page
+    (Windows-1252, CP949) is the usual reason for a program file that is not UTF-8; the message then says so
+    instead of suspecting a binary file. Same rules as the lexer: ``(`` opens a comment up to the next ``)``,
+    ``;`` outside one starts a comment to the end of the line.
+    """
+    start = max(data.rfind(b"\n", 0, offset), data.rfind(b"\r", 0, offset)) + 1
+    inside = False
+    for byte in data[start:offset]:
+        if inside:
+            inside = byte != 0x29  # ")"
+        elif byte == 0x28:  # "("
+            inside = True
+        elif byte == 0x3B:  # ";"
+            return True
+    return inside
