@@ -521,7 +521,8 @@ def _cnc_rows(recording: Recording) -> Recording:
         return recording
     channels = {c: np.asarray(recording[c], float)[keep] for c in recording.channels if c not in ("fx_N", "fy_N",
                                                                                                    "fz_N", "fc_N")}
-    return Recording.from_channels(channels, source=recording.source)
+    lines = recording.file_lines.take(keep) if recording.file_lines is not None else None
+    return Recording.from_channels(channels, source=recording.source, file_lines=lines)
 
 
 def _diagnose_drives(case: Case, prep: Prepared, base_machine: Machine, holdout, vertical: tuple[str, ...],
