@@ -20,7 +20,7 @@ import numpy as np
 from fmus_src.units import split_unit_suffix
 
 from .errors import CncTwinError
-from .recording_csv import RecordingError, read_table, table_text, write_table
+from .recording_csv import FileLines, RecordingError, read_table, table_text, write_table
 
 #: Columns defined by the recording contract, with their units.
 SPEC_COLUMNS: dict[str, str] = {
@@ -66,6 +66,11 @@ class Recording:
         Why it stopped (or what went wrong).
     source : str
         Where it came from (file path or description), for error messages.
+    meta : dict
+        Free-form annotations.
+    file_lines : FileLines, optional
+        The file line (1-based) of every row, for a recording read from a CSV file (errors name
+        ``file:line``); None for a recording built in memory.
     """
 
     data: np.ndarray
@@ -74,6 +79,7 @@ class Recording:
     message: str = ""
     source: str = "<memory>"
     meta: dict = field(default_factory=dict)
+    file_lines: FileLines | None = field(default=None, repr=False)
 
     # ------------------------------------------------------------------ construction
     @classmethod
@@ -84,11 +90,13 @@ class Recording:
         success: bool = True,
         message: str = "",
         source: str = "<memory>",
+        file_lines: FileLines | None = None,
     ) -> "Recording":
         """Build from a mapping name → array (``t_s`` required, shape (n,) or (n, B)).
 
         Integer channels (``line``) are stored as float so that "not
-        measured" (NaN) is representable.
+        measured" (NaN) is representable. ``file_lines`` gives the file line
+        of every row (see :class:`FileLines`).
         """
         if "t_s" not in channels:
             raise RecordingError(f"{source}: a recording needs a 't_s' channel")
@@ -107,7 +115,9 @@ class Recording:
         data = np.empty(n, dtype=fields)
         for name, arr in arrays.items():
             data[name] = arr
-        return cls(data, _unit_map(channels, units), success, message, source)
+        if file_lines is not None and file_lines.rows != n:
+            raise RecordingError(f"{source}: {file_lines.rows} file lines given for {n} rows")
+        return cls(data, _unit_map(channels, units), success, message, source, file_lines=file_lines)
 
     @classmethod
     def from_rows(
@@ -170,6 +180,26 @@ class Recording:
             raise RecordingError(f"{self.source}: no channel {name!r}; channels are {self.channels}")
         return self.data[name]
 
+    def where(self, row: int) -> str:
+        """Where a 0-based row is, for messages: ``"file:line"`` when read from a file, else ``"source, row k"``."""
+        if self.file_lines is not None:
+            return f"{self.file_lines.path}:{self.file_lines.line(row)}"
+        return f"{self.source}, row {int(row) + 1}"
+
+    def take(self, index: np.ndarray) -> "Recording":
+        """The rows ``index`` (integer indices or a boolean mask) as a new recording, with their file lines.
+
+        Parameters
+        ----------
+        index : ndarray of int or bool
+            Rows to keep, in increasing order (time must still increase).
+        """
+        index = np.asarray(index)
+        rows = np.flatnonzero(index) if index.dtype == bool else index.astype(np.int64)
+        lines = self.file_lines.take(rows) if self.file_lines is not None else None
+        return Recording(self.data[rows], dict(self.units), self.success, self.message, self.source,
+                         dict(self.meta), lines)
+
     def member(self, b: int) -> "Recording":
         """Batch member ``b`` as an ordinary recording."""
         if self.batch == 1 and not any(self.data.dtype[n].shape for n in self.channels):
@@ -180,7 +210,8 @@ class Recording:
         for name in self.channels[1:]:
             col = self.data[name]
             channels[name] = col[:, b] if col.ndim == 2 else col
-        return Recording.from_channels(channels, self.units, self.success, self.message, f"{self.source}[{b}]")
+        return Recording.from_channels(channels, self.units, self.success, self.message, f"{self.source}[{b}]",
+                                       file_lines=self.file_lines)
 
     def following_error_um(self, axis: str) -> np.ndarray:
         """Following error ``ref - actual`` of one axis in µm (derived, never stored)."""
@@ -262,4 +293,4 @@ class Recording:
                 )
         order = [it] + [j for j in range(len(header)) if j != it and j not in ignored]
         channels = {header[j]: values[:, j] for j in order}
-        return cls.from_channels(channels, source=str(path))
+        return cls.from_channels(channels, source=str(path), file_lines=FileLines.from_numbers(path, table.lines))

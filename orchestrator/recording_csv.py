@@ -97,6 +97,66 @@ class Table:
     lines: np.ndarray
 
 
+@dataclass(frozen=True)
+class FileLines:
+    """Where the rows of a recording stand in its CSV file: 1-based line numbers, kept as runs.
+
+    A file's rows are consecutive lines except where blank lines (or a cell spanning lines) come between, so
+    the line of every row is stored as runs of consecutive lines: memory grows with the number of such breaks,
+    not with the number of rows (a 10-minute log of 600 000 rows without a blank line is one run).
+
+    Attributes
+    ----------
+    path : str
+        The file.
+    starts : ndarray of int64
+        First row (0-based) of each run, increasing; ``starts[0] == 0`` when there are rows.
+    first : ndarray of int64
+        File line (1-based) of that row.
+    rows : int
+        Number of rows.
+    """
+
+    path: str
+    starts: np.ndarray
+    first: np.ndarray
+    rows: int
+
+    @classmethod
+    def from_numbers(cls, path: str | Path, numbers: np.ndarray) -> "FileLines":
+        """Runs of the file line numbers ``numbers`` (one per row, increasing)."""
+        numbers = np.asarray(numbers, dtype=np.int64)
+        if numbers.size == 0:
+            return cls(str(path), np.zeros(0, np.int64), np.zeros(0, np.int64), 0)
+        starts = np.concatenate([[0], np.flatnonzero(np.diff(numbers) != 1) + 1]).astype(np.int64)
+        return cls(str(path), starts, numbers[starts].copy(), int(numbers.size))
+
+    def of(self, rows: np.ndarray | int) -> np.ndarray:
+        """File lines (1-based) of 0-based ``rows``.
+
+        Raises
+        ------
+        IndexError
+            A row outside ``0 .. rows - 1``.
+        """
+        k = np.asarray(rows, dtype=np.int64)
+        if k.size and (k.min() < 0 or k.max() >= self.rows):
+            raise IndexError(f"{self.path}: row {int(k.max() if k.max() >= self.rows else k.min())} is not one of "
+                             f"its {self.rows} rows")
+        run = np.searchsorted(self.starts, k, side="right") - 1
+        return self.first[run] + (k - self.starts[run])
+
+    def line(self, row: int) -> int:
+        """File line (1-based) of the 0-based ``row``."""
+        return int(self.of(np.int64(row)))
+
+    def take(self, index: np.ndarray) -> "FileLines":
+        """The lines of the rows ``index`` (integer indices, or a boolean mask over all rows)."""
+        index = np.asarray(index)
+        rows = np.flatnonzero(index) if index.dtype == bool else index.astype(np.int64)
+        return FileLines.from_numbers(self.path, self.of(rows))
+
+
 def read_table(path: Path, contract: Iterable[str], required: Iterable[str] = ()) -> Table:
     """Read a recording CSV into a float table, checking the header and every cell.
 
@@ -334,7 +394,7 @@ class _ChunkParser:
         rows: list[tuple[int, list[str]]] = []
         reader = csv.reader(lines)
         while True:
-            lineno = first_line + len(rows)
+            lineno = first_line + reader.line_num  # a quoted cell may span lines: the row starts after the last
             try:
                 row = next(reader, None)
             except csv.Error as exc:  # e.g. a cell longer than csv.field_size_limit()

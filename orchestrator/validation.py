@@ -16,7 +16,8 @@ formed but cannot be what they claim to be:
   beyond any machine's reach.
 
 Every problem raises the reader's own error type (:class:`RecordingError`,
-:class:`CaseError`) naming the file, the row/time and the field.
+:class:`CaseError`) naming the file, the line (for a recording read from a file: its 1-based line in the
+file, blank lines counted; in memory: the row) with its time, and the field.
 """
 from __future__ import annotations
 
@@ -81,12 +82,19 @@ def block_lines(text: str) -> set[int]:
     return out
 
 
-def _row(recording: Recording, k: int) -> str:
-    return f"row {k + 1} (t_s = {float(recording.t[k]):.6g})"
+def _at(recording: Recording, k: int, column: str, time: bool = True) -> str:
+    """Where the cell of ``column`` in the 0-based row ``k`` is, to start a message.
+
+    ``"file.csv:412: column 'x_mm' (t_s = 5.03)"`` for a recording read from a file (its 1-based line, blank
+    lines counted), ``"<memory>: column 'x_mm', row 4 (t_s = 5.03)"`` for one built in memory.
+    """
+    when = f" (t_s = {float(recording.t[k]):.6g})" if time else ""
+    if recording.file_lines is not None:
+        return f"{recording.where(k)}: column {column!r}{when}"
+    return f"{recording.source}: column {column!r}, row {k + 1}{when}"
 
 
 def _check_ranges(recording: Recording, ranges: Mapping[str, Range] | None) -> None:
-    src = recording.source
     for name in recording.channels:
         if name in ("t_s", "line"):
             continue
@@ -101,7 +109,7 @@ def _check_ranges(recording: Recording, ranges: Mapping[str, Range] | None) -> N
             value = col.reshape(len(recording), -1)[k]
             shown = float(value[0]) if value.size == 1 else value.tolist()
             raise RecordingError(
-                f"{src}: column {name!r}, {_row(recording, k)}: {shown!r} is outside the plausible range "
+                f"{_at(recording, k, name)}: {shown!r} is outside the plausible range "
                 f"[{rng.low:g}, {rng.high:g}] {recording.units.get(name, '')} ({rng.reason}); "
                 f"{bad.size} value(s) out of range: wrong unit or wrong column?"
             )
@@ -118,13 +126,12 @@ def _program_text(program: str | Path) -> tuple[str, str]:
 
 
 def _check_lines(recording: Recording, text: str, program_name: str) -> None:
-    src = recording.source
     line = np.asarray(recording["line"], dtype=float)
     known = ~np.isnan(line)
     whole = known & (np.floor(line) == line) & (line >= 1)
     if (known & ~whole).any():
         k = int(np.flatnonzero(known & ~whole)[0])
-        raise RecordingError(f"{src}: column 'line', {_row(recording, k)}: {float(line[k])!r} is not a line number; "
+        raise RecordingError(f"{_at(recording, k, 'line')}: {float(line[k])!r} is not a line number; "
                              f"expected whole numbers >= 1 (1-based lines of {program_name})")
     n_lines = len(split_lines(text))
     blocks = block_lines(text)
@@ -132,18 +139,18 @@ def _check_lines(recording: Recording, text: str, program_name: str) -> None:
         value = int(line[k])
         if value > n_lines:
             raise RecordingError(
-                f"{src}: column 'line', {_row(recording, int(k))}: line {value} does not exist, {program_name} has "
+                f"{_at(recording, int(k), 'line')}: line {value} does not exist, {program_name} has "
                 f"{n_lines} lines: is this the recording of another program?")
         if value not in blocks:
             raise RecordingError(
-                f"{src}: column 'line', {_row(recording, int(k))}: line {value} of {program_name} holds no block "
+                f"{_at(recording, int(k), 'line')}: line {value} of {program_name} holds no block "
                 f"(a comment or blank line cannot execute): is this the recording of another program?")
     seq = line[known]
     back = np.flatnonzero(np.diff(seq) < 0)
     if back.size:
         k = int(np.flatnonzero(known)[back[0] + 1])
         raise RecordingError(
-            f"{src}: column 'line', {_row(recording, k)}: the line goes back from {int(seq[back[0]])} to "
+            f"{_at(recording, k, 'line')}: the line goes back from {int(seq[back[0]])} to "
             f"{int(seq[back[0] + 1])}; {program_name} has no loops, so a run executes its lines in increasing order")
 
 
@@ -195,17 +202,18 @@ def validate_recording(
     Raises
     ------
     RecordingError
-        The first problem found, naming the recording, the column, the row and its time.
+        The first problem found, naming the recording file and its line (``file.csv:412``; for a recording
+        built in memory its source and row), the column and the row's time.
     """
     if any(recording.data.dtype[n].shape for n in recording.channels):
         raise RecordingError(f"{recording.source}: validate one member at a time (use recording.member(b))")
     t = recording.t
     if len(t) and not np.isfinite(t).all():
         k = int(np.flatnonzero(~np.isfinite(t))[0])
-        raise RecordingError(f"{recording.source}: column 't_s', row {k + 1}: {float(t[k])!r}; every row needs a finite time")
+        raise RecordingError(f"{_at(recording, k, 't_s', time=False)}: {float(t[k])!r}; every row needs a finite time")
     if len(t) > 1 and (np.diff(t) <= 0).any():
         k = int(np.flatnonzero(np.diff(t) <= 0)[0]) + 1
-        raise RecordingError(f"{recording.source}: column 't_s', {_row(recording, k)}: time does not increase "
+        raise RecordingError(f"{_at(recording, k, 't_s')}: time does not increase "
                              f"({float(t[k - 1])!r} then {float(t[k])!r})")
     _check_ranges(recording, ranges)
     if program is None and program_text is None:

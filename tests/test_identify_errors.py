@@ -97,7 +97,8 @@ def test_nan_in_a_needed_column(tmp_path):
     ch = reciprocating()
     ch["x_tcmd_A"][100] = np.nan  # an empty cell in the CSV
     folder = make_case(tmp_path, ch)
-    with pytest.raises(IdentificationError, match=r"recording\.csv: column 'x_tcmd_A' has 1 empty or NaN cell.*101"):
+    with pytest.raises(IdentificationError, match=r"recording\.csv:102: column 'x_tcmd_A' has 1 empty or NaN "
+                                                  r"cell.*line\(s\) \[102\]"):  # row 100 = file line 102
         identify_friction([folder])
 
 

@@ -103,14 +103,14 @@ def test_missing_file_wrong_columns_and_binary(good, tmp_path):
 
 # ----------------------------------------------------------------------------- plausibility
 @pytest.mark.parametrize("column, value, match", [
-    ("x_mm", "1000000000", r"column 'x_mm', row 4 \(t_s = 5.03\): 1000000000.0 is outside the plausible range "
+    ("x_mm", "1000000000", r"recording.csv:5: column 'x_mm' \(t_s = 5.03\): 1000000000.0 is outside the plausible range "
                            r"\[-10000, 10000\] mm"),
-    ("x_ref_mm", "-20000", r"column 'x_ref_mm', row 4"),
-    ("spindle_rpm", "-5000000", r"column 'spindle_rpm', row 4 .*\[-100000, 100000\] rpm"),
-    ("x_tcmd_A", "1e5", r"column 'x_tcmd_A', row 4 .* A"),
-    ("fc_N", "-3", r"column 'fc_N', row 4 .*is not negative"),
+    ("x_ref_mm", "-20000", r"recording.csv:5: column 'x_ref_mm'"),
+    ("spindle_rpm", "-5000000", r"recording.csv:5: column 'spindle_rpm' .*\[-100000, 100000\] rpm"),
+    ("x_tcmd_A", "1e5", r"recording.csv:5: column 'x_tcmd_A' .* A"),
+    ("fc_N", "-3", r"recording.csv:5: column 'fc_N' .*is not negative"),
 ])
-def test_values_outside_plausible_ranges_name_file_column_and_row(good, column, value, match):
+def test_values_outside_plausible_ranges_name_file_line_and_column(good, column, value, match):
     rewrite(good, column, 3, value)
     rec = Recording.read_csv(good)  # well formed: the reader accepts it
     with pytest.raises(RecordingError, match=match) as info:
@@ -147,7 +147,7 @@ def test_line_numbers_of_comments_and_fractions(good, tmp_path):
     # line 3 of the paper program is a comment: nothing there can execute
     assert 3 not in block_lines(PROGRAM_TEXT) and 6 in block_lines(PROGRAM_TEXT)
     rewrite(good, "line", 0, "3")
-    with pytest.raises(RecordingError, match=r"row 1 .*: line 3 of .*holds no block"):
+    with pytest.raises(RecordingError, match=r"recording.csv:2: column 'line' .*: line 3 of .*holds no block"):
         validate_recording(Recording.read_csv(good), PAPER / "program.nc")
     rewrite(good, "line", 0, "6.5")
     with pytest.raises(RecordingError, match=r"6.5 is not a line number"):
@@ -287,7 +287,7 @@ def test_identification_rejects_the_recording_of_another_program(good, kind):
     from orchestrator.identify import IdentificationError, identify
 
     folder, n = mismatched_case(good)
-    with pytest.raises(IdentificationError, match=rf"^{good}: column 'line', row 4 .*line {n + 1} does not exist"):
+    with pytest.raises(IdentificationError, match=rf"^{good}:5: column 'line' .*line {n + 1} does not exist"):
         identify(kind, [folder])
 
 
@@ -295,5 +295,5 @@ def test_diagnosis_rejects_the_recording_of_another_program(good):
     from orchestrator.diagnose import DiagnosisError, diagnose
 
     folder, n = mismatched_case(good)
-    with pytest.raises(DiagnosisError, match=rf"^{good}: column 'line', row 4 .*line {n + 1} does not exist"):
+    with pytest.raises(DiagnosisError, match=rf"^{good}:5: column 'line' .*line {n + 1} does not exist"):
         diagnose(folder)

@@ -86,6 +86,9 @@ class Diagnosis:
         ``{"case": ..., "rms_before": ..., "rms_after": ...}`` of a held-out case.
     log : list of str
         Selection and refit log.
+    notes : list of str
+        What was not diagnosed and why (e.g. a cutting effect the force sampling cannot resolve); in
+        ``report.md`` under "Not diagnosed" and in ``log``.
     """
 
     alignment: dict[str, Any]
@@ -103,6 +106,7 @@ class Diagnosis:
     final_model: Model = field(default_factory=dict)
     case_name: str = ""
     cutting: CuttingResult | None = field(default=None, repr=False)
+    notes: list[str] = field(default_factory=list)
 
     def to_json(self) -> dict[str, Any]:
         """The ``diagnosis.json`` object, exactly the layout of the spec."""
@@ -521,7 +525,8 @@ def _cnc_rows(recording: Recording) -> Recording:
         return recording
     channels = {c: np.asarray(recording[c], float)[keep] for c in recording.channels if c not in ("fx_N", "fy_N",
                                                                                                    "fz_N", "fc_N")}
-    return Recording.from_channels(channels, source=recording.source)
+    lines = recording.file_lines.take(keep) if recording.file_lines is not None else None
+    return Recording.from_channels(channels, source=recording.source, file_lines=lines)
 
 
 def _diagnose_drives(case: Case, prep: Prepared, base_machine: Machine, holdout, vertical: tuple[str, ...],

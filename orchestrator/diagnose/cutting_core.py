@@ -22,8 +22,9 @@ from .cutting import (PHASE_EPS, CuttingColumns, CuttingData, CuttingModel, cutt
                       prepare_cutting, select_cutting, start_model)
 from .cutting_chatter import ChatterFit, refit_chatter
 from .cutting_library import CUTTING_CHANNELS, CUTTING_EFFECT_PARAMETERS, CUTTING_EVENTS, machine_keys
-from .cutting_locate import ChatterPeak, chatter_peaks, force_unexplained, harmonic_ratio, windows_where
+from .cutting_locate import ChatterPeak, angle_of, chatter_peaks, force_unexplained, windows_where
 from .cutting_refit import projector, refit_cutting, refit_droop
+from .cutting_sampling import Resolution, resolution, sinusoid_amplitude, unresolved_effects
 from .cutting_replay import ForceReplay
 from .errors import DiagnosisError
 from .select import MIN_GAIN, Selection
@@ -65,6 +66,9 @@ class CuttingResult:
     chatter : list of ChatterPeak
     chatter_fit : ChatterFit or None
         The refitted tool mode of the strongest chatter cut (:mod:`.cutting_chatter`).
+    notes : list of str
+        Effects not offered because the force sampling cannot resolve their signature, and why
+        (:mod:`.cutting_sampling`); also in ``log``.
     """
 
     effects: list[dict[str, Any]]
@@ -82,6 +86,13 @@ class CuttingResult:
     chatter: list[ChatterPeak] = field(default_factory=list)
     droop_rows: tuple[np.ndarray, np.ndarray, np.ndarray] | None = field(default=None, repr=False)
     chatter_fit: ChatterFit | None = field(default=None, repr=False)
+    notes: list[str] = field(default_factory=list)
+
+
+def _offered(cols: CuttingColumns, unresolved: list[str]) -> CuttingColumns:
+    """``cols`` without the candidate variants of the effects the force sampling cannot resolve."""
+    cols.variants = [v for v in cols.variants if v.effect not in unresolved]
+    return cols
 
 
 def _without(model: CuttingModel, effect: str) -> CuttingModel:
@@ -138,14 +149,19 @@ def diagnose_cutting(case: Case, recording: Recording, spindle_command: Callable
     data = prepare_cutting(case, recording, spindle_command, say)
     log.append(f"cutting: {len(data.cuts.bounds)} cuts, spindle angle of tooth 0 at the first force sample "
                f"{math.degrees(data.theta0) % 360:.2f} deg (phase scan), force noise floor {data.sigma:.3g} N")
-    peaks = chatter_peaks(data)
+    # what the force sampling can resolve (the samples' spindle angles, before the entries and exits are drawn)
+    sampling: dict[str, Resolution] = resolution(data, data.force_rows())
+    unresolved = unresolved_effects(sampling)
+    notes = [f"cutting: {sampling[e].text}" for e in unresolved]
+    log += notes
+    peaks = chatter_peaks(data) if "chatter" not in unresolved else []
     for p in peaks:
         where = "also in the air" if p.in_air else "only while cutting"
         log.append(f"cutting: cut {p.cut + 1}: non-harmonic peak {p.frequency:.1f} Hz, {p.amplitude:.2f} N, "
                    f"SNR {p.snr:.0f}, growth x{p.growth:.2f}, {where}")
     chatter = [p for p in peaks if not p.in_air]
     data.chatter_cuts = sorted({p.cut for p in chatter})
-    cols = cutting_columns(data, say=say)
+    cols = _offered(cutting_columns(data, say=say), unresolved)
     sel = select_cutting(cols)
     start = start_model(sel, data, cols)
     fit = refit_cutting(data, cols, start, say=say)
@@ -160,7 +176,7 @@ def diagnose_cutting(case: Case, recording: Recording, spindle_command: Callable
         log.append(f"cutting: the refit moved the spindle angle by {moved:.2f} deg from the phase scan's; "
                    "entries and exits redrawn there, effects selected and refitted again")
         data.theta0 += math.radians(moved)
-        cols = cutting_columns(data, say=say)
+        cols = _offered(cutting_columns(data, say=say), unresolved)
         sel = select_cutting(cols)
         start = start_model(sel, data, cols)
         fit = refit_cutting(data, cols, start, say=say)
@@ -309,7 +325,7 @@ def diagnose_cutting(case: Case, recording: Recording, spindle_command: Callable
         alignment["channels"]["spindle_rpm"] = {"scale": 1.0, "offset": _r(sp_offset, 4)}
     machine_values = _machine_values(case, data, final)
     return CuttingResult(effects, unexplained, rms_before, rms_after, noise, alignment, final, machine_values, log,
-                         data, cols, sim, chatter, droop_rows, chatter_fit)
+                         data, cols, sim, chatter, droop_rows, chatter_fit, notes)
 
 
 def _windows(t: np.ndarray, mask: np.ndarray) -> list[list[float]]:
@@ -357,16 +373,22 @@ def _evidence(effect: str, data: CuttingData, cols: CuttingColumns, sim: ForceRe
     if effect == "runout":
         f_sp = float(np.mean(data.inputs.omega[data.cuts.mask(t.size)])) / (2 * math.pi)
         i0, i1 = max(data.cuts.bounds, key=lambda b: b[1] - b[0])
-        a = math.hypot(_amp(t[i0:i1], data.measured[i0:i1, 0], f_sp), _amp(t[i0:i1], data.measured[i0:i1, 1], f_sp))
-        a0 = math.hypot(_amp(t[i0:i1], sim.fx[i0:i1, 0], f_sp), _amp(t[i0:i1], sim.fy[i0:i1, 0], f_sp))
-        text = (f"force component at the spindle frequency {f_sp:.1f} Hz of {a:.1f} N measured against {a0:.1f} N "
-                "in the twin: unequal tooth loads")
+        theta = angle_of(data)[i0:i1]  # the spindle angle, not 2 pi f t: the samples' phase of the harmonic
+        a = math.hypot(sinusoid_amplitude(theta, data.measured[i0:i1, 0]),
+                       sinusoid_amplitude(theta, data.measured[i0:i1, 1]))
+        a0 = math.hypot(sinusoid_amplitude(theta, sim.fx[i0:i1, 0]), sinusoid_amplitude(theta, sim.fy[i0:i1, 0]))
+        if math.isfinite(a) and math.isfinite(a0):
+            text = (f"force component at the spindle frequency {f_sp:.1f} Hz of {a:.1f} N measured against "
+                    f"{a0:.1f} N in the twin: unequal tooth loads")
+        else:
+            text = (f"unequal tooth loads (the samples of the longest cut do not spread over the revolution: no "
+                    f"amplitude at the spindle frequency {f_sp:.1f} Hz is given)")
     elif effect == "helix_angle":
-        f_sp = float(np.mean(data.inputs.omega[data.cuts.mask(t.size)])) / (2 * math.pi)
         i0, i1 = max(data.cuts.bounds, key=lambda b: b[1] - b[0])
-        f_tooth = f_sp * data.flutes
-        hm = harmonic_ratio(t[i0:i1], data.measured[i0:i1, 1], f_tooth)
-        hb = harmonic_ratio(t[i0:i1], sim.fy[i0:i1, 0], f_tooth)
+        tooth = angle_of(data)[i0:i1] * data.flutes  # the tooth-passing phase of each sample
+        hm = (sinusoid_amplitude(2 * tooth, data.measured[i0:i1, 1])
+              / max(sinusoid_amplitude(tooth, data.measured[i0:i1, 1]), 1e-12))
+        hb = sinusoid_amplitude(2 * tooth, sim.fy[i0:i1, 0]) / max(sinusoid_amplitude(tooth, sim.fy[i0:i1, 0]), 1e-12)
         text = (f"the tooth pulse is smoothed: 2nd / 1st tooth-passing harmonic of fy {hm:.3f} measured against "
                 f"{hb:.3f} for a straight flute")
     elif effect == "edge_force":
@@ -390,8 +412,3 @@ def _evidence(effect: str, data: CuttingData, cols: CuttingColumns, sim: ForceRe
         text = effect
     return text + tail
 
-
-def _amp(t: np.ndarray, y: np.ndarray, f0: float) -> float:
-    x = np.column_stack([np.sin(2 * np.pi * f0 * t), np.cos(2 * np.pi * f0 * t), np.ones_like(t)])
-    c, *_ = np.linalg.lstsq(x, y, rcond=None)
-    return float(np.hypot(c[0], c[1]))

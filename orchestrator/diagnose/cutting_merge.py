@@ -28,6 +28,7 @@ def merge_cutting(d: "Diagnosis", cres: CuttingResult, case: Case) -> None:
     d.alignment.setdefault("channels", {}).update(cres.alignment["channels"])
     d.alignment["spindle_angle_deg"] = cres.alignment["spindle_angle_deg"]
     d.log += cres.log
+    d.notes += cres.notes
     source = f"diagnosed: cnctwin diagnose, {_dt.date.today().isoformat()}, from {Path(case.folder).name}"
     m = d.machine
     for section, values in cres.machine_values.items():

@@ -110,5 +110,5 @@ def force_only_recording(case: Case, recording: Recording, machine: Machine) -> 
         channels["spindle_rpm"] = np.interp(t_prog, t_twin, np.asarray(twin["spindle_rpm"], float))
     idx = np.clip(np.searchsorted(t_twin, t_prog, side="right") - 1, 0, t_twin.size - 1)
     channels["line"] = np.asarray(twin["line"], float)[idx]
-    out = Recording.from_channels(channels, source=src)
+    out = Recording.from_channels(channels, source=src, file_lines=recording.file_lines)
     return ForceOnly(out, float(offset), method)

@@ -43,6 +43,8 @@ def report_markdown(d: "Diagnosis") -> str:
                   f"- where: {len(w['time_s'])} window(s) {w['time_s'][:3]}{' ...' if len(w['time_s']) > 3 else ''}, "
                   f"lines {w['lines']}, event {w['event']}, frequency {w['frequency_Hz']} Hz",
                   f"- evidence: {e['evidence']}", ""]
+    if d.notes:
+        lines += ["## Not diagnosed", "", *[f"- {n}" for n in d.notes], ""]
     lines += ["## Unexplained", ""]
     if not j["unexplained"]:
         lines += ["Nothing above the noise floor is left.", ""]

@@ -109,24 +109,34 @@ def check_columns(recording: Recording, columns: Sequence[str], purpose: str) ->
         raise IdentificationError(f"{src}: {purpose} needs at least 3 samples, the recording has {len(recording)}")
     t = recording.t
     if not np.all(np.isfinite(t)):
-        raise IdentificationError(f"{src}: t_s has NaN or infinite values at row(s) {_rows(~np.isfinite(t))}")
+        bad = ~np.isfinite(t)
+        raise IdentificationError(f"{_first(recording, bad)}: t_s has NaN or infinite values "
+                                  f"({_places(recording, bad)})")
     if np.any(np.diff(t) <= 0.0):
         k = int(np.flatnonzero(np.diff(t) <= 0.0)[0]) + 1
         raise IdentificationError(
-            f"{src}: t_s is not strictly increasing at data row {k + 1} ({t[k - 1]!r} then {t[k]!r})"
+            f"{recording.where(k)}: t_s is not strictly increasing ({t[k - 1]!r} then {t[k]!r})"
         )
     for c in columns:
         bad = ~np.isfinite(np.asarray(recording[c], dtype=float))
         if bad.any():
             raise IdentificationError(
-                f"{src}: column {c!r} has {int(bad.sum())} empty or NaN cell(s) (first at data row(s) {_rows(bad)}); "
-                f"{purpose} needs it at every sample"
+                f"{_first(recording, bad)}: column {c!r} has {int(bad.sum())} empty or NaN cell(s) "
+                f"({_places(recording, bad)}); {purpose} needs it at every sample"
             )
 
 
-def _rows(mask: np.ndarray) -> list[int]:
-    """1-based data-row numbers (file line = row + 1) of the first few True entries."""
-    return [int(i) + 1 for i in np.flatnonzero(mask)[:5]]
+def _first(recording: Recording, mask: np.ndarray) -> str:
+    """``"file:line"`` (or ``"source, row k"``) of the first True entry of ``mask``."""
+    return recording.where(int(np.flatnonzero(mask)[0]))
+
+
+def _places(recording: Recording, mask: np.ndarray) -> str:
+    """The first few True entries of ``mask`` as file lines (1-based, blank lines counted) or, in memory, rows."""
+    rows = np.flatnonzero(mask)[:5]
+    if recording.file_lines is not None:
+        return f"first at line(s) {recording.file_lines.of(rows).tolist()}"
+    return f"first at row(s) {[int(i) + 1 for i in rows]}"
 
 
 def load_inputs(cases: Iterable[str | Path | Case]) -> list[CaseData]:
