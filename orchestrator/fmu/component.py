@@ -132,6 +132,9 @@ class LoadedFMU:
     path: Path
     model_description: ModelDescription
     unzip_dir: Path
+    #: names of the variables with ``relativeQuantity="true"`` (read here: fmpy 0.3 tests the attribute with
+    #: ``in`` on the element, which looks at its children, and never sets it for a variable)
+    relative: frozenset[str] = frozenset()
 
 
 def load_fmu(path: str | Path) -> LoadedFMU:
@@ -208,7 +211,17 @@ def load_fmu(path: str | Path) -> LoadedFMU:
         with zipfile.ZipFile(path) as zf:
             zf.extractall(folder)
         _EXTRACTED[key] = folder
-    return LoadedFMU(path, md, folder)
+    return LoadedFMU(path, md, folder, _relative_quantities(root))
+
+
+def _relative_quantities(root: ET.Element) -> frozenset[str]:
+    """Names of the variables whose own type element says ``relativeQuantity="true"`` (FMI 2.0 and 3.0)."""
+    out = set()
+    for element in root.iterfind("ModelVariables/*"):
+        typed = [element] + list(element)  # FMI 3.0: <Float64 .../>; FMI 2.0: <ScalarVariable><Real .../>
+        if any(e.get("relativeQuantity") in ("true", "1") for e in typed):
+            out.add(element.get("name", ""))
+    return frozenset(out)
 
 
 def fmu_unit(variable: ScalarVariable) -> str | None:
@@ -254,15 +267,17 @@ def unit_definitions(md: ModelDescription, source: str) -> dict[str, UnitDefinit
     return out
 
 
-def variable_unit_definition(variable: ScalarVariable, definitions: Mapping[str, UnitDefinition]
-                             ) -> UnitDefinition | None:
+def variable_unit_definition(variable: ScalarVariable, definitions: Mapping[str, UnitDefinition],
+                             relative: frozenset[str] = frozenset()) -> UnitDefinition | None:
     """The definition of ``variable``'s unit, without its offset when the variable is a relative quantity.
 
     FMI: a ``relativeQuantity="true"`` variable (a temperature *difference*
-    in ``degC``) converts without the unit's offset.
+    in ``degC``) converts without the unit's offset; ``relative`` names the
+    variables that say so themselves (:attr:`LoadedFMU.relative`), a
+    declared type may say so too.
     """
     found = definitions.get(fmu_unit(variable) or "")
-    if found is not None and found.offset != 0.0 and _relative(variable):
+    if found is not None and found.offset != 0.0 and (variable.name in relative or _relative(variable)):
         found = UnitDefinition(found.name, found.exponents, found.factor, 0.0, found.source)
     return found
 
@@ -577,7 +592,7 @@ class FMUComponent:
             if not ours.isidentifier():
                 continue  # e.g. "der(x)" or "a[1]": not addressable by the twin, shown by check_fmu
             their_unit = fmu_unit(v) if type_ == "Real" else None
-            their_definition = variable_unit_definition(v, definitions) if type_ == "Real" else None
+            their_definition = variable_unit_definition(v, definitions, self._fmu.relative) if type_ == "Real" else None
             spec = self.role.variable(ours) if self.role else None
             our_unit: str | None = their_unit if type_ == "Real" else "1"
             our_definition = their_definition
