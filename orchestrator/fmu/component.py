@@ -17,7 +17,11 @@ returns ``terminateSimulation`` or ``earlyReturn`` raises :class:`FMUError`.
 
 A foreign FMU whose variables are named differently stands in for a role of
 the twin through ``mapping={our_name: their_name}``; units are checked and
-converted with :mod:`fmus_src.units` (``values`` always holds our units).
+converted with :mod:`fmus_src.units` (``values`` always holds our units),
+units the table lacks through the FMU's ``<UnitDefinitions>``
+(:func:`unit_definitions`; each :class:`Variable` carries its unit's
+definition). A variable without a declared unit has ``unit = None``
+(unknown, not ``"1"``).
 
 Every FMI call goes through :meth:`FMUComponent._fmi`, the one place where
 status codes are checked: fmi2Discard, fmi2Error and fmi2Fatal (fmi3Discard,

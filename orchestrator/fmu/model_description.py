@@ -114,7 +114,8 @@ def annotate_model_description(xml_text: bytes | str, variables: Iterable[Variab
         var = declared[name]
         if var.type == "Real":
             real = scalar.find("Real")
-            if real is not None and var.unit not in ("1", None):
+            # "1" too: an FMU variable without a unit is *undeclared* (unknown) to an importer, not dimensionless
+            if real is not None and var.unit is not None:
                 real.set("unit", var.unit)
                 if var.unit not in used_units:
                     used_units.append(var.unit)
