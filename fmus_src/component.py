@@ -28,11 +28,14 @@ can ship it inside an FMU.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import ClassVar, Literal, Mapping
+from typing import TYPE_CHECKING, ClassVar, Literal, Mapping
 
 import numpy as np
 
 from .errors import CncTwinError
+
+if TYPE_CHECKING:  # only for the annotation: this module needs numpy alone at run time
+    from .units import UnitDefinition
 
 Causality = Literal["parameter", "input", "output"]
 VariableType = Literal["Real", "Integer", "Boolean", "String"]
@@ -54,23 +57,30 @@ class Variable:
         Python identifier, unique within the component (e.g. ``"x_ref"``).
     causality : {"parameter", "input", "output"}
         FMI 2.0 causality.
-    unit : str
+    unit : str or None
         Unit symbol (see :mod:`fmus_src.units`); ``"1"`` for dimensionless.
-        SI inside the physics.
+        SI inside the physics. None: no unit declared (a foreign FMU's
+        variable without ``unit``): unknown, which is not dimensionless;
+        connected and recorded unchanged.
     start : float or str
         Start value; for parameters the default value.
     description : str
         One line for humans and for ``modelDescription.xml``.
     type : {"Real", "Integer", "Boolean", "String"}
         FMI base type. String variables are shared by the whole batch.
+    unit_definition : UnitDefinition, optional
+        How ``unit`` maps to SI when its source defined it (an FMU's
+        ``<UnitDefinitions>``); used to convert units that
+        :mod:`fmus_src.units` does not know (``kN``, ``degC``).
     """
 
     name: str
     causality: Causality
-    unit: str = "1"
+    unit: str | None = "1"
     start: float | str = 0.0
     description: str = ""
     type: VariableType = "Real"
+    unit_definition: "UnitDefinition | None" = None
 
     def __post_init__(self) -> None:
         if not self.name.isidentifier():

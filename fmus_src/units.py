@@ -4,6 +4,14 @@ A small registry of the units this project uses. Each unit is a factor to its
 SI unit and a dimension signature, so that connections between components can
 be checked (same dimension) and converted (factor only, no offsets).
 
+Units this registry does not know can still be converted when their source
+defines them against the SI base units, as FMI 2.0/3.0 ``<UnitDefinitions>``
+and SSP ``<ssc:Units>`` do (:class:`UnitDefinition`: value_SI = factor ×
+value + offset, e.g. ``degC``: factor 1, offset 273.15). :func:`conversion`
+returns the affine map between two units, from this registry first and from
+such definitions otherwise. A variable that declares no unit at all is
+*undeclared* (``None``), which is not the dimensionless ``"1"``.
+
 Machine parameter files put the unit in the key name (``screw_lead_mm``,
 ``rapid_feed_mm_per_min``); :func:`split_unit_suffix` reads it back.
 """
@@ -11,6 +19,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Mapping
 
 
 class UnitError(ValueError):
@@ -91,12 +100,82 @@ _register("N.m/A", 1.0, "F.L/I", "Nm_per_A")
 _register("W", 1.0, "P", "W")
 _register("kW", 1e3, "P", "kW")
 _register("A", 1.0, "I", "A")
+_register("V", 1.0, "P/I", "V")
+_register("K", 1.0, "K", "K")
 _register("A/(m/s)", 1.0, "I.T/L", "A_per_m_per_s")
 _register("A/m", 1.0, "I/L", "A_per_m")
 _register("m3/s", 1.0, "L3/T", "m3_per_s")
 _register("mm3/min", 1e-9 / 60.0, "L3/T", "mm3_per_min")
 _register("KRW", 1.0, "KRW", "KRW")
 _register("KRW/s", 1.0, "KRW/T", "KRW_per_s")
+
+
+#: SI base units of FMI 2.0/3.0 ``<BaseUnit>`` and SSP ``<ssc:BaseUnit>``, in the schema's order.
+BASE_UNITS = ("kg", "m", "s", "A", "K", "mol", "cd", "rad")
+
+
+@dataclass(frozen=True)
+class UnitDefinition:
+    """How a unit maps to SI: value_SI = ``factor`` × value + ``offset``.
+
+    The form of an FMI ``<Unit name=...><BaseUnit .../></Unit>`` and of an SSP
+    ``<ssc:Unit>``: e.g. ``kN`` is ``kg·m·s⁻²`` with factor 1000, ``degC`` is
+    ``K`` with offset 273.15.
+
+    Attributes
+    ----------
+    name : str
+        Unit symbol (``"kN"``).
+    exponents : tuple of (str, int)
+        Non-zero exponents of the SI base units (:data:`BASE_UNITS`), in that
+        order (``(("kg", 1), ("m", 1), ("s", -2))``).
+    factor : float
+        Scale to SI (1000 for ``kN``).
+    offset : float
+        Offset to SI, in SI units (273.15 for ``degC``; 0 for almost every unit).
+    source : str
+        Where it was defined (the FMU or SSP file), for messages; ``""`` for
+        this module's own table.
+    """
+
+    name: str
+    exponents: tuple[tuple[str, int], ...] = ()
+    factor: float = 1.0
+    offset: float = 0.0
+    source: str = ""
+
+    @classmethod
+    def from_base(cls, name: str, base: Mapping[str, float], factor: float = 1.0, offset: float = 0.0,
+                  source: str = "") -> "UnitDefinition":
+        """A definition from base-unit exponents by name (``{"kg": 1, "m": 1, "s": -2}``).
+
+        Raises
+        ------
+        UnitError
+            An exponent of a base unit not in :data:`BASE_UNITS`, or a factor that is not finite and non-zero.
+        """
+        unknown = sorted(set(base) - set(BASE_UNITS))
+        if unknown:
+            raise UnitError(f"unit {name!r}{_at(source)}: unknown base unit(s) {unknown}; expected {list(BASE_UNITS)}")
+        if not (math.isfinite(factor) and factor != 0.0 and math.isfinite(offset)):
+            raise UnitError(f"unit {name!r}{_at(source)}: factor {factor!r} and offset {offset!r} must be finite "
+                            "and the factor non-zero")
+        exps = tuple((b, int(base[b])) for b in BASE_UNITS if int(base.get(b, 0)) != 0)
+        return cls(name, exps, float(factor), float(offset), source)
+
+    @property
+    def signature(self) -> str:
+        """The exponents as text (``"kg m s-2"``; ``"1"`` when dimensionless)."""
+        return " ".join(b if e == 1 else f"{b}{e}" for b, e in self.exponents) or "1"
+
+    def same_as(self, other: "UnitDefinition") -> bool:
+        """Same exponents, factor and offset (to 1e-12 relative): the same unit, whatever its name."""
+        return (self.exponents == other.exponents and math.isclose(self.factor, other.factor, rel_tol=1e-12)
+                and math.isclose(self.offset, other.offset, rel_tol=1e-12, abs_tol=1e-12))
+
+
+def _at(source: str) -> str:
+    return f" (defined in {source})" if source else ""
 
 
 def unit(symbol: str) -> Unit:
@@ -159,7 +238,7 @@ def si_symbol(symbol: str) -> str:
 
 _PRIMITIVE_DIMENSIONS: dict[str, dict[str, int]] = {
     "L": {"m": 1}, "T": {"s": 1}, "M": {"kg": 1}, "I": {"A": 1}, "A": {"rad": 1},
-    "F": {"kg": 1, "m": 1, "s": -2}, "P": {"kg": 1, "m": 2, "s": -3}, "KRW": {},
+    "F": {"kg": 1, "m": 1, "s": -2}, "P": {"kg": 1, "m": 2, "s": -3}, "K": {"K": 1}, "KRW": {},
 }
 
 
@@ -181,3 +260,84 @@ def base_exponents(symbol: str) -> dict[str, int]:
             for base, exp in _PRIMITIVE_DIMENSIONS[name].items():
                 out[base] = out.get(base, 0) + sign * power * exp
     return {k: v for k, v in out.items() if v}
+
+
+def known(symbol: str | None) -> bool:
+    """Whether ``symbol`` is in this module's table."""
+    return symbol in _UNITS
+
+
+def definition(symbol: str) -> UnitDefinition | None:
+    """This table's unit ``symbol`` as a :class:`UnitDefinition`; None when unknown or without SI form (currency).
+
+    Angles count in ``rad`` as FMI's ``<BaseUnit rad=...>`` does (``"rpm"`` is
+    ``rad s-1`` with factor 2π/60).
+    """
+    if symbol not in _UNITS or _UNITS[symbol].dimension.startswith("KRW"):
+        return None
+    return UnitDefinition.from_base(symbol, base_exponents(symbol), _UNITS[symbol].factor)
+
+
+def conversion(
+    source: str,
+    target: str,
+    source_definition: UnitDefinition | None = None,
+    target_definition: UnitDefinition | None = None,
+) -> tuple[float, float]:
+    """Affine map ``(factor, offset)`` with value_in_target = factor × value_in_source + offset.
+
+    A unit of this module's table is taken from the table; any other from its
+    definition (an FMU's ``<UnitDefinitions>``, an SSP's ``<ssc:Units>``):
+    value_SI = factor × value + offset on each side, so ``degC`` → ``K`` is
+    ``(1, 273.15)`` and ``kN`` → ``N`` is ``(1000, 0)``. Two table units convert
+    exactly as :func:`conversion_factor` (offset 0). The same symbol on both
+    sides is ``(1, 0)`` unless both sides define it, differently.
+
+    Parameters
+    ----------
+    source, target : str
+        Unit symbols (both declared: an undeclared unit is the caller's case).
+    source_definition, target_definition : UnitDefinition, optional
+        Definitions that came with each side's variable.
+
+    Raises
+    ------
+    UnitError
+        A unit neither in the table nor defined, or units of different base-unit exponents.
+    """
+    if source == target and (source in _UNITS or source_definition is None or target_definition is None
+                             or source_definition.same_as(target_definition)):
+        return 1.0, 0.0
+    if source in _UNITS and target in _UNITS:
+        return conversion_factor(source, target), 0.0
+    sides = []
+    for symbol, given in ((source, source_definition), (target, target_definition)):
+        resolved = definition(symbol) if symbol in _UNITS else given
+        if resolved is None:
+            raise UnitError(
+                f"cannot convert {source!r} to {target!r}: unknown unit {symbol!r}, neither in cnctwin's table "
+                "(fmus_src.units) nor defined by its source (no <Unit> with a <BaseUnit> in the FMU's "
+                "<UnitDefinitions> or the SSP's <ssc:Units>)")
+        sides.append(resolved)
+    a, b = sides
+    if a.exponents != b.exponents:
+        raise UnitError(f"cannot connect {source!r} ({a.signature}{_at(a.source)}) to {target!r} "
+                        f"({b.signature}{_at(b.source)}): different SI base units")
+    return a.factor / b.factor, (a.offset - b.offset) / b.factor
+
+
+def disagreement(given: UnitDefinition) -> str | None:
+    """How a definition of a symbol this table knows differs from the table's (None: it agrees).
+
+    Exponents of ``rad`` are not compared (many tools leave angles out of
+    ``<BaseUnit>``, as SI does); factor and offset are.
+    """
+    ours = definition(given.name)
+    if ours is None:
+        return None
+    strip = lambda d: tuple(x for x in d.exponents if x[0] != "rad")  # noqa: E731
+    if strip(ours) == strip(given) and math.isclose(ours.factor, given.factor, rel_tol=1e-9) \
+            and given.offset == 0.0:
+        return None
+    return (f"{given.name!r} is defined as {given.factor!r} {given.signature} + {given.offset!r}{_at(given.source)}, "
+            f"cnctwin's table has {ours.factor!r} {ours.signature}; the table is used")

@@ -32,9 +32,11 @@ from typing import Callable, Literal, Sequence
 
 import numpy as np
 
+from fmus_src.component import Variable
+
 from .errors import CncTwinError, SimulationError, SystemDescriptionError
 from .recording import Recording
-from .system import Connection, System, split_reference, unit_factor
+from .system import Connection, System, split_reference, unit_conversion, unit_text
 
 log = logging.getLogger(__name__)
 
@@ -61,8 +63,11 @@ class Probe:
     unit: str | None = None
 
 
-def probe_factor(system: System, probe: Probe) -> float:
-    """Factor from the probed variable's unit to the probe's channel unit (1 without a channel unit).
+def probe_conversion(system: System, probe: Probe) -> tuple[float, float]:
+    """``(factor, offset)`` from the probed variable's unit to the probe's channel unit ((1, 0) without one).
+
+    A variable without a declared unit is recorded unchanged, under the
+    channel unit when the probe gives one, else with no unit (None).
 
     Raises
     ------
@@ -71,8 +76,32 @@ def probe_factor(system: System, probe: Probe) -> float:
     """
     comp, var = split_reference(probe.reference)
     declared = system.component(comp).variable(var)
-    unit = probe.unit or declared.unit
-    return unit_factor(declared.unit, unit, f"probe {probe.channel!r}: {probe.reference} [{declared.unit}] -> [{unit}]")
+    if probe.unit is None or probe.unit == declared.unit:
+        return 1.0, 0.0
+    channel = Variable(declared.name, "input", probe.unit)
+    return unit_conversion(declared, channel, f"probe {probe.channel!r}: {probe.reference} "
+                                              f"[{unit_text(declared.unit)}] -> [{probe.unit}]")
+
+
+def probe_factor(system: System, probe: Probe) -> float:
+    """Factor of :func:`probe_conversion` (for paths that scale only; see there).
+
+    Raises
+    ------
+    SystemDescriptionError
+        The channel unit cannot be converted from the variable's, or only with an offset.
+    """
+    factor, offset = probe_conversion(system, probe)
+    if offset != 0.0:
+        raise SystemDescriptionError(f"probe {probe.channel!r}: {probe.reference} -> [{probe.unit}] needs an offset "
+                                     f"({offset!r}); use probe_conversion")
+    return factor
+
+
+def probe_unit(system: System, probe: Probe) -> str | None:
+    """Unit of the probe's channel: the probe's own, else the variable's (None: no unit declared)."""
+    comp, var = split_reference(probe.reference)
+    return probe.unit or system.component(comp).variable(var).unit
 
 
 @dataclass
@@ -150,12 +179,14 @@ class _Wire:
     source_values: dict
     source_name: str
     factor: float
+    offset: float = 0.0
 
 
 class _Recorder:
     """Samples probes into arrays that grow geometrically (amortised preallocation)."""
 
-    def __init__(self, probes: list[tuple[str, dict, str, float, str]], batch: int, capacity: int) -> None:
+    def __init__(self, probes: list[tuple[str, dict, str, tuple[float, float], str | None]], batch: int,
+                 capacity: int) -> None:
         self.probes = probes
         self.batch = batch
         self.n = 0
@@ -172,9 +203,11 @@ class _Recorder:
         if self.n == self.t.shape[0]:
             self._grow()
         self.t[self.n] = t
-        for buf, (_, values, name, factor, _) in zip(self.buffers, self.probes):
+        for buf, (_, values, name, (factor, offset), _) in zip(self.buffers, self.probes):
             v = values[name]
             buf[self.n] = v[0] * factor if self.batch == 1 else v * factor
+            if offset != 0.0:
+                buf[self.n] += offset
         self.n += 1
 
     def recording(self, success: bool, message: str, source: str) -> Recording:
@@ -266,7 +299,7 @@ class Master:
             comp, var = split_reference(reference)
             system.component(comp).variable(var)
         for p in self.probes:  # a channel's unit must be the variable's or convertible from it
-            probe_factor(system, p)
+            probe_conversion(system, p)
         self._wires: dict[str, list[_Wire]] = {name: [] for name in system.components}
         self._connections_by_target: dict[str, list[Connection]] = {name: [] for name in system.components}
         for c in system.connections:
@@ -301,7 +334,7 @@ class Master:
         for name, conns in self._connections_by_target.items():
             self._wires[name] = [
                 _Wire(comps[c.target_component].values, c.target_variable,
-                      comps[c.source_component].values, c.source_variable, c.factor)
+                      comps[c.source_component].values, c.source_variable, c.factor, c.offset)
                 for c in conns
             ]
 
@@ -314,6 +347,8 @@ class Master:
                 np.copyto(dst, src, casting="unsafe")
             else:
                 np.multiply(src, w.factor, out=dst, casting="unsafe")
+            if w.offset != 0.0:  # affine units (degC -> K): factor, then offset, as every loop does
+                np.add(dst, w.offset, out=dst, casting="unsafe")
 
     def _check_divergence(self, t: float) -> None:
         """Mark members with non-finite connection values or values outside the limits as failed.
@@ -506,9 +541,7 @@ class Master:
         probes = []
         for p in self.probes:
             comp, var = split_reference(p.reference)
-            declared = comps[comp].variable(var)
-            unit = p.unit or declared.unit
-            probes.append((p.channel, None, var, probe_factor(system, p), unit, comp))
+            probes.append((p.channel, None, var, probe_conversion(system, p), probe_unit(system, p), comp))
         batch = system.batch
         t = s.t0
         k = 0

@@ -43,9 +43,15 @@ def unit_of_column(name: str) -> str:
     return split_unit_suffix(name)[1]
 
 
-def _unit_map(names: Iterable[str], units: Mapping[str, str] | None) -> dict[str, str]:
-    """Every channel's unit: from ``units``, else from the channel name."""
-    return {name: (units or {}).get(name) or unit_of_column(name) for name in names}
+def _unit_map(names: Iterable[str], units: Mapping[str, str | None] | None) -> dict[str, str | None]:
+    """Every channel's unit: from ``units``, else from the channel name.
+
+    An explicit None in ``units`` stays None: the channel records a variable
+    that declares no unit (a foreign FMU's), which is not dimensionless.
+    """
+    given = units or {}
+    return {name: None if name in given and given[name] is None else (given.get(name) or unit_of_column(name))
+            for name in names}
 
 
 @dataclass
@@ -58,8 +64,9 @@ class Recording:
         One field per channel; the first is ``t_s``. Fields have shape
         ``()`` for a single run or ``(B,)`` for a batched run (``t_s`` is
         always scalar per sample).
-    units : dict[str, str]
-        Unit symbol of every field.
+    units : dict[str, str or None]
+        Unit symbol of every field; None for a channel of a variable that
+        declares no unit (a foreign FMU's).
     success : bool
         Whether the run reached its end condition.
     message : str
@@ -74,7 +81,7 @@ class Recording:
     """
 
     data: np.ndarray
-    units: dict[str, str]
+    units: dict[str, str | None]
     success: bool = True
     message: str = ""
     source: str = "<memory>"

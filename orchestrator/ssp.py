@@ -22,8 +22,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from fmus_src.component import Component
-from fmus_src.units import UnitError, base_exponents, conversion_factor
+from fmus_src.component import Component, Variable
+from fmus_src.units import UnitDefinition, UnitError, base_exponents, conversion, known
+from fmus_src.units import unit as lookup_unit
 
 from .atomic import atomic_write_text
 from .errors import CncTwinError
@@ -101,6 +102,7 @@ class SystemSpec:
     method: str = "gauss-seidel"
     order: tuple[str, ...] | None = None
     folder: Path = Path(".")
+    units: dict[str, UnitDefinition] = field(default_factory=dict)
 
 
 # ---------------------------------------------------------------------------- writing
@@ -116,19 +118,49 @@ def _fmt(value: Any) -> str:
     return str(value)
 
 
-def _units_element(parent: ET.Element, prefix: str, symbols: set[str]) -> None:
+def _units_element(parent: ET.Element, prefix: str, symbols: dict[str, UnitDefinition | None]) -> None:
+    """``<ssd:Units>``/``<ssv:Units>``: each unit's ``ssc:BaseUnit``.
+
+    A unit of :mod:`fmus_src.units` from the table; any other from the
+    definition its variable came with (an FMU's ``<UnitDefinitions>``, with
+    its offset); a unit with neither gets an ``ssc:Unit`` without
+    ``ssc:BaseUnit`` (SSP allows it: nothing to convert with).
+    """
     if not symbols:
         return
     units = ET.SubElement(parent, _q(prefix, "Units"))
     for symbol in sorted(symbols):
         u = ET.SubElement(units, _q("ssc", "Unit"), name=symbol)
-        from fmus_src.units import unit as lookup
-
-        attrs = {k: str(v) for k, v in base_exponents(symbol).items()}
-        factor = lookup(symbol).factor
+        if known(symbol):
+            attrs = {k: str(v) for k, v in base_exponents(symbol).items()}
+            factor, offset = lookup_unit(symbol).factor, 0.0
+        elif symbols[symbol] is not None:
+            found = symbols[symbol]
+            attrs = {k: str(v) for k, v in found.exponents}
+            factor, offset = found.factor, found.offset
+        else:
+            continue
         if factor != 1.0:
             attrs["factor"] = repr(factor)
+        if offset != 0.0:
+            attrs["offset"] = repr(offset)
         ET.SubElement(u, _q("ssc", "BaseUnit"), attrs)
+
+
+def _read_units(path: Path, holder: ET.Element, prefix: str) -> dict[str, UnitDefinition]:
+    """The ``ssc:Unit`` definitions under ``holder``'s ``<prefix:Units>`` (those with an ``ssc:BaseUnit``)."""
+    out: dict[str, UnitDefinition] = {}
+    for u in holder.iterfind(f"{prefix}:Units/ssc:Unit", NS):
+        name, base = u.get("name"), u.find("ssc:BaseUnit", NS)
+        if not name or base is None:
+            continue
+        try:
+            exps = {k: int(base.get(k, "0")) for k in ("kg", "m", "s", "A", "K", "mol", "cd", "rad")}
+            out[name] = UnitDefinition.from_base(name, exps, float(base.get("factor", "1")),
+                                                 float(base.get("offset", "0")), str(path))
+        except (ValueError, UnitError) as exc:
+            raise SSPError(f"{path}: unit {name!r}: malformed ssc:BaseUnit ({exc})") from None
+    return out
 
 
 def _pretty(root: ET.Element) -> str:
@@ -136,17 +168,18 @@ def _pretty(root: ET.Element) -> str:
     return '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
 
 
-def parameter_set_xml(name: str, parameters: dict[str, tuple[Any, str, str | None]]) -> str:
-    """SSV text for ``{"comp.param": (value, type, unit)}``."""
+def parameter_set_xml(name: str, parameters: dict[str, tuple[Any, str, str | None]],
+                      definitions: dict[str, UnitDefinition | None] | None = None) -> str:
+    """SSV text for ``{"comp.param": (value, type, unit)}`` (``definitions``: of units not in :mod:`fmus_src.units`)."""
     root = ET.Element(_q("ssv", "ParameterSet"), version="1.0", name=name)
     params = ET.SubElement(root, _q("ssv", "Parameters"))
-    used: set[str] = set()
+    used: dict[str, UnitDefinition | None] = {}
     for pname, (value, vtype, unit) in parameters.items():
         p = ET.SubElement(params, _q("ssv", "Parameter"), name=pname)
         attrs = {"value": _fmt(value)}
         if unit and vtype == "Real":
             attrs["unit"] = unit
-            used.add(unit)
+            used.setdefault(unit, (definitions or {}).get(unit))
         ET.SubElement(p, _q("ssv", vtype), attrs)
     _units_element(root, "ssv", used)
     return _pretty(root)
@@ -183,7 +216,7 @@ def system_to_ssp(
     bindings = ET.SubElement(sys_el, _q("ssd", "ParameterBindings"))
     ET.SubElement(bindings, _q("ssd", "ParameterBinding"), source=os.path.relpath(ssv_path, ssd_path.parent))
     elements = ET.SubElement(sys_el, _q("ssd", "Elements"))
-    used_units: set[str] = set()
+    used_units: dict[str, UnitDefinition | None] = {}
     parameters: dict[str, tuple[Any, str, str | None]] = {}
     for name, comp in system.components.items():
         attrs = {"name": name, "type": FMU_TYPE}
@@ -192,9 +225,10 @@ def system_to_ssp(
         conns = ET.SubElement(el, _q("ssd", "Connectors"))
         for var in comp.declared_variables():
             c = ET.SubElement(conns, _q("ssd", "Connector"), name=var.name, kind=var.causality)
-            t_attrs = {"unit": var.unit} if var.type == "Real" else {}
-            if var.type == "Real":
-                used_units.add(var.unit)
+            # a variable without a declared unit gets a connector without one (not "1")
+            t_attrs = {"unit": var.unit} if var.type == "Real" and var.unit is not None else {}
+            if t_attrs:
+                used_units.setdefault(var.unit, var.unit_definition)
             ET.SubElement(c, _q("ssc", var.type), t_attrs)
             if var.causality == "parameter":
                 value = comp.values[var.name]
@@ -221,7 +255,7 @@ def system_to_ssp(
     if settings.stop_signals():
         master_attrs["stopWhen"] = " ".join(settings.stop_signals())
     ET.SubElement(ann, _q("cnctwin", "Master"), master_attrs)
-    atomic_write_text(ssv_path, parameter_set_xml(f"{system.name}-parameters", parameters))
+    atomic_write_text(ssv_path, parameter_set_xml(f"{system.name}-parameters", parameters, used_units))
     atomic_write_text(ssd_path, _pretty(root))
     return ssd_path, ssv_path
 
@@ -279,9 +313,11 @@ def _parameter_set(path: Path, root: ET.Element) -> dict[str, tuple[Any, str | N
     return out
 
 
-def _bindings(path: Path, holder: ET.Element) -> dict[str, tuple[Any, str | None]]:
-    """Merge the parameter bindings of an element (later bindings win)."""
+def _bindings(path: Path, holder: ET.Element, units: dict[str, UnitDefinition] | None = None
+              ) -> dict[str, tuple[Any, str | None]]:
+    """Merge the parameter bindings of an element (later bindings win); their unit definitions go into ``units``."""
     values: dict[str, tuple[Any, str | None]] = {}
+    units = {} if units is None else units
     for binding in holder.iterfind("ssd:ParameterBindings/ssd:ParameterBinding", NS):
         prefix = binding.get("prefix", "")
         source = binding.get("source")
@@ -289,11 +325,13 @@ def _bindings(path: Path, holder: ET.Element) -> dict[str, tuple[Any, str | None
             if source.startswith("#"):
                 raise SSPError(f"{path}: parameter binding to {source!r}: fragment references are not supported")
             found = read_ssv(path.parent / source)
+            units.update(_read_units(path.parent / source, _parse(path.parent / source), "ssv"))
         else:
             inline = binding.find("ssd:ParameterValues/ssv:ParameterSet", NS)
             if inline is None:
                 raise SSPError(f"{path}: a ParameterBinding has neither a source nor inline ParameterValues")
             found = _parameter_set(path, inline)
+            units.update(_read_units(path, inline, "ssv"))
         for name, value in found.items():
             values[name[len(prefix):] if prefix and name.startswith(prefix) else name] = value
     return values
@@ -317,6 +355,7 @@ def read_ssd(path: str | Path) -> SystemSpec:
         raise SSPError(f"{path}: no ssd:System element")
     elements: list[ElementSpec] = []
     by_name: dict[str, ElementSpec] = {}
+    units = _read_units(path, root, "ssd")
     for el in sys_el.iterfind("ssd:Elements/*", NS):
         if el.tag != _q("ssd", "Component"):
             raise SSPError(
@@ -341,10 +380,10 @@ def read_ssd(path: str | Path) -> SystemSpec:
         if ann is not None:
             spec.native = ann.get("native")
             spec.rate = int(ann.get("rate", "1"))
-        spec.parameters.update(_bindings(path, el))
+        spec.parameters.update(_bindings(path, el, units))
         elements.append(spec)
         by_name[name] = spec
-    for name, value in _bindings(path, sys_el).items():
+    for name, value in _bindings(path, sys_el, units).items():
         comp, _, pname = name.partition(".")
         if comp not in by_name or not pname:
             raise SSPError(f"{path}: parameter {name!r} does not name a component's parameter ('component.parameter')")
@@ -358,7 +397,7 @@ def read_ssd(path: str | Path) -> SystemSpec:
                 "connector; connect component connectors directly"
             )
         connections.append((start, c.get("startConnector", ""), end, c.get("endConnector", "")))
-    system_spec = SystemSpec(root.get("name", path.stem), elements, connections, folder=path.parent)
+    system_spec = SystemSpec(root.get("name", path.stem), elements, connections, folder=path.parent, units=units)
     experiment = root.find("ssd:DefaultExperiment", NS)
     if experiment is not None:
         system_spec.start_time = float(experiment.get("startTime", "0"))
@@ -384,13 +423,23 @@ def _import_native(spec: ElementSpec) -> type[Component]:
     return cls
 
 
-def _converted(spec: ElementSpec, pname: str, value: Any, unit: str | None, declared_unit: str, vtype: str) -> Any:
-    if vtype != "Real" or unit is None or unit == declared_unit:
+def _converted(spec: ElementSpec, pname: str, value: Any, unit: str | None, declared: Variable,
+               units: dict[str, UnitDefinition]) -> Any:
+    """A parameter value in ``unit`` converted to the variable's unit (affine: ``degC`` -> ``K`` adds 273.15).
+
+    Units not in :mod:`fmus_src.units` are converted through the SSP's
+    ``ssc:Unit`` definitions and the variable's own (an FMU's
+    ``<UnitDefinitions>``); a variable without a declared unit takes the
+    value as it is.
+    """
+    if declared.type != "Real" or unit is None or declared.unit is None or unit == declared.unit:
         return value
     try:
-        return value * conversion_factor(unit, declared_unit)
+        factor, offset = conversion(unit, declared.unit, units.get(unit),
+                                    declared.unit_definition or units.get(declared.unit))
     except UnitError as exc:
-        raise SSPError(f"{spec.name}.{pname}: value in {unit!r} for a parameter in {declared_unit!r}: {exc}") from None
+        raise SSPError(f"{spec.name}.{pname}: value in {unit!r} for a parameter in {declared.unit!r}: {exc}") from None
+    return value * factor + offset if offset != 0.0 else value * factor
 
 
 def build_system(spec: SystemSpec, native: bool = True, batch: int = 1) -> tuple[System, MasterSettings]:
@@ -418,7 +467,7 @@ def build_system(spec: SystemSpec, native: bool = True, batch: int = 1) -> tuple
                 var = declared[pname]
                 if pname in PATH_PARAMETERS and isinstance(value, str) and value and not Path(value).is_absolute():
                     value = str((spec.folder / value).resolve())
-                params[pname] = _converted(el, pname, value, unit, var.unit, var.type)
+                params[pname] = _converted(el, pname, value, unit, var, spec.units)
             component = cls(el.name, batch=batch, **params)
         else:
             if not el.source:
@@ -432,7 +481,7 @@ def build_system(spec: SystemSpec, native: bool = True, batch: int = 1) -> tuple
                 var = component.variable(pname)
                 if pname in PATH_PARAMETERS and isinstance(value, str) and value and not Path(value).is_absolute():
                     value = str((spec.folder / value).resolve())
-                component.set(pname, _converted(el, pname, value, unit, var.unit, var.type))
+                component.set(pname, _converted(el, pname, value, unit, var, spec.units))
         system.add(component, rate=el.rate)
     for start, sc, end, ec in spec.connections:
         system.connect(f"{start}.{sc}", f"{end}.{ec}")

@@ -4,7 +4,10 @@ A :class:`System` holds named components (native or FMU-backed, anything that
 follows :class:`fmus_src.component.Component`'s protocol) and connections
 ``"source_component.output" -> "target_component.input"``. Units are checked
 when a connection is made; compatible units of different scale (mm and m)
-are converted by a factor carried on the connection.
+are converted by a factor carried on the connection, units with an offset
+(``degC`` and ``K``, defined by an FMU's ``<UnitDefinitions>``) by a factor
+and an offset. A variable that declares no unit (``Variable.unit is None``)
+connects to anything unchanged.
 
 Each component has a *rate*: how many times it is stepped per communication
 step (a servo loop at 250 µs inside a 1 ms communication step has rate 4).
@@ -12,6 +15,7 @@ Components of the same rate exchange values at their own, finer step.
 """
 from __future__ import annotations
 
+import logging
 import math
 from dataclasses import dataclass
 from typing import Iterable, Protocol
@@ -19,37 +23,64 @@ from typing import Iterable, Protocol
 import numpy as np
 
 from fmus_src.component import Variable
-from fmus_src.units import UnitError, conversion_factor
+from fmus_src.units import UnitError, conversion
 
 from .errors import SystemDescriptionError
 
+log = logging.getLogger(__name__)
 
-def unit_factor(source: str, target: str, what: str) -> float:
-    """Factor ``k`` with value in ``target`` = k × value in ``source``; 1 for the same symbol, known or not.
 
-    A foreign FMU may declare units this project does not know (``"kV"``,
-    ``"degC"``, ``"bar"``); a value can still be recorded in its own unit and
-    passed to a variable of the same unit. Only a conversion needs both units
-    known and of the same dimension.
+def unit_conversion(source: Variable, target: Variable, what: str) -> tuple[float, float]:
+    """Affine map ``(factor, offset)``: value in ``target``'s unit = factor × value in ``source``'s + offset.
+
+    * The same symbol, known or not: ``(1, 0)``. A foreign FMU may declare
+      units this project does not know; a value can still be recorded in
+      its own unit and passed to a variable of the same unit.
+    * No declared unit on either side (``unit is None``): ``(1, 0)``; an
+      undeclared unit is unknown, not dimensionless, so nothing is checked.
+    * Otherwise :func:`fmus_src.units.conversion`: units of
+      :mod:`fmus_src.units`, else the variables' own unit definitions (an
+      FMU's ``<UnitDefinitions>``), e.g. ``kN`` → ``N`` is ``(1000, 0)``,
+      ``degC`` → ``K`` is ``(1, 273.15)``.
 
     Parameters
     ----------
-    source, target : str
-        Unit symbols.
+    source, target : Variable
+        The two declarations.
     what : str
         What is converted, for the message (``"a.y [kV] -> b.u [V]"``).
 
     Raises
     ------
     SystemDescriptionError
-        Different symbols of which one is unknown, or of different dimension.
+        Different symbols of which one is neither known nor defined, or of different SI base units.
     """
-    if source == target:
-        return 1.0
+    if source.unit is None or target.unit is None:
+        return 1.0, 0.0
     try:
-        return conversion_factor(source, target)
+        return conversion(source.unit, target.unit, source.unit_definition, target.unit_definition)
     except UnitError as exc:
         raise SystemDescriptionError(f"{what}: {exc}") from None
+
+
+def unit_factor(source: str, target: str, what: str) -> float:
+    """Factor ``k`` with value in ``target`` = k × value in ``source`` (units without offset).
+
+    The factor-only case of :func:`unit_conversion`, for two unit symbols
+    without definitions.
+
+    Raises
+    ------
+    SystemDescriptionError
+        See :func:`unit_conversion`.
+    """
+    factor, _ = unit_conversion(Variable("a", "output", source), Variable("b", "input", target), what)
+    return factor
+
+
+def unit_text(unit: str | None) -> str:
+    """``unit`` for messages: the symbol, or ``"no unit declared"``."""
+    return "no unit declared" if unit is None else unit
 
 
 class ComponentLike(Protocol):
@@ -74,13 +105,15 @@ class Connection:
     ----------
     source, target : str
         ``"component.variable"`` of the output and of the input.
-    factor : float
-        Unit conversion: input value = factor × output value.
+    factor, offset : float
+        Unit conversion: input value = factor × output value + offset (offset
+        0 but for units such as ``degC`` → ``K``).
     """
 
     source: str
     target: str
     factor: float = 1.0
+    offset: float = 0.0
 
     @property
     def source_component(self) -> str:
@@ -170,6 +203,11 @@ class System:
         SystemDescriptionError
             Unknown component or variable, wrong causality, incompatible units,
             or an input that is already connected.
+
+        Notes
+        -----
+        A side without a declared unit passes the value unchanged (factor 1),
+        logged once at info level naming both ends.
         """
         src, dst = self._variable(source), self._variable(target)
         if src.causality != "output":
@@ -178,11 +216,17 @@ class System:
             raise SystemDescriptionError(f"{target} is a {dst.causality}, not an input")
         if src.type == "String" or dst.type == "String":
             raise SystemDescriptionError(f"{source} -> {target}: string variables cannot be connected")
-        factor = unit_factor(src.unit, dst.unit, f"{source} [{src.unit}] -> {target} [{dst.unit}]")
+        factor, offset = unit_conversion(
+            src, dst, f"{source} [{unit_text(src.unit)}] -> {target} [{unit_text(dst.unit)}]")
         for existing in self.connections:
             if existing.target == target:
                 raise SystemDescriptionError(f"{target} is already connected to {existing.source}")
-        connection = Connection(source, target, factor)
+        if (src.unit is None or dst.unit is None) and src.type == "Real":
+            log.info("%s: %s [%s] -> %s [%s]: no unit declared on %s; the value is passed unchanged",
+                     self.name, source, unit_text(src.unit), target, unit_text(dst.unit),
+                     "either side" if src.unit is None and dst.unit is None else
+                     ("the source" if src.unit is None else "the target"))
+        connection = Connection(source, target, factor, offset)
         self.connections.append(connection)
         return connection
 

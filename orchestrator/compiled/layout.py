@@ -39,7 +39,7 @@ from fmus_src.servo.drive import DriveAxis
 from fmus_src.servo.mcu import MCU, TICK_RTOL
 
 from ..errors import CncTwinError
-from ..master import probe_factor
+from ..master import probe_conversion, probe_unit
 from ..system import split_reference
 from .loop import (CUT_ROWS, DRIVE_ROWS, INTEGRATOR_EXPONENTIAL, INTEGRATOR_RK4,
                    KIND_CUT, KIND_DRIVE, KIND_MCU, KIND_NCK, KIND_ZMAP, MCU_ROWS, NCK_ROWS, ZMAP_ROWS)
@@ -194,6 +194,9 @@ class Layout:
                 comp, var = split_reference(ref)
                 if system.components[comp].variable(var).type != "Real":
                     raise Unsupported(f"connection {c.source} -> {c.target}: {ref} is not Real")
+            if c.offset != 0.0:  # the loop scales only; the Python loop applies factor and offset
+                raise Unsupported(f"connection {c.source} -> {c.target} converts units with an offset "
+                                  f"({c.offset!r}); the compiled loop applies factors only")
             wires[self.index[c.target_component]].append(
                 (self._row(c.source), self._row(c.target), float(c.factor)))
         flat = [w for ws in wires for w in ws]
@@ -211,12 +214,13 @@ class Layout:
         # probes: rows and unit factors (as the master's recorder)
         self.probe_rows, factors, self.channels = [], [], []
         for p in master.probes:
-            comp, var = split_reference(p.reference)
-            declared = system.components[comp].variable(var)
-            unit = p.unit or declared.unit
+            factor, offset = probe_conversion(system, p)
+            if offset != 0.0:
+                raise Unsupported(f"probe {p.channel!r} converts {p.reference} with an offset ({offset!r}); the "
+                                  "compiled loop applies factors only")
             self.probe_rows.append(self._row(p.reference))
-            factors.append(probe_factor(system, p))
-            self.channels.append((p.channel, unit))
+            factors.append(factor)
+            self.channels.append((p.channel, probe_unit(system, p)))
         self.probe_rows = np.array(self.probe_rows, dtype=np.int64)
         self.probe_factor = np.array(factors, dtype=np.float64)
         # real outputs of each component (NaN for its failed members, Component._blank_failed_outputs)

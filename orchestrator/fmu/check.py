@@ -7,9 +7,9 @@ from typing import Mapping
 
 from fmpy.validation import validate_fmu
 
-from fmus_src.units import UnitError, conversion_factor, unit as lookup_unit
+from fmus_src.units import UnitError, conversion, known
 
-from .component import FMUComponent, fmu_unit, load_fmu, our_type
+from .component import FMUComponent, fmu_unit, load_fmu, our_type, unit_definitions, variable_unit_definition
 from .errors import FMUError
 from .roles import get_role
 
@@ -133,7 +133,9 @@ class FMUCheckReport:
 
 def _role_rows(path: Path, role_name: str, mapping: Mapping[str, str]) -> list[RoleRow]:
     role = get_role(role_name)
-    md = load_fmu(path).model_description
+    loaded = load_fmu(path)
+    md = loaded.model_description
+    definitions = unit_definitions(md, str(loaded.path))
     fmu_vars = {v.name: v for v in md.modelVariables}
     rows = []
     required = {v.name for v in role.required}
@@ -155,8 +157,13 @@ def _role_rows(path: Path, role_name: str, mapping: Mapping[str, str]) -> list[R
             status = f"ok (no unit declared; assumed {spec.unit})"
         else:
             try:
-                factor = conversion_factor(spec.unit, unit)
-                status = "ok" if factor == 1.0 else f"ok (converted: 1 {spec.unit} = {factor:g} {unit})"
+                factor, offset = conversion(spec.unit, unit, None,
+                                            variable_unit_definition(v, definitions, loaded.relative))
+                if offset != 0.0:
+                    status = (f"unit {unit!r} does not fit {spec.unit!r}: the conversion needs an offset; a role "
+                              "maps units by a factor only")
+                else:
+                    status = "ok" if factor == 1.0 else f"ok (converted: 1 {spec.unit} = {factor:g} {unit})"
             except UnitError as exc:
                 status = f"unit {unit!r} does not fit {spec.unit!r}: {exc}"
         rows.append(RoleRow(spec.name, theirs, spec.name in required, status))
@@ -240,12 +247,18 @@ def check_fmu(
     ]
     problems = list(validate_fmu(str(loaded.path)))
     notes = []
+    definitions = unit_definitions(md, str(loaded.path))
     for v in variables:
-        if v.unit is not None and our_type(v.type) == "Real":
-            try:
-                lookup_unit(v.unit)
-            except UnitError:
-                notes.append(f"variable {v.name!r}: unit {v.unit!r} is not known to cnctwin (fmus_src.units)")
+        if v.unit is not None and our_type(v.type) == "Real" and not known(v.unit):
+            if v.unit in definitions:
+                d = definitions[v.unit]
+                notes.append(f"variable {v.name!r}: unit {v.unit!r} is not in cnctwin's table; converted through the "
+                             f"FMU's <UnitDefinitions> ({d.factor!r} {d.signature}"
+                             + (f" + {d.offset!r}" if d.offset else "") + ")")
+            else:
+                notes.append(f"variable {v.name!r}: unit {v.unit!r} is not known to cnctwin (fmus_src.units) nor "
+                             "defined in the FMU's <UnitDefinitions>: it can be connected and recorded in its own "
+                             "unit only")
     rows = _role_rows(loaded.path, role, mapping) if role is not None else []
     smoke_ok, message, outputs = _smoke(loaded.path, mapping, dict(parameters or {}), smoke_steps)
     return FMUCheckReport(

@@ -17,7 +17,11 @@ returns ``terminateSimulation`` or ``earlyReturn`` raises :class:`FMUError`.
 
 A foreign FMU whose variables are named differently stands in for a role of
 the twin through ``mapping={our_name: their_name}``; units are checked and
-converted with :mod:`fmus_src.units` (``values`` always holds our units).
+converted with :mod:`fmus_src.units` (``values`` always holds our units),
+units the table lacks through the FMU's ``<UnitDefinitions>``
+(:func:`unit_definitions`; each :class:`Variable` carries its unit's
+definition). A variable without a declared unit has ``unit = None``
+(unknown, not ``"1"``).
 
 Every FMI call goes through :meth:`FMUComponent._fmi`, the one place where
 status codes are checked: fmi2Discard, fmi2Error and fmi2Fatal (fmi3Discard,
@@ -51,7 +55,7 @@ from fmpy.model_description import ModelDescription, ScalarVariable
 from . import fmi3
 
 from fmus_src.component import Variable
-from fmus_src.units import UnitError, conversion_factor
+from fmus_src.units import UnitDefinition, UnitError, conversion, disagreement
 
 from .binary_check import shared_library_problem
 from .errors import FMUError, status_name
@@ -63,6 +67,8 @@ PLATFORM = "linux64"
 _SUFFIX = ".so"
 _TYPES = ("Real", "Integer", "Boolean", "String")
 _DTYPES = {"Real": np.float64, "Integer": np.int64, "Boolean": np.bool_}
+#: fmi2Pending: an asynchronous fmi2DoStep (not supported; see FMUComponent._failure)
+PENDING = 5
 
 
 @dataclass(frozen=True)
@@ -130,6 +136,9 @@ class LoadedFMU:
     path: Path
     model_description: ModelDescription
     unzip_dir: Path
+    #: names of the variables with ``relativeQuantity="true"`` (read here: fmpy 0.3 tests the attribute with
+    #: ``in`` on the element, which looks at its children, and never sets it for a variable)
+    relative: frozenset[str] = frozenset()
 
 
 def load_fmu(path: str | Path) -> LoadedFMU:
@@ -206,7 +215,17 @@ def load_fmu(path: str | Path) -> LoadedFMU:
         with zipfile.ZipFile(path) as zf:
             zf.extractall(folder)
         _EXTRACTED[key] = folder
-    return LoadedFMU(path, md, folder)
+    return LoadedFMU(path, md, folder, _relative_quantities(root))
+
+
+def _relative_quantities(root: ET.Element) -> frozenset[str]:
+    """Names of the variables whose own type element says ``relativeQuantity="true"`` (FMI 2.0 and 3.0)."""
+    out = set()
+    for element in root.iterfind("ModelVariables/*"):
+        typed = [element] + list(element)  # FMI 3.0: <Float64 .../>; FMI 2.0: <ScalarVariable><Real .../>
+        if any(e.get("relativeQuantity") in ("true", "1") for e in typed):
+            out.add(element.get("name", ""))
+    return frozenset(out)
 
 
 def fmu_unit(variable: ScalarVariable) -> str | None:
@@ -215,6 +234,98 @@ def fmu_unit(variable: ScalarVariable) -> str | None:
         return variable.unit
     declared = getattr(variable, "declaredType", None)
     return getattr(declared, "unit", None) or None
+
+
+def unit_definitions(md: ModelDescription, source: str) -> dict[str, UnitDefinition]:
+    """The ``<UnitDefinitions>`` of a model description that define a ``<BaseUnit>``, by unit name.
+
+    A ``<Unit>`` without ``<BaseUnit>`` (allowed by FMI 2.0 and 3.0) defines
+    nothing to convert with and is left out.
+
+    Parameters
+    ----------
+    md : ModelDescription
+        fmpy's model description (FMI 2.0 or 3.0).
+    source : str
+        The FMU, for messages.
+
+    Raises
+    ------
+    FMUError
+        A definition that is not usable (a zero or non-finite factor, an unknown base unit).
+    """
+    out: dict[str, UnitDefinition] = {}
+    for u in md.unitDefinitions or []:
+        base = u.baseUnit
+        if base is None or not u.name:
+            continue
+        try:
+            out[u.name] = UnitDefinition.from_base(
+                u.name, {b: getattr(base, b, 0) for b in ("kg", "m", "s", "A", "K", "mol", "cd", "rad")},
+                float(base.factor), float(base.offset), source)
+        except UnitError as exc:
+            raise FMUError(f"{source}: modelDescription.xml <UnitDefinitions>: {exc}", path=source) from None
+        problem = disagreement(out[u.name])
+        if problem is not None:
+            log.warning("%s: %s", source, problem)
+    return out
+
+
+def variable_unit_definition(variable: ScalarVariable, definitions: Mapping[str, UnitDefinition],
+                             relative: frozenset[str] = frozenset()) -> UnitDefinition | None:
+    """The definition of ``variable``'s unit, without its offset when the variable is a relative quantity.
+
+    FMI: a ``relativeQuantity="true"`` variable (a temperature *difference*
+    in ``degC``) converts without the unit's offset; ``relative`` names the
+    variables that say so themselves (:attr:`LoadedFMU.relative`), a
+    declared type may say so too.
+    """
+    found = definitions.get(fmu_unit(variable) or "")
+    if found is not None and found.offset != 0.0 and (variable.name in relative or _relative(variable)):
+        found = UnitDefinition(found.name, found.exponents, found.factor, 0.0, found.source)
+    return found
+
+
+def _relative(variable: ScalarVariable) -> bool:
+    if getattr(variable, "relativeQuantity", False):
+        return True
+    declared = getattr(variable, "declaredType", None)
+    return bool(getattr(declared, "relativeQuantity", False))
+
+
+def no_variable_error(component: str, path: Path, name: str, exposed: Mapping[str, object],
+                      md: ModelDescription) -> FMUError:
+    """The :class:`FMUError` for a name that is not an exposed variable, saying why.
+
+    Shared by :class:`FMUComponent` and
+    :class:`~orchestrator.fmu.isolated.IsolatedFMUComponent`: a structured FMU
+    name (``gain.k``, ``der(x)``, ``a[1]``) is reachable through ``mapping``;
+    a local or independent variable is not exchanged.
+
+    Parameters
+    ----------
+    component : str
+        Instance name.
+    path : Path
+        The FMU file.
+    name : str
+        The name asked for.
+    exposed : Mapping
+        The exposed variables by our name.
+    md : ModelDescription
+        The FMU's model description.
+    """
+    theirs = {v.name: v for v in md.modelVariables}.get(name)
+    if theirs is not None and theirs.causality in ("parameter", "input", "output"):
+        # an FMU name the twin cannot address (structured names "gain.k", "der(x)", "a[1]")
+        why = (f"the FMU's {theirs.causality} {name!r} is not an identifier; give it one through "
+               f"mapping={{'your_name': {name!r}}}")
+    elif theirs is not None:
+        why = f"the FMU's {name!r} is a {theirs.causality} variable, which the twin does not exchange"
+    else:
+        why = "no such variable"
+    return FMUError(f"{component} ({path.name}): no variable {name!r} ({why}); it has {sorted(exposed)}",
+                    path=str(path), component=component)
 
 
 def our_type(type_name: str) -> str:
@@ -431,6 +542,8 @@ class FMUComponent:
         self.values: dict[str, np.ndarray | str] = {}
         self._load_start_values()
         self._init_parameters: dict[str, object] = dict(parameters or {})
+        #: names given a value by the caller (constructor parameters, set()); see _settable_bindings
+        self._explicit: set[str] = set()
         for key in self._init_parameters:
             var = self.variable(key)
             if var.causality == "output":
@@ -466,6 +579,7 @@ class FMUComponent:
             reverse[theirs] = ours
         bindings: list[_Binding] = []
         problems: list[str] = []
+        definitions = unit_definitions(md, where)
         for v in md.modelVariables:
             if v.causality not in ("parameter", "input", "output"):
                 continue
@@ -481,9 +595,11 @@ class FMUComponent:
             ours = reverse.get(v.name, v.name)
             if not ours.isidentifier():
                 continue  # e.g. "der(x)" or "a[1]": not addressable by the twin, shown by check_fmu
-            their_unit = fmu_unit(v)
+            their_unit = fmu_unit(v) if type_ == "Real" else None
+            their_definition = variable_unit_definition(v, definitions, self._fmu.relative) if type_ == "Real" else None
             spec = self.role.variable(ours) if self.role else None
-            our_unit = their_unit or "1"
+            our_unit: str | None = their_unit if type_ == "Real" else "1"
+            our_definition = their_definition
             factor = 1.0
             if spec is not None:
                 if spec.causality != v.causality:
@@ -492,12 +608,20 @@ class FMUComponent:
                 if spec.type != type_:
                     problems.append(f"{ours!r} (FMU {v.name!r}) is {type_}, the role needs {spec.type}")
                     continue
-                our_unit = spec.unit
+                our_unit, our_definition = spec.unit, None
+                if their_unit is None and type_ == "Real":
+                    log.info("%s: %r (FMU %r) declares no unit; taken as the role's %s", where, ours, v.name,
+                             spec.unit)
                 if their_unit is not None and type_ == "Real":
                     try:
-                        factor = conversion_factor(our_unit, their_unit)
+                        factor, offset = conversion(our_unit, their_unit, None, their_definition)
                     except UnitError as exc:
                         problems.append(f"{ours!r} (FMU {v.name!r} [{their_unit}]): {exc}")
+                        continue
+                    if offset != 0.0:  # a role variable is exchanged by a factor; connect such a variable instead
+                        problems.append(f"{ours!r} (FMU {v.name!r} [{their_unit}]): converting {spec.unit!r} to "
+                                        f"{their_unit!r} needs an offset ({offset!r}); a role maps units by a "
+                                        "factor only")
                         continue
             try:
                 start = _start(v, type_)
@@ -508,7 +632,8 @@ class FMUComponent:
                 ) from None
             if type_ == "Real" and factor != 1.0:
                 start = start / factor
-            declared = Variable(ours, v.causality, our_unit, start, v.description or "", type_)  # type: ignore[arg-type]
+            declared = Variable(ours, v.causality, our_unit, start, v.description or "", type_,  # type: ignore[arg-type]
+                                our_definition)
             bindings.append(_Binding(declared, v, factor, native))
         if self.role is not None:
             present = {b.ours.name for b in bindings}
@@ -552,18 +677,7 @@ class FMUComponent:
         try:
             return self._by_name[name].ours
         except KeyError:
-            pass
-        theirs = {v.name: v for v in self.model_description.modelVariables}.get(name)
-        if theirs is not None and theirs.causality in ("parameter", "input", "output"):
-            # an FMU name the twin cannot address (structured names "gain.k", "der(x)", "a[1]")
-            why = (f"the FMU's {theirs.causality} {name!r} is not an identifier; give it one through "
-                   f"mapping={{'your_name': {name!r}}}")
-        elif theirs is not None:
-            why = f"the FMU's {name!r} is a {theirs.causality} variable, which the twin does not exchange"
-        else:
-            why = "no such variable"
-        raise FMUError(f"{self.name} ({self.path.name}): no variable {name!r} ({why}); it has {sorted(self._by_name)}",
-                       path=str(self.path), component=self.name)
+            raise no_variable_error(self.name, self.path, name, self._by_name, self.model_description) from None
 
     def names(self, causality: str) -> list[str]:
         """Names of the exposed variables of one causality, in model-description order."""
@@ -581,8 +695,10 @@ class FMUComponent:
                 self.values[var.name] = np.full(1, var.start, dtype=_DTYPES[var.type])
 
     def _apply_init_parameters(self) -> None:
+        self._explicit = set()
         for key, value in self._init_parameters.items():
             self._store(self.variable(key), value)
+            self._explicit.add(key)
 
     def _store(self, var: Variable, value: object) -> None:
         if var.type == "String":
@@ -606,6 +722,7 @@ class FMUComponent:
             raise FMUError(f"{self.name}.{name} is a parameter; set it before setup()", path=str(self.path),
                            component=self.name)
         self._store(var, value)
+        self._explicit.add(var.name)
 
     def get(self, name: str) -> np.ndarray | str:
         """Current value of a variable (copy of shape ``(1,)``, or a str)."""
@@ -629,7 +746,12 @@ class FMUComponent:
         return fmi3.status_name(status) if self._v3 else status_name(status)
 
     def _failure(self, function: str, status: int, verb: str = "returned") -> FMUError:
-        return self._end(function, f"{verb} {self._status_name(status)}", status)
+        what = f"{verb} {self._status_name(status)}"
+        if status == PENDING and not self._v3:
+            # FMI 2.0, 4.2.2: fmi2Pending means the FMU runs the step asynchronously (canRunAsynchronuously)
+            what += (" (the FMU runs the step asynchronously; asynchronous steps are not supported: cnctwin's "
+                     "master steps every FMU synchronously and does not wait for fmi2StepFinished)")
+        return self._end(function, what, status)
 
     def _end(self, function: str, what: str, status: int | None) -> FMUError:
         """The FMUError for a failed call (``what`` happened in ``function``); frees or abandons the instance."""
@@ -745,12 +867,51 @@ class FMUComponent:
     close = _close
 
     # -- typed transfers (all through _fmi)
-    def _set_all(self, causalities: tuple[str, ...]) -> None:
-        settable = [b for b in self._bindings
-                    if b.ours.causality in causalities and b.theirs.variability != "constant"]
-        for block in _blocks(self.values, settable):
+    def _settable_bindings(self, causalities: tuple[str, ...]) -> tuple[list[_Binding], list[_Binding]]:
+        """The bindings :meth:`setup` writes, and those it leaves to the FMU (read back after initialisation).
+
+        Variables of one alias set (FMI 2.0: the same value reference and type)
+        are written once: the one the caller gave a value, else the one with a
+        ``start`` in the model description (FMI 2.0 allows ``start`` on one
+        variable of the set only). A variable without ``start`` that the
+        caller did not set is not written, so the FMU's own value stands
+        (writing our placeholder 0 would overwrite the alias's start value);
+        inputs are always written (the master hands connected values through
+        ``values``).
+
+        Raises
+        ------
+        FMUError
+            Two aliases of one set given different values.
+        """
+        groups: dict[tuple[str, int], list[_Binding]] = {}
+        for b in self._bindings:
+            if b.ours.causality in causalities and b.theirs.variability != "constant":
+                groups.setdefault((b.native.setter, int(b.theirs.valueReference)), []).append(b)
+        write: list[_Binding] = []
+        keep: list[_Binding] = []
+        for group in groups.values():
+            given = [b for b in group if b.ours.name in self._explicit]
+            if len(given) > 1:
+                values = {b.ours.name: self.values[b.ours.name] for b in given}
+                if len({str(np.asarray(v).tolist()) for v in values.values()}) > 1:
+                    raise FMUError(f"{self.name}: {sorted(values)} are aliases (value reference "
+                                   f"{group[0].theirs.valueReference}) and were given different values; give one",
+                                   path=str(self.path), component=self.name)
+            # inputs are always written: the master puts connected values into ``values`` before setup()
+            chosen = (given[:1] or [b for b in group if b.theirs.start is not None][:1]
+                      or [b for b in group if b.ours.causality == "input"][:1])
+            write += chosen
+            keep += [b for b in group if b not in chosen]
+        return write, keep
+
+    def _set_all(self, causalities: tuple[str, ...]) -> list[_Binding]:
+        """Write parameters and inputs (see :meth:`_settable_bindings`); returns the bindings left unwritten."""
+        write, keep = self._settable_bindings(causalities)
+        for block in _blocks(self.values, write):
             block.pack()
             self._fmi(block.native.setter, *block.args)
+        return keep
 
     def _pull_outputs(self) -> None:
         for block in self._out_blocks:
@@ -788,7 +949,7 @@ class FMUComponent:
         else:
             self._fmi("fmi2SetupExperiment", 0, 0.0, self.t0, 0, 0.0)
             self._fmi("fmi2EnterInitializationMode")
-        self._set_all(("parameter", "input"))
+        unwritten = self._set_all(("parameter", "input"))
         self._worst_logged = 0
         exit_init = f"{self._prefix}ExitInitializationMode"
         self._fmi(exit_init)
@@ -796,6 +957,9 @@ class FMUComponent:
             # the initialisation failed but the FMU could not say so in its status (pythonfmu: see
             # fmus_src.fmu.slave.ComponentSlave.exit_initialization_mode); the log names the cause
             raise self._failure(exit_init, self._worst_logged, "logged")
+        for block in _blocks(self.values, unwritten):  # aliases and start-less variables: the FMU's values
+            self._fmi(block.native.getter, *block.args)
+            block.unpack()
         self._pull_outputs()
         self.state = "initialized"
 

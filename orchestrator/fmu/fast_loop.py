@@ -27,8 +27,9 @@ call and operation for operation, so recordings are bit-identical:
   (FMI 3.0: the Float64 ones, ``fmi3SetFloat64`` / ``fmi3GetFloat64``, and
   ``fmi3DoStep`` with ``noSetFMUStatePriorToCurrentPoint = true``);
 * an output value in our units is ``raw × from_fmu``; an input receives
-  ``(source × connection factor) × to_fmu`` (as :class:`FMUComponent` and
-  :class:`~orchestrator.system.System` do).
+  ``(source × connection factor + connection offset) × to_fmu``, the offset
+  added only when it is not 0 (units such as ``degC`` → ``K``), as
+  :class:`FMUComponent` and the master's Python loop do.
 
 Only Real variables can be connected (of an FMI 3.0 FMU: ``Float64``
 variables). Recorded outputs and stop signals of an FMI 2.0 FMU may also be
@@ -117,6 +118,7 @@ typedef struct {
     const unsigned int *in_vr;
     const int *in_src;            /* source slot, or -1: constant in_const */
     const double *in_factor;      /* connection unit factor */
+    const double *in_offset;      /* connection unit offset (added after the factor when not 0) */
     const double *in_to;          /* our unit -> FMU unit */
     const double *in_const;
     const int *out_start;         /* outputs of component c: out_start[c] .. out_start[c+1]-1 */
@@ -261,7 +263,11 @@ int cnct_run(Loop *L, long k0, long n_steps, double t0, double h) {
                 fmi2Status s;
                 if (b > a) {
                     for (int i = a; i < b; ++i) {
-                        double v = L->in_src[i] >= 0 ? src[L->in_src[i]] * L->in_factor[i] : L->in_const[i];
+                        double v = L->in_const[i];
+                        if (L->in_src[i] >= 0) {
+                            v = src[L->in_src[i]] * L->in_factor[i];
+                            if (L->in_offset[i] != 0.0) v += L->in_offset[i];
+                        }
                         L->in_last[i] = v;
                         L->buffer[i - a] = v * L->in_to[i];
                     }
@@ -325,6 +331,7 @@ class _Loop(ctypes.Structure):
         ("in_vr", ctypes.POINTER(ctypes.c_uint)),
         ("in_src", ctypes.POINTER(ctypes.c_int)),
         ("in_factor", ctypes.POINTER(ctypes.c_double)),
+        ("in_offset", ctypes.POINTER(ctypes.c_double)),
         ("in_to", ctypes.POINTER(ctypes.c_double)),
         ("in_const", ctypes.POINTER(ctypes.c_double)),
         ("out_start", ctypes.POINTER(ctypes.c_int)),
@@ -623,8 +630,8 @@ class FastFMULoop:
         their connected inputs first, as the master does).
     connections : sequence of (str, str) or Connection
         ``("source.output", "target.input")`` pairs, or
-        :class:`~orchestrator.system.Connection` objects (their unit factor is
-        applied).
+        :class:`~orchestrator.system.Connection` objects (their unit factor
+        and offset are applied).
     record : sequence of str
         ``"component.output"`` to record every communication step.
     order : sequence of str, optional
@@ -690,19 +697,20 @@ class FastFMULoop:
         self.method = method
         self.units = [_Instance(n, self.objects[n]) for n in self.order]
         self._index = {u.name: i for i, u in enumerate(self.units)}
-        self.connections: list[tuple[str, str, float]] = []
+        self.connections: list[tuple[str, str, float, float]] = []  # (source, target, factor, offset)
         seen: dict[str, str] = {}
         for c in connections:
             if isinstance(c, tuple):
-                source, target, factor = c[0], c[1], 1.0
+                source, target, factor, offset = c[0], c[1], 1.0, 0.0
             else:
-                source, target, factor = c.source, c.target, float(getattr(c, "factor", 1.0))
+                source, target = c.source, c.target
+                factor, offset = float(getattr(c, "factor", 1.0)), float(getattr(c, "offset", 0.0))
             if target in seen:
                 raise FMUError(f"FastFMULoop: {target} is connected twice ({seen[target]} and {source})")
             seen[target] = source
             self._unit(source).port(_split(source)[1], "output")
             self._unit(target).port(_split(target)[1], "input")
-            self.connections.append((source, target, factor))
+            self.connections.append((source, target, factor, offset))
         self.record = list(record)
         self.stop = list(stop)
         self.checks = {ref: (float(lo), float(hi)) for ref, (lo, hi) in (checks or {}).items()}
@@ -761,7 +769,7 @@ class FastFMULoop:
             owner = u.owner
             if owner is None or owner.state != "instantiated":
                 continue
-            for source, target, factor in self.connections:
+            for source, target, factor, offset in self.connections:
                 if _split(target)[0] != u.name:
                     continue
                 src = self._unit(source)
@@ -773,6 +781,8 @@ class FastFMULoop:
                     np.copyto(dst, value, casting="unsafe")
                 else:
                     np.multiply(value, factor, out=dst, casting="unsafe")
+                if offset != 0.0:
+                    np.add(dst, offset, out=dst, casting="unsafe")
             owner.setup(t0)
         for u in self.units:
             if u.owner is not None and u.owner.state != "initialized":
@@ -807,21 +817,23 @@ class FastFMULoop:
             int_start.append(len(int_vr))
         for i, ref in enumerate(bool_names + int_names):
             slot_of[ref] = n_real + i
-        source_of = {target: (source, factor) for source, target, factor in self.connections}
-        in_start, in_vr, in_src, in_factor, in_to, in_const = [0], [], [], [], [], []
+        source_of = {target: (source, factor, offset) for source, target, factor, offset in self.connections}
+        in_start, in_vr, in_src, in_factor, in_offset, in_to, in_const = [0], [], [], [], [], [], []
         for u in self.units:
             for name, port in u.inputs.items():
                 ref = f"{u.name}.{name}"
                 in_vr.append(port.vr)
                 in_to.append(port.to_fmu)
                 if ref in source_of:
-                    source, factor = source_of[ref]
+                    source, factor, offset = source_of[ref]
                     in_src.append(slot_of[source])
                     in_factor.append(factor)
+                    in_offset.append(offset)
                     in_const.append(0.0)
                 else:
                     in_src.append(-1)
                     in_factor.append(1.0)
+                    in_offset.append(0.0)
                     in_const.append(self._held_input(u, name, port))
             in_start.append(len(in_vr))
         n_fine = math.lcm(*self.rates.values())
@@ -858,7 +870,8 @@ class FastFMULoop:
             get_real=arr([p[2] for p in ptrs], ctypes.c_void_p),
             do_step=arr([p[3] for p in ptrs], ctypes.c_void_p),
             in_start=arr(in_start, ctypes.c_int), in_vr=arr(in_vr, ctypes.c_uint), in_src=arr(in_src, ctypes.c_int),
-            in_factor=arr(in_factor, ctypes.c_double), in_to=arr(in_to, ctypes.c_double),
+            in_factor=arr(in_factor, ctypes.c_double), in_offset=arr(in_offset, ctypes.c_double),
+            in_to=arr(in_to, ctypes.c_double),
             in_const=arr(in_const, ctypes.c_double),
             out_start=arr(out_start, ctypes.c_int), out_vr=arr(out_vr, ctypes.c_uint),
             out_from=arr(out_from, ctypes.c_double),

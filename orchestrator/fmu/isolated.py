@@ -38,7 +38,7 @@ import numpy as np
 
 from fmus_src.component import Variable
 
-from .component import _DTYPES, FMUComponent, load_fmu
+from .component import _DTYPES, FMUComponent, load_fmu, no_variable_error
 from .errors import FMUError
 
 #: Seconds to wait for the worker to start and load the FMU.
@@ -207,6 +207,7 @@ class IsolatedFMUComponent:
         loaded = load_fmu(path)  # file errors without starting a process
         self.path = loaded.path
         self.fmi_version = loaded.model_description.fmiVersion
+        self._model_description = loaded.model_description
         self._prefix = "fmi3" if self.fmi_version.startswith("3.") else "fmi2"
         self.name = name or loaded.model_description.coSimulation.modelIdentifier
         if batch != 1:
@@ -323,8 +324,7 @@ class IsolatedFMUComponent:
         try:
             return self._by_name[name]
         except KeyError:
-            raise FMUError(f"{self.name} ({self.path.name}): no variable {name!r}; it has {sorted(self._by_name)}",
-                           path=str(self.path), component=self.name) from None
+            raise no_variable_error(self.name, self.path, name, self._by_name, self._model_description) from None
 
     def names(self, causality: str) -> list[str]:
         """Names of the exposed variables of one causality."""

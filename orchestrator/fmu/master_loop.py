@@ -37,7 +37,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..errors import CncTwinError
-from ..master import probe_factor
+from ..master import probe_conversion, probe_unit
 from ..recording import Recording
 from ..system import split_reference
 from . import fmi3
@@ -127,15 +127,12 @@ def run_fast_fmu(master: "Master") -> "RunResult | None":
     expected = master.expected_duration or s.time_limit
     report_every = max(1, int(expected / h / 100))
     stop_refs = master._stop_refs  # noqa: SLF001 - the master's own state, as run_compiled
-    probes = []  # (channel, column, factor, unit)
+    probes = []  # (channel, column, (factor, offset), unit)
     record: list[str] = []
     for p in master.probes:
-        comp, var = split_reference(p.reference)
-        declared = comps[comp].variable(var)
-        unit = p.unit or declared.unit
         if p.reference not in record:
             record.append(p.reference)
-        probes.append((p.channel, record.index(p.reference), probe_factor(system, p), unit))
+        probes.append((p.channel, record.index(p.reference), probe_conversion(system, p), probe_unit(system, p)))
     checks = {c.source: (-math.inf, math.inf) for c in system.connections}
     for ref, (lo, hi) in s.limits.items():
         checks[ref] = (float(lo), float(hi))
@@ -216,8 +213,10 @@ def run_fast_fmu(master: "Master") -> "RunResult | None":
     table = np.concatenate(rows, axis=0)
     channels = {"t_s": s.t0 + ks * h}
     units = {"t_s": "s"}
-    for channel, column, factor, unit in probes:
+    for channel, column, (factor, offset), unit in probes:
         channels[channel] = table[:, column] * factor
+        if offset != 0.0:  # as the master's recorder: factor, then offset
+            channels[channel] += offset
         units[channel] = unit
     recording = Recording.from_channels(channels, units, success, message, system.name)
     return master._result(recording, success, message, k, t, stopped_at)  # noqa: SLF001

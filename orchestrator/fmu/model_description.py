@@ -30,6 +30,7 @@ _BASE_EXPONENTS: dict[str, dict[str, int]] = {
     "A": {"rad": 1},
     "F": {"kg": 1, "m": 1, "s": -2},
     "P": {"kg": 1, "m": 2, "s": -3},
+    "K": {"K": 1},
 }
 _TOKEN = re.compile(r"(KRW|[A-Z])(\d*)")
 #: Order of the attributes of ``<BaseUnit>`` in the FMI 2.0 schema.
@@ -113,7 +114,8 @@ def annotate_model_description(xml_text: bytes | str, variables: Iterable[Variab
         var = declared[name]
         if var.type == "Real":
             real = scalar.find("Real")
-            if real is not None and var.unit != "1":
+            # "1" too: an FMU variable without a unit is *undeclared* (unknown) to an importer, not dimensionless
+            if real is not None and var.unit is not None:
                 real.set("unit", var.unit)
                 if var.unit not in used_units:
                     used_units.append(var.unit)
