@@ -550,10 +550,13 @@ def _screen_glitches(series: list[_Series], used: list[str], residual: dict[str,
             idx = np.concatenate([np.arange(st + channel * s.t.size, st + (channel + 1) * s.t.size)
                                   for _, s, st, _ in pieces])
             x = r[idx]
-            scale = 1.4826 * float(np.median(np.abs(x - np.median(x))))
+            dev = np.abs(x - np.median(x))
+            # the MAD alone is too narrow where an axis rests most of the time (its quantised residual is
+            # mostly exactly 0): at least the standard deviation of all but the largest 0.5 %
+            inner = dev[dev <= np.percentile(dev, 99.5)]
+            scale = max(1.4826 * float(np.median(dev)), float(np.sqrt(np.mean(inner ** 2))))
             if scale <= 0.0:
                 continue
-            dev = np.abs(x - np.median(x))
             far = dev > GLITCH_SIGMAS * scale
             # a gross glitch biases the first fit, and the misfit it leaves is itself many MADs wide: one
             # 10 times the 99.5th percentile of the residuals is a glitch whatever the rest looks like
