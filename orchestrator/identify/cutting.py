@@ -154,12 +154,78 @@ def _columns(d: CaseData) -> tuple[str, list[str]]:
             f"{d.source}: cutting identification needs measured forces: 'fx_N' and 'fy_N' (dynamometer) or at "
             f"least 'fc_N'; the recording has {rec.channels}"
         )
-    need = ["t_s", "x_mm", "y_mm", "z_mm", spindle] + forces
-    check_columns(rec, need, "cutting identification")
     if d.case.stock is None:
         raise IdentificationError(f"{d.case.source or d.case.folder}: cutting identification needs the [stock] block "
                                   "of the workpiece in case.toml (min, max in mm)")
     return spindle, forces
+
+
+def cutting_samples(d: CaseData) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """Times [s] and the columns cutting identification uses, on common rows.
+
+    A controller log and a dynamometer log merged into one file (``fx_N``, ``fy_N`` at 10 kHz, positions at
+    1 ms, an empty cell where one side has no sample) are two streams: the fit runs on the rows of the
+    sparser one, with the denser one linearly interpolated there (rows outside the other stream's time
+    span, or in a gap of more than 5 of its median sampling steps, are not used). A recording in which
+    every row has every column is used as it is.
+
+    Returns
+    -------
+    t : ndarray, shape (n,)
+    columns : dict
+        ``x_mm``, ``y_mm``, ``z_mm``, the spindle speed column and the force columns, each shape (n,).
+
+    Raises
+    ------
+    IdentificationError
+        A missing column, a row with only part of a stream (e.g. ``x_mm`` without ``y_mm``; named by file
+        line), a stream with fewer than 3 samples, or streams that do not overlap in time.
+    """
+    rec = d.recording
+    spindle, forces = _columns(d)
+    kinematic = ["x_mm", "y_mm", "z_mm", spindle]
+    check_columns(rec, ["t_s"], "cutting identification")
+    missing = [c for c in kinematic if c not in rec]
+    if missing:
+        raise IdentificationError(f"{d.source}: cutting identification needs column(s) {missing}; the recording has "
+                                  f"{rec.channels}")
+    t = np.asarray(rec.t, dtype=float)
+    cols = {c: np.asarray(rec[c], dtype=float) for c in kinematic + forces}
+    streams = {"positions and spindle speed": kinematic, "forces": forces}
+    full = {}
+    for name, names in streams.items():
+        have = np.array([np.isfinite(cols[c]) for c in names])
+        partial = have.any(axis=0) & ~have.all(axis=0)
+        if partial.any():
+            k = int(np.flatnonzero(partial)[0])
+            empty = [c for c, h in zip(names, have[:, k]) if not h]
+            raise IdentificationError(
+                f"{rec.where(k)}: {', '.join(empty)} empty where the other {name} columns have a sample "
+                f"({int(partial.sum())} such row(s)); cutting identification needs {names} together on every row "
+                "of that stream")
+        full[name] = have.all(axis=0)
+        if full[name].sum() < 3:
+            raise IdentificationError(f"{d.source}: cutting identification needs {name} ({names}) in at least 3 "
+                                      f"rows; the recording has them in {int(full[name].sum())}")
+    kin, frc = full["positions and spindle speed"], full["forces"]
+    if (kin & frc).all():
+        return t, cols
+    # two streams: the rows of the sparser one, the denser one interpolated there
+    (base, mine), (other, _) = sorted([(frc, forces), (kin, kinematic)], key=lambda item: int(item[0].sum()))
+    to = t[other]
+    tb = t[base]
+    gap = 5.0 * float(np.median(np.diff(to)))
+    k = np.clip(np.searchsorted(to, tb), 1, to.size - 1)
+    usable = (tb >= to[0]) & (tb <= to[-1]) & (to[k] - to[k - 1] <= gap)
+    if usable.sum() < 3:
+        raise IdentificationError(
+            f"{d.source}: the forces ({int(frc.sum())} rows, {t[frc][0]:.6g} to {t[frc][-1]:.6g} s) and the "
+            f"positions ({int(kin.sum())} rows, {t[kin][0]:.6g} to {t[kin][-1]:.6g} s) do not overlap in time")
+    rows = np.flatnonzero(base)[usable]
+    out = {}
+    for c, v in cols.items():
+        out[c] = v[rows] if c in mine else np.interp(t[rows], to, v[other])
+    return t[rows], out
 
 
 def basis_forces(d: CaseData, phases: np.ndarray, smooth_s: float,
@@ -168,13 +234,12 @@ def basis_forces(d: CaseData, phases: np.ndarray, smooth_s: float,
 
     ``position_lag_s``: the component at sample ``t`` gets the recorded position at ``t - position_lag_s``.
     """
-    rec = d.recording
     spindle, _ = _columns(d)
-    t = np.asarray(rec.t, dtype=float)
-    pos = np.stack([smooth_positions(t, np.asarray(rec[f"{a}_mm"], dtype=float), smooth_s) * 1e-3 for a in "xyz"], 1)
+    t, cols = cutting_samples(d)
+    pos = np.stack([smooth_positions(t, cols[f"{a}_mm"], smooth_s) * 1e-3 for a in "xyz"], 1)
     if position_lag_s > 0.0:
         pos = np.stack([np.interp(t - position_lag_s, t, pos[:, i]) for i in range(3)], 1)
-    omega = np.maximum(np.asarray(rec[spindle], dtype=float), 0.0) * (2.0 * math.pi / 60.0)
+    omega = np.maximum(cols[spindle], 0.0) * (2.0 * math.pi / 60.0)
     p = phases.size
     params = cutting_parameters(d.case)
     params.update(kt=KT_UNIT, ke=np.tile([0.0, 1.0], p), initial_spindle_angle=np.repeat(phases, 2))
@@ -256,8 +321,8 @@ def _prepare(d: CaseData, phases: int, smooth_s: float, position_lag_s: float, j
                             lambda: basis_forces(d, angles, smooth_s, position_lag_s))
 
     _, forces = _columns(d)
-    meas = {"fx": np.asarray(rec["fx_N"], float), "fy": np.asarray(rec["fy_N"], float)} if "fx_N" in forces \
-        else {"fc": np.asarray(rec["fc_N"], float)}
+    t, cols = cutting_samples(d)
+    meas = {"fx": cols["fx_N"], "fy": cols["fy_N"]} if "fx_N" in forces else {"fc": cols["fc_N"]}
     flutes = int(d.case.tool.flutes)
     pitch = 2.0 * math.pi / flutes
     step = pitch / phases
@@ -308,7 +373,7 @@ def _prepare(d: CaseData, phases: int, smooth_s: float, position_lag_s: float, j
         phase = float(np.mod(phase + delta, pitch))
         if abs(delta) < 1e-5:
             break
-    return _Prepared(d, np.asarray(rec.t, float), meas, a3[:, 0], b3[:, 0], robust, phase)
+    return _Prepared(d, t, meas, a3[:, 0], b3[:, 0], robust, phase)
 
 
 def identify_cutting(

@@ -134,6 +134,54 @@ def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1)))
 
 
+def _densest(speed: np.ndarray, rel_tol: float, abs_tol: float) -> float:
+    """The median of the most populated band ``|speed - c| <= rel_tol c + abs_tol`` over candidates ``c``."""
+    order = np.sort(speed)
+    cand = np.quantile(order, np.linspace(0.0, 1.0, min(order.size, 201)))
+    tol = rel_tol * cand + abs_tol
+    count = np.searchsorted(order, cand + tol, side="right") - np.searchsorted(order, cand - tol, side="left")
+    c = float(cand[int(np.argmax(count))])
+    band = order[np.abs(order - c) <= rel_tol * c + abs_tol]
+    return float(np.median(band))
+
+
+def _bridge(mask: np.ndarray, t: np.ndarray, width: float) -> np.ndarray:
+    """``mask`` with its False gaps shorter than ``width`` [s] between two True runs set True."""
+    out = mask.copy()
+    runs = _runs(mask)
+    for (_, end), (start, _) in zip(runs[:-1], runs[1:]):
+        if t[start] - t[end - 1] <= width:
+            out[end:start] = True
+    return out
+
+
+#: A sample of a window farther than this many robust standard deviations from the rest is a logger glitch.
+OUTLIER_SIGMAS = 8.0
+
+
+def _inliers(t: np.ndarray, pos: np.ndarray, cur: np.ndarray) -> np.ndarray:
+    """Samples of a constant-velocity window without isolated glitches (a current spike, a position jump).
+
+    A logger's bad sample (50 A in one row of a 0.3 s window moves its mean force by 100 N and more) lies
+    far outside the scatter of the others: more than :data:`OUTLIER_SIGMAS` robust standard deviations
+    (1.4826 MAD, at least 0.5 % of the median current and 1 um) from the median current or from the
+    straight line through the positions. Such samples are left out; the rest (constant velocity: the
+    current is constant) is kept.
+    """
+    keep = np.ones(t.size, dtype=bool)
+    if t.size < 5:
+        return keep
+    dev = cur - np.median(cur)
+    scale = max(1.4826 * float(np.median(np.abs(dev))), 0.005 * abs(float(np.median(cur))), 1e-6)
+    keep &= np.abs(dev) <= OUTLIER_SIGMAS * scale
+    tc = t - t.mean()
+    line = np.polyfit(tc[keep], pos[keep], 1)
+    res = pos - np.polyval(line, tc)
+    scale = max(1.4826 * float(np.median(np.abs(res[keep] - np.median(res[keep])))), 1e-3)
+    keep &= np.abs(res) <= OUTLIER_SIGMAS * scale
+    return keep
+
+
 def find_segments(
     recording: Recording,
     axis: str,
@@ -165,7 +213,9 @@ def find_segments(
     ref_col = f"{axis}_ref_mm"
     if ref_col in recording and np.all(np.isfinite(recording[ref_col])):
         detect, window, abs_tol = np.asarray(recording[ref_col], dtype=float), s.smooth_s, s.abs_tol_mm_s
+        exact = True
     else:
+        exact = False
         # actual position: quantised and noisy, smooth more and widen the tolerance
         detect, window, abs_tol = pos, 5.0 * s.smooth_s, 4.0 * s.abs_tol_mm_s
     v = centred_velocity(t, detect, window)  # mm/s
@@ -175,20 +225,34 @@ def find_segments(
         for i, j in _runs(moving & (np.sign(v) == sign)):
             speed = np.abs(v[i:j])
             cruise = float(np.percentile(speed, 95))
+            if not exact:
+                # the actual velocity overshoots at slow speeds (0.28 mm/s for 10 mm/min) and is noisy: its 95th
+                # percentile is not the cruise speed; take the speed the axis holds longest (the densest band
+                # of the tolerance's width), and bridge dips shorter than the window (one quantisation step of
+                # a 1 um encoder at 10 mm/min broke every slow plateau)
+                cruise = _densest(speed, s.rel_tol, abs_tol)
             flat = np.abs(speed - cruise) <= s.rel_tol * cruise + abs_tol
+            if not exact:
+                flat = _bridge(flat, t[i:j], window)
             runs = _runs(flat)
             if not runs:
                 continue
             a, b = max(runs, key=lambda r: t[i + r[1] - 1] - t[i + r[0]])
-            t0 = t[i + a] + s.settle_s + 0.5 * window
+            # from the actual position, the flat stretch starts once the axis has settled (at 10 mm/min it
+            # overshoots for 0.1 s after the command's plateau begins): a third of the settling time is left
+            t0 = t[i + a] + (s.settle_s if exact else s.settle_s / 3.0) + 0.5 * window
             t1 = t[i + b - 1] - s.end_trim_s - 0.5 * window
             sel = (t >= t0) & (t <= t1)
             n = int(sel.sum())
             if t1 - t0 < s.min_window_s or n < s.min_samples:
                 continue
-            tw = t[sel]
-            slope = np.polyfit(tw - tw.mean(), pos[sel], 1)[0]  # mm/s
-            force = cur[sel] * force_per_amp
+            keep = _inliers(t[sel], pos[sel], cur[sel])
+            if int(keep.sum()) < s.min_samples:
+                continue
+            tw = t[sel][keep]
+            n = tw.size
+            slope = np.polyfit(tw - tw.mean(), pos[sel][keep], 1)[0]  # mm/s
+            force = cur[sel][keep] * force_per_amp
             out.append(Segment(
                 axis=axis, direction=sign, t_start=float(tw[0]), t_end=float(tw[-1]),
                 velocity=float(slope) * 1e-3, force=float(force.mean()),

@@ -101,6 +101,44 @@ def _check_points(speed: np.ndarray, force: np.ndarray, label: str) -> None:
         raise IdentificationError(f"{label}: the Stribeck points span fewer than 4 distinct speeds; need at least 4")
 
 
+#: A Stribeck point counts as inside the Stribeck region below this multiple of ``vs``.
+STRIBECK_REGION = 3.0
+
+
+def _check_identified(speed: np.ndarray, force: np.ndarray, x: np.ndarray, label: str) -> None:
+    """Refuse a fit whose ``Fs`` and ``vs`` the points do not determine (no residual, or no point in the hump).
+
+    With 4 points the 4 parameters fit any data exactly; with no two points below about ``3 vs`` (a log
+    that misses the slow runs: started late, or slow plateaus too short to be detected) the hump
+    ``(Fs - Fc) exp(-v / vs)`` is an extrapolation, and the optimiser trades it against ``Fc`` and ``mu_v``
+    (seen: Fs = 3e8 N, vs = 0.35 m/s, with a residual of 0.2 N). A hump smaller than the scatter of the
+    points (``Fs = Fc``: no Stribeck effect) needs no ``vs`` and is accepted.
+    """
+    fc, fs, vs, mu = (float(v) for v in x)
+    vmin, vmax = float(speed.min()), float(speed.max())
+    slow = int(np.sum(speed <= STRIBECK_REGION * vs))
+    line = np.polyfit(speed, force, 1) if speed.size >= 2 else np.array([0.0, float(np.mean(force))])
+    scatter = float(np.std(force - np.polyval(line, speed)))
+    hump = abs(fs - fc)
+    problems = []
+    if speed.size <= 4:
+        problems.append(f"{speed.size} points fit the 4 parameters exactly, with no residual to judge them by; "
+                        "at least 5 speeds are needed")
+    elif hump > max(0.01 * abs(fc), 1e-9) and (slow < 2 or vs > vmax / STRIBECK_REGION or fs <= 0.0):
+        problems.append(f"only {slow} point(s) lie in the Stribeck region (below {STRIBECK_REGION:g} vs), "
+                        f"so Fs and vs are extrapolated")
+    if not problems:
+        return
+    raise IdentificationError(
+        f"{label}: Fs and vs are not determined by the constant-velocity segments found: {problems[0]} "
+        f"(fitted Fc {fc:.4g} N, Fs {fs:.4g} N, vs {vs * 6e4:.4g} mm/min, mu_v {mu:.4g} N.s/m). "
+        f"The segments span {vmin * 6e4:.3g} to {vmax * 6e4:.3g} mm/min "
+        f"(a straight line Fc + mu_v v through them: Fc {line[1]:.4g} N, mu_v {line[0]:.4g} N.s/m, "
+        f"scatter {scatter:.3g} N). Log the whole experiment, with runs down to 10 mm/min and constant-velocity "
+        "windows long enough to be detected (`cnctwin experiment friction`, plateau 1 s)"
+    )
+
+
 def fit_stribeck(
     speed: np.ndarray,
     force: np.ndarray,
@@ -139,6 +177,7 @@ def fit_stribeck(
         raise IdentificationError(f"unknown friction method {method!r}; expected 'default' or 'paper-ga'")
     fc, fs, vs, mu = x
     e = force - stribeck_curve(speed, fc, fs, vs, mu)
+    _check_identified(speed, force, x, label)
     return StribeckFit(
         coulomb=float(fc), static=float(fs), stribeck_velocity=float(vs), viscous=float(mu),
         fitness=float(paper_objective(e)), rms=float(np.sqrt(np.mean(e * e))),
