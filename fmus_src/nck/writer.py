@@ -5,7 +5,8 @@ Rules
 * Only the number of an existing F (S) word changes (letter case, blanks
   before the number and everything else on the line, e.g. ``,C1.``/``,R2`` corner words, are kept).
 * A line without an F (S) word gets one appended right after its last word,
-  separated by one blank, i.e. before any comment and trailing blanks.
+  separated by one blank, i.e. before any comment and trailing blanks; in lower case
+  when every word of the line is written in lower case (``x45. f500``).
 * Feeds are given in mm/min and written in the program's unit at that line
   (mm/min under G21, in/min under G20) with at most 3 (G21) or 4 (G20)
   decimals; a decimal point is kept when the original word had one.
@@ -195,6 +196,9 @@ def _set_word(body: str, letter: str, value: float, decimals: int, keep_point: b
         return body[: w.start] + head + num + body[w.end :]
     num = _format(value, decimals, False) if decimals else str(int(round(value)))
     end = max(x.end for x in lexed.words)
+    letters = [body[x.start] for x in lexed.words if body[x.start].isalpha()]
+    if letters and all(c.islower() for c in letters):
+        letter = letter.lower()  # a lower-case program gets lower-case words
     return body[:end] + f" {letter}{num}" + body[end:]
 
 

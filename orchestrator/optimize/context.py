@@ -41,7 +41,10 @@ import numpy as np
 
 from fmus_src.cutting.table import EngagementTable
 
-from fmus_src.nck.blocks import Arc, Block, Linear, SpindleSpeed, SpindleStop, ToolChange
+from fmus_src.nck.blocks import (
+    Arc, Block, Linear, Program, ProgramEnd, ProgramStop, SpindleSpeed, SpindleStop, ToolChange,
+)
+from fmus_src.nck.overrides import apply_overrides
 from fmus_src.nck.settings import INCH, MM, RPM
 from fmus_src.nck.writer import MM_PER_INCH, feed_word_value, rewrite_program
 
@@ -264,27 +267,33 @@ class ProblemContext:
         return dict(zip(self.keys, x.tolist()))
 
 
-def classify_lines(blocks: tuple[Block, ...], removed_mm3: dict[int, float], min_removed_mm3: float
+def classify_lines(blocks: tuple[Block, ...], removed_mm3: dict[int, float], min_removed_mm3: float,
+                   program: Program | None = None
                    ) -> tuple[list[int], list[int], dict[int, float], list[float], list[float]]:
     """Cutting lines, their S-word lines, feed pins and original values (see the module rules).
 
     Parameters
     ----------
     blocks : tuple of Block
-        Interpreted original program (execution order, SI units).
+        Interpreted original program (execution order, SI units; a subprogram's or loop's lines once per run).
     removed_mm3 : dict line -> mm3
         Removed volume per line in the reference run.
     min_removed_mm3 : float
         Threshold of a cutting line, mm3.
+    program : Program, optional
+        The interpreted program ``blocks`` come from. With it, every S-word line is checked to govern every
+        run of its cutting line (:func:`_governed_spindle_lines`); a line that runs more than once (subprogram,
+        loop) and whose S word placed before it would not, gets the S word on itself.
 
     Returns
     -------
     lines, spindle_lines, pins, feeds_mm_per_min, spindles_rpm
     """
-    feed_lines: dict[int, tuple[float, int]] = {}
+    feed_runs: dict[int, list[tuple[float, int]]] = {}  # every run of a feed line: (written feed, F-word line)
     for b in blocks:
-        if isinstance(b, (Linear, Arc)) and b.line not in feed_lines:
-            feed_lines[b.line] = (round(b.feed * MM_PER_MIN_PER_M_S, 6), b.feed_line)  # the written value
+        if isinstance(b, (Linear, Arc)):
+            feed_runs.setdefault(b.line, []).append((round(b.feed * MM_PER_MIN_PER_M_S, 6), b.feed_line))
+    feed_lines = {line: runs[0] for line, runs in feed_runs.items()}
     tapping = {b.line for b in blocks if isinstance(b, Linear) and b.tap_pitch > 0.0}  # F tied to S: never genes
     cutting = sorted(line for line in feed_lines
                      if line not in tapping and removed_mm3.get(line, 0.0) >= min_removed_mm3)
@@ -292,8 +301,10 @@ def classify_lines(blocks: tuple[Block, ...], removed_mm3: dict[int, float], min
     # a G94 tapping line with a modal F gets it written (an F override of a cutting line in between would govern it)
     tap_modal = {b.line for b in blocks if isinstance(b, Linear) and b.tap_pitch > 0.0 and b.feed_per_rev == 0.0
                  and b.feed_line != b.line}
-    pins = {line: f for line, (f, src) in feed_lines.items()
-            if line not in cut_set and (src in cut_set or line in tap_modal)}
+    # a non-cutting line that inherits F from a cutting line in ANY of its runs (a loop, a subprogram called
+    # twice) gets its original F written; when its runs had different feeds, the lowest of them
+    pins = {line: min(f for f, _ in runs) for line, runs in feed_runs.items()
+            if line not in cut_set and (any(src in cut_set for _, src in runs) or line in tap_modal)}
     # spindle speed in effect at each cutting line, and where its S word goes
     speed_at: dict[int, float] = {}
     speed = 0.0
@@ -304,28 +315,73 @@ def classify_lines(blocks: tuple[Block, ...], removed_mm3: dict[int, float], min
             speed = 0.0
         if b.line in cut_set and b.line not in speed_at:
             speed_at[b.line] = speed
-    block_lines = sorted({b.line for b in blocks})
-    spindle_lines = []
-    previous = 0
-    for line in cutting:
-        between = [b for b in blocks if previous < b.line < line]
-        target = line
-        if between:
-            barrier = None
-            for b in between:
-                if isinstance(b, (SpindleSpeed, SpindleStop, ToolChange)):
-                    barrier = b
-            if barrier is None:
-                target = min(b.line for b in between)
-            elif isinstance(barrier, SpindleSpeed):
-                target = barrier.line
-        if target not in block_lines:
-            target = line
-        spindle_lines.append(target)
-        previous = line
+    target_of = _spindle_targets(blocks, cut_set)
+    if program is not None:
+        target_of = _governed_spindle_lines(program, cutting, target_of)
     # values as written in the program (undo the SI round trip)
-    return (cutting, spindle_lines, {k: round(v, 6) for k, v in pins.items()},
+    return (cutting, [target_of[line] for line in cutting], {k: round(v, 6) for k, v in pins.items()},
             [round(feed_lines[line][0], 6) for line in cutting], [round(speed_at.get(line, 0.0), 6) for line in cutting])
+
+
+def _spindle_targets(blocks: tuple[Block, ...], cut_set: set[int]) -> dict[int, int]:
+    """The S-word line of each cutting line from its first run, in execution order (the module rule).
+
+    The stretch before a cutting line is what runs between the previous cutting block and it. Its last spindle
+    command (S, M5, M6) decides: an S word takes the new speed; M5 or M6 leave it on the cutting line; without
+    one, the stretch's first block that is not an M0/M1 program stop takes it. Two cutting lines never share a
+    target line (both then get their own).
+    """
+    target_of: dict[int, int] = {}
+    stretch_start = 0
+    for i, b in enumerate(blocks):
+        if b.line not in cut_set:
+            continue
+        if b.line not in target_of:
+            stretch = [s for s in blocks[stretch_start:i] if s.line != b.line]
+            target = b.line
+            barrier = None
+            for s in stretch:
+                if isinstance(s, (SpindleSpeed, SpindleStop, ToolChange)):
+                    barrier = s
+            if isinstance(barrier, SpindleSpeed):
+                target = barrier.line
+            elif barrier is None:
+                first = next((s.line for s in stretch if not isinstance(s, (ProgramStop, ProgramEnd))), None)
+                target = b.line if first is None else first
+            target_of[b.line] = target
+        stretch_start = i + 1
+    claimed: dict[int, int] = {}
+    for line, target in target_of.items():
+        claimed[target] = claimed.get(target, 0) + 1
+    return {line: (target if claimed[target] == 1 else line) for line, target in target_of.items()}
+
+
+def _governed_spindle_lines(program: Program, cutting: list[int], target_of: dict[int, int]) -> dict[int, int]:
+    """Move the S word of a cutting line onto the line itself wherever its S-word line does not govern every
+    one of its runs (a subprogram called from several places, a loop, a target line that also runs elsewhere).
+
+    Marks each S-word line with its own speed through the NC kernel's overrides (modal in execution order,
+    exactly as the written words act) and checks the speed in effect at every feed block of every cutting line.
+    """
+    target_of = dict(target_of)
+    cut_set = set(cutting)
+    for _ in range(len(cutting) + 1):
+        marks = {target_of[line]: 1.0e9 + k for k, line in enumerate(cutting)}
+        blocks, _, speeds = apply_overrides(program, 1, None, marks)
+        mark_of = {line: marks[target_of[line]] for line in cutting}
+        bad: set[int] = set()
+        current = math.nan
+        for i, b in enumerate(blocks):
+            if isinstance(b, SpindleSpeed):
+                current = float(speeds[0, i])
+            elif isinstance(b, (Linear, Arc)) and b.line in cut_set and current != mark_of[b.line]:
+                bad.add(b.line)
+        bad = {line for line in bad if target_of[line] != line}
+        if not bad:
+            break
+        for line in bad:
+            target_of[line] = line
+    return target_of
 
 
 def check_context(ctx: ProblemContext) -> None:

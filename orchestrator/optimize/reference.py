@@ -107,7 +107,7 @@ def build_reference(case: Case, program_text: str | None = None, ranges: Ranges 
     twin.nck.setup(0.0)
     blocks = twin.nck.blocks_
     removed = removed_volume_by_line(run.recording)
-    lines, s_lines, pins, f0, s0 = classify_lines(blocks, removed, min_removed_mm3)
+    lines, s_lines, pins, f0, s0 = classify_lines(blocks, removed, min_removed_mm3, twin.nck.program_)
     check_tapping_spindle(twin.nck.program_, s_lines, str(case.program))  # tapping: F tied to S
     per_rev = sorted({b.line for b in blocks if getattr(b, "feed_per_rev", 0.0) > 0.0} & (set(lines) | set(pins)))
     if per_rev:  # the feed genes are mm/min; an F word in mm/rev is not rewritten (fmus_src.nck.writer)
