@@ -50,6 +50,23 @@ def test_pins_keep_non_cutting_feeds():
     assert feeds == [pytest.approx(300.0)] and speeds == [pytest.approx(600.0 * 60 / (2 * np.pi))]
 
 
+def test_a_straight_retract_credited_with_the_cuts_lag_tail_is_not_a_cutting_line():
+    """A G1 straight up +Z removes nothing itself, whatever the reference run credited to it; a ramp out does cut."""
+    mm = 1e-3
+    blocks = (
+        SpindleSpeed(2, 600.0, 1, 2),
+        Rapid(3, (0, 0, 0), (0, 0, mm)),
+        Linear(4, (0, 0, mm), (5 * mm, 0, mm), 300 / 60000, 4),
+        Linear(5, (5 * mm, 0, mm), (5 * mm, 0, 5 * mm), 1000 / 60000, 5),  # G1 Z5. F1000. (Fusion's retract)
+        Linear(6, (5 * mm, 0, 5 * mm), (5 * mm, 0, mm), 300 / 60000, 6),
+        Linear(7, (5 * mm, 0, mm), (9 * mm, 0, 3 * mm), 300 / 60000, 6),  # a ramp out: sideways while rising
+    )
+    removed = {4: 10.0, 5: 0.67, 6: 0.0, 7: 0.67}  # 0.67 mm3: what the servo lag left on a Fusion retract
+    lines, _, pins, feeds, _ = classify_lines(blocks, removed, 0.1)
+    assert lines == [4, 7] and feeds == [pytest.approx(300.0), pytest.approx(300.0)]
+    assert 5 not in pins  # its own F word (F1000) stays as written
+
+
 def test_snap_to_machinist_grid(reference):
     f, s = reference.context.snap(np.array([[123.0, 999.0]]), np.array([[6024.0, 100.0]]))
     assert f.tolist() == [[120.0, 600.0]]

@@ -7,7 +7,9 @@ Rules (documented for machinists)
   original program on the twin (removed volume = time integral of the
   cutting component's material removal rate over the time the NC kernel
   executes that line). Air moves, plunges outside the stock and rapids are
-  not cutting lines.
+  not cutting lines, nor is a straight retract along +Z (a flat end mill
+  moving up its own axis meets no material: what the reference run credits
+  to it is the servo lag's tail of the cut before, which it cannot change).
 * **Genes**: one feed (mm/min) and one spindle speed (rpm) per cutting line,
   keys ``L0042.feed`` and ``L0042.spindle`` (``0042`` = 1-based line of the
   program file), on a grid of ``feed_step`` (10 mm/min) and ``spindle_step``
@@ -295,8 +297,9 @@ def classify_lines(blocks: tuple[Block, ...], removed_mm3: dict[int, float], min
             feed_runs.setdefault(b.line, []).append((round(b.feed * MM_PER_MIN_PER_M_S, 6), b.feed_line))
     feed_lines = {line: runs[0] for line, runs in feed_runs.items()}
     tapping = {b.line for b in blocks if isinstance(b, Linear) and b.tap_pitch > 0.0}  # F tied to S: never genes
+    retracts = _straight_retracts(blocks)
     cutting = sorted(line for line in feed_lines
-                     if line not in tapping and removed_mm3.get(line, 0.0) >= min_removed_mm3)
+                     if line not in tapping and line not in retracts and removed_mm3.get(line, 0.0) >= min_removed_mm3)
     cut_set = set(cutting)
     # a G94 tapping line with a modal F gets it written (an F override of a cutting line in between would govern it)
     tap_modal = {b.line for b in blocks if isinstance(b, Linear) and b.tap_pitch > 0.0 and b.feed_per_rev == 0.0
@@ -321,6 +324,21 @@ def classify_lines(blocks: tuple[Block, ...], removed_mm3: dict[int, float], min
     # values as written in the program (undo the SI round trip)
     return (cutting, [target_of[line] for line in cutting], {k: round(v, 6) for k, v in pins.items()},
             [round(feed_lines[line][0], 6) for line in cutting], [round(speed_at.get(line, 0.0), 6) for line in cutting])
+
+
+def _straight_retracts(blocks: tuple[Block, ...]) -> set[int]:
+    """Lines whose every feed move is a straight move along +Z only (a retract up the tool's axis).
+
+    A flat end mill cuts with its periphery and its end face; moving up its own axis neither meets material
+    (the end face leaves it) nor moves the periphery sideways, so such a line removes nothing itself.
+    """
+    out: dict[int, bool] = {}
+    for b in blocks:
+        if isinstance(b, (Linear, Arc)):
+            d = np.asarray(b.end, float) - np.asarray(b.start, float)
+            up = isinstance(b, Linear) and d[2] > 0.0 and d[0] == 0.0 and d[1] == 0.0
+            out[b.line] = out.get(b.line, True) and up
+    return {line for line, up in out.items() if up}
 
 
 def _spindle_targets(blocks: tuple[Block, ...], cut_set: set[int]) -> dict[int, int]:
