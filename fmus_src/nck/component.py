@@ -159,6 +159,7 @@ class NCKernel(Component):
         self._text_file = "<text>"
         self._feed_over: dict[int, object] = {}
         self._spindle_over: dict[int, object] = {}
+        self._per_rev_over: dict[int, object] = {}
 
     # ------------------------------------------------------------------ Python-side inputs
     def set_program_text(self, text: str, file: str = "<text>") -> None:
@@ -168,21 +169,25 @@ class NCKernel(Component):
         self._text = text
         self._text_file = file
 
-    def set_overrides(self, feed: Mapping[int, object] | None = None, spindle: Mapping[int, object] | None = None
-                      ) -> None:
+    def set_overrides(self, feed: Mapping[int, object] | None = None, spindle: Mapping[int, object] | None = None,
+                      feed_per_rev: Mapping[int, object] | None = None) -> None:
         """Replace F and S of source lines per batch member (before ``setup``).
 
         Parameters
         ----------
         feed : mapping line -> scalar or array (B,), m/s
-            New feed of the given 1-based source lines (modal, like rewriting the F word there).
+            New feed of the given 1-based source lines under G94 (modal, like rewriting the F word there).
         spindle : mapping line -> scalar or array (B,), rad/s
             New spindle speed of the given lines (like rewriting the S word there).
+        feed_per_rev : mapping line -> scalar or array (B,), m/rev, optional
+            New feed per revolution of the given lines under G95 (like rewriting their F word in mm/rev; the
+            feed is then this value x the member's spindle speed in effect, see :mod:`.overrides`).
         """
         if self.state != "instantiated":
             raise ComponentError(f"{self.name}: set_overrides() must be called before setup()")
         self._feed_over = dict(feed or {})
         self._spindle_over = dict(spindle or {})
+        self._per_rev_over = dict(feed_per_rev or {})
 
     # ------------------------------------------------------------------ helpers
     def _uniform(self, name: str) -> float:
@@ -234,7 +239,8 @@ class NCKernel(Component):
                                        f"got {settings.reference_position(n)}")
         self.program_: Program = interpret(text, file, settings)
         blocks: tuple[Block, ...]
-        blocks, feeds, speeds = apply_overrides(self.program_, self.batch, self._feed_over, self._spindle_over)
+        blocks, feeds, speeds = apply_overrides(self.program_, self.batch, self._feed_over, self._spindle_over,
+                                                self._per_rev_over)
         self.blocks_ = blocks
         self._uniform("interpolation_period")
         params = [self._member_params(b) for b in range(self.batch)]

@@ -11,10 +11,20 @@ without an S word inserts a spindle command there at each run of the line
 
 Feed per revolution (G95): the feed of a G95 block is its F (m/rev) x the
 spindle speed in effect, so a spindle override rescales it (as rewriting the
-S word would). A feed override is in m/s and cannot stand for an F word in
-mm/rev: a feed override that would govern a G95 block is an
-:class:`NCParameterError` (the writer refuses such F words too), and so is a
-spindle override that leaves a G95 block at speed 0.
+S word would). An F word under G95 is overridden with a *feed-per-revolution*
+override (``feed_per_rev``, m/rev): the block's feed is then that value x the
+member's spindle speed in effect (rev/s), computed as the interpreter computes
+a written ``F`` under G95 (``F x S / 2 pi``), so the override and the
+rewritten word agree bit for bit. Both kinds are one modal F: the latest
+override line that ran governs, whichever kind it is. A feed override (m/s)
+that would govern a G95 block, or a feed-per-revolution override that would
+govern a G94 block, is an :class:`NCParameterError` (the interpreter refuses a
+modal F given in the other feed mode), and so is a spindle override that
+leaves a G95 block at speed 0.
+
+:func:`modal_before` gives, for every run of every override line, the modal F
+and S that a word written on that line replaces (resolved with all the
+overrides): a word equal to it changes nothing.
 """
 from __future__ import annotations
 
@@ -140,7 +150,9 @@ def _insert(blocks: Sequence[Block], lines: Sequence[int], segments: Sequence[tu
 
 
 def apply_overrides(program: Program, batch: int, feed: Mapping[int, object] | None = None,
-                    spindle: Mapping[int, object] | None = None) -> tuple[tuple[Block, ...], np.ndarray, np.ndarray]:
+                    spindle: Mapping[int, object] | None = None,
+                    feed_per_rev: Mapping[int, object] | None = None
+                    ) -> tuple[tuple[Block, ...], np.ndarray, np.ndarray]:
     """:func:`insert_spindle_commands` then :func:`resolve_values` on an interpreted program, every run of a line
     told apart (:attr:`fmus_src.nck.blocks.Program.segment_blocks`).
 
@@ -151,6 +163,8 @@ def apply_overrides(program: Program, batch: int, feed: Mapping[int, object] | N
         B.
     feed : mapping line -> scalar or (B,), m/s
     spindle : mapping line -> scalar or (B,), rad/s
+    feed_per_rev : mapping line -> scalar or (B,), m/rev, optional
+        Overrides of F words under G95 (see the module notes).
 
     Returns
     -------
@@ -160,13 +174,49 @@ def apply_overrides(program: Program, batch: int, feed: Mapping[int, object] | N
         As :func:`resolve_values`.
     """
     blocks, runs = _insert(program.blocks, list(spindle or {}), program.segments, program.segment_blocks)
-    feeds, speeds = resolve_values(blocks, batch, feed, spindle, program.segments, runs)
+    feeds, speeds = resolve_values(blocks, batch, feed, spindle, program.segments, runs, feed_per_rev)
     return blocks, feeds, speeds
+
+
+def modal_before(program: Program, batch: int, feed: Mapping[int, object] | None = None,
+                 spindle: Mapping[int, object] | None = None, feed_per_rev: Mapping[int, object] | None = None
+                 ) -> tuple[dict[int, np.ndarray], dict[int, np.ndarray]]:
+    """The modal F and S in effect when each run of each override line starts, with all the overrides applied.
+
+    A word written on line L with the value of L's override changes nothing in a run where the value in effect
+    before L already equals it: the rewritten program then runs exactly as without that word.
+
+    Parameters
+    ----------
+    program : Program
+        The interpreted program.
+    batch : int
+        B.
+    feed, spindle, feed_per_rev : mapping line -> scalar or (B,)
+        As :func:`apply_overrides` (m/s, rad/s, m/rev).
+
+    Returns
+    -------
+    feed_before : dict line -> ndarray (runs, B)
+        For each feed or feed-per-revolution override line, the modal F its word replaces in each run: m/s
+        under G94, m/rev under G95 (the kind of the line's override). NaN where it is not known from the line's
+        own blocks: the line sets F itself in the program, has no feed block in that run, or the F in effect
+        was given in the other feed mode.
+    speed_before : dict line -> ndarray (runs, B)
+        For each spindle override line, the modal spindle speed (rad/s, 0 before the first S) its word
+        replaces in each run.
+    """
+    blocks, runs = _insert(program.blocks, list(spindle or {}), program.segments, program.segment_blocks)
+    before: tuple[dict[int, list[np.ndarray]], dict[int, list[np.ndarray]]] = ({}, {})
+    resolve_values(blocks, batch, feed, spindle, program.segments, runs, feed_per_rev, _before=before)
+    return ({k: np.array(v) for k, v in before[0].items()}, {k: np.array(v) for k, v in before[1].items()})
 
 
 def resolve_values(blocks: Sequence[Block], batch: int, feed: Mapping[int, object] | None = None,
                    spindle: Mapping[int, object] | None = None,
-                   segments: Sequence[tuple[int, int]] = (), runs: Sequence[int] = ()) -> tuple[np.ndarray, np.ndarray]:
+                   segments: Sequence[tuple[int, int]] = (), runs: Sequence[int] = (),
+                   feed_per_rev: Mapping[int, object] | None = None,
+                   _before: tuple[dict, dict] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Feed of every feed block and speed of every spindle command, per batch member.
 
     An override of line L governs a block when L ran after the line whose F (S) word set the block's value
@@ -187,22 +237,34 @@ def resolve_values(blocks: Sequence[Block], batch: int, feed: Mapping[int, objec
     runs : sequence of int, optional
         Blocks of each run for ``blocks`` (after the insertion: use :func:`apply_overrides`); empty: runs told
         apart by line numbers only.
+    feed_per_rev : mapping line -> scalar or (B,), m/rev, optional
+        Overrides of F words under G95: the governed G95 blocks' feed is this value x the member's spindle
+        speed in effect (rev/s).
 
     Returns
     -------
     feeds, speeds : ndarray (B, n_blocks)
-        NaN where the block has no feed (speed). A G95 block's feed is its ``feed_per_rev`` x the member's
-        spindle speed in effect (rev/s).
+        NaN where the block has no feed (speed). A G95 block's feed is its ``feed_per_rev`` (or the governing
+        feed-per-revolution override) x the member's spindle speed in effect (rev/s).
 
     Raises
     ------
     NCParameterError
-        A feed override would govern a G95 (feed per revolution) block, or a G95 block runs at speed 0.
+        A line has both a feed and a feed-per-revolution override, a feed override would govern a G95 (feed
+        per revolution) block or a feed-per-revolution override a G94 block, or a G95 block runs at speed 0.
     """
     n = len(blocks)
     feeds = np.full((batch, n), np.nan)
     speeds = np.full((batch, n), np.nan)
     f_over = {int(k): as_batch(v, batch, f"feed override of line {k}", positive=True) for k, v in (feed or {}).items()}
+    per_rev_over = {int(k): as_batch(v, batch, f"feed-per-revolution override of line {k}", positive=True)
+                    for k, v in (feed_per_rev or {}).items()}
+    both = sorted(set(f_over) & set(per_rev_over))
+    if both:
+        raise NCParameterError(f"line {both[0]} has a feed override (m/s) and a feed-per-revolution override "
+                               "(m/rev); expected one F per line")
+    f_over.update(per_rev_over)
+    per_rev_lines = set(per_rev_over)
     s_over = {int(k): as_batch(v, batch, f"spindle override of line {k}", positive=False)
               for k, v in (spindle or {}).items()}
     ran: dict[int, int] = {}  # line -> step of its latest execution
@@ -211,6 +273,12 @@ def resolve_values(blocks: Sequence[Block], batch: int, feed: Mapping[int, objec
     speed_now = np.zeros(batch)  # rad/s, per member
     for step, (line, i0, i1, _) in enumerate(_walk(blocks, segments, runs)):
         ran[line] = step
+        if _before is not None:
+            if line in f_over:
+                _before[0].setdefault(line, []).append(
+                    _feed_before(blocks[i0:i1], line, f_cur, ran, f_over, per_rev_lines, batch))
+            if line in s_over:
+                _before[1].setdefault(line, []).append(speed_now.copy())
         if line in f_over:
             f_cur = (step, line)
         if line in s_over:
@@ -219,10 +287,14 @@ def resolve_values(blocks: Sequence[Block], batch: int, feed: Mapping[int, objec
             b = blocks[i]
             if isinstance(b, (Linear, Arc)):
                 use = f_cur is not None and f_cur[0] >= ran.get(b.feed_line, -1)
+                over = f_cur[1] if use else None  # type: ignore[index]
+                if over is not None and (over in per_rev_lines) != (b.feed_per_rev > 0.0):
+                    _mode_error(b, over, over in per_rev_lines)
                 if b.feed_per_rev > 0.0:
-                    feeds[:, i] = _per_revolution(b, speed_now, f_cur[1] if use else None)  # type: ignore[index]
+                    per_rev = per_rev_over[over] if over is not None else np.full(batch, b.feed_per_rev)
+                    feeds[:, i] = _per_revolution(b, speed_now, per_rev)
                 else:
-                    feeds[:, i] = f_over[f_cur[1]] if use else b.feed  # type: ignore[index]
+                    feeds[:, i] = f_over[over] if over is not None else b.feed
             elif isinstance(b, SpindleSpeed):
                 use = s_cur is not None and s_cur[0] >= ran.get(b.speed_line, -1)
                 speeds[:, i] = s_over[s_cur[1]] if use else b.speed  # type: ignore[index]
@@ -230,14 +302,41 @@ def resolve_values(blocks: Sequence[Block], batch: int, feed: Mapping[int, objec
     return feeds, speeds
 
 
-def _per_revolution(block: Linear | Arc, speed: np.ndarray, override_line: int | None) -> np.ndarray:
-    """Feed (m/s) of a G95 block at the members' spindle speeds ``speed`` (rad/s, shape (B,))."""
-    if override_line is not None:
-        raise NCParameterError(f"feed override of line {override_line} would govern line {block.line}, a feed per "
-                               f"revolution (G95) block whose F (line {block.feed_line}) is in mm/rev; feed "
-                               "overrides are feeds per minute: override F only on G94 lines")
+def _mode_error(block: Linear | Arc, override_line: int, per_rev: bool) -> None:
+    """Raise for an override of the other feed mode than the block it would govern."""
+    if per_rev:
+        raise NCParameterError(f"feed-per-revolution override of line {override_line} would govern line "
+                               f"{block.line}, a feed per minute (G94) block; a G94 block needs a feed override "
+                               "(m/s)")
+    raise NCParameterError(f"feed override of line {override_line} would govern line {block.line}, a feed per "
+                           f"revolution (G95) block whose F (line {block.feed_line}) is in mm/rev; expected a "
+                           "feed-per-revolution override (m/rev) for F words under G95")
+
+
+def _feed_before(line_blocks: Sequence[Block], line: int, f_cur: tuple[int, int] | None, ran: dict[int, int],
+                 f_over: dict[int, np.ndarray], per_rev_lines: set[int], batch: int) -> np.ndarray:
+    """Modal F in effect when one run of override line ``line`` starts (m/s, or m/rev when ``per_rev``).
+
+    Read from the run's first feed block, whose ``feed_line`` is the modal F line at the start of the run when
+    ``line`` does not set F itself; ``f_cur`` is the latest override line that ran before this run and
+    ``per_rev_lines`` the lines of feed-per-revolution overrides. NaN where not known (see :func:`modal_before`).
+    """
+    per_rev = line in per_rev_lines
+    b = next((x for x in line_blocks if isinstance(x, (Linear, Arc))), None)
+    if b is None or b.feed_line == line or (b.feed_per_rev > 0.0) != per_rev:
+        return np.full(batch, np.nan)
+    if f_cur is not None and f_cur[0] >= ran.get(b.feed_line, -1):
+        if (f_cur[1] in per_rev_lines) != per_rev:
+            return np.full(batch, np.nan)  # without this line's word, its blocks would have an F of the other mode
+        return f_over[f_cur[1]].copy()
+    return np.full(batch, b.feed_per_rev if per_rev else b.feed)
+
+
+def _per_revolution(block: Linear | Arc, speed: np.ndarray, per_rev: np.ndarray) -> np.ndarray:
+    """Feed (m/s) of a G95 block: ``per_rev`` (m/rev, shape (B,)) at the members' spindle speeds ``speed``
+    (rad/s, shape (B,)), as the interpreter computes a written F under G95."""
     stopped = ~(speed > 0.0)
     if stopped.any():
         raise NCParameterError(f"line {block.line}: feed per revolution (G95) at spindle speed 0 (batch member "
                                f"{int(np.argmax(stopped))}, from a spindle override); expected S > 0")
-    return block.feed_per_rev * speed / (2.0 * math.pi)
+    return per_rev * speed / (2.0 * math.pi)

@@ -21,10 +21,14 @@ Rules
   does for every run of the line). Macro statements (``#1 = ...``, IF, WHILE, GOTO) and G65 calls (whose F
   and S are the macro's arguments #9 and #19) cannot take a word: :class:`GCodeError`. G20/G95 written with
   a variable (``G#10``) are not seen by the writer's unit and feed-mode scan.
-* An F word under G95 (feed per revolution, mm/rev or in/rev) is not
-  rewritten from a feed in mm/min: :class:`GCodeError` naming the line
-  (the optimiser refuses G95 cutting lines for the same reason). S words on
-  such lines are rewritten as usual (the feed then follows the new S).
+* An F word under G95 (feed per revolution) is not rewritten from a feed in
+  mm/min: :class:`GCodeError` naming the line. It is given as a feed per
+  revolution instead (``feed_per_rev_by_line``, mm/rev), written in mm/rev
+  under G21 (at most 4 decimals) and in in/rev under G20 (at most 5
+  decimals). The caller names the G95 lines (the NC kernel knows a
+  subprogram's inherited feed mode; the writer's scan in file order does
+  not). S words on G95 lines are rewritten as usual (the feed then follows
+  the new S).
 """
 from __future__ import annotations
 
@@ -39,6 +43,9 @@ from .macro.statements import parse_line, scan_line
 #: Decimals of a written F word: mm/min under G21, in/min under G20.
 FEED_DECIMALS_MM = 3
 FEED_DECIMALS_INCH = 4
+#: Decimals of a written F word under G95: mm/rev under G21, in/rev under G20.
+FEED_PER_REV_DECIMALS_MM = 4
+FEED_PER_REV_DECIMALS_INCH = 5
 MM_PER_INCH = 25.4
 
 
@@ -60,6 +67,26 @@ def feed_word_value(feed_mm_per_min: float, inch: bool) -> float:
     """
     value = float(feed_mm_per_min) / MM_PER_INCH if inch else float(feed_mm_per_min)
     return float(_format(value, FEED_DECIMALS_INCH if inch else FEED_DECIMALS_MM, True))
+
+
+def feed_per_rev_word_value(feed_mm_per_rev: float, inch: bool) -> float:
+    """The number an F word written by :func:`rewrite_program` under G95 carries, as the lexer reads it back.
+
+    Parameters
+    ----------
+    feed_mm_per_rev : float
+        Feed per revolution, mm/rev.
+    inch : bool
+        G20 in effect on the line (the word is then in in/rev).
+
+    Returns
+    -------
+    float
+        In/rev under G20, else mm/rev (``float`` of the written digits, so ``value * INCH`` or ``value * MM``
+        is the interpreter's feed per revolution bit for bit).
+    """
+    value = float(feed_mm_per_rev) / MM_PER_INCH if inch else float(feed_mm_per_rev)
+    return float(_format(value, FEED_PER_REV_DECIMALS_INCH if inch else FEED_PER_REV_DECIMALS_MM, True))
 
 
 def inch_lines(text: str, lines: list[int] | tuple[int, ...], file: str = "<text>") -> set[int]:
@@ -85,17 +112,21 @@ def _format(value: float, decimals: int, point: bool) -> str:
 
 
 def rewrite_program(text: str, feed_by_line: Mapping[int, float] | None = None,
-                    spindle_by_line: Mapping[int, float] | None = None, file: str = "<text>") -> str:
-    """Re-emit ``text`` with new F (mm/min) and S (rpm) values on the given 1-based lines.
+                    spindle_by_line: Mapping[int, float] | None = None, file: str = "<text>",
+                    feed_per_rev_by_line: Mapping[int, float] | None = None) -> str:
+    """Re-emit ``text`` with new F (mm/min or mm/rev) and S (rpm) values on the given 1-based lines.
 
     Parameters
     ----------
     text : str
         Program source.
     feed_by_line : mapping line -> feed (mm/min), optional
+        F words of G94 lines.
     spindle_by_line : mapping line -> speed (rpm), optional
     file : str
         Name used in error messages.
+    feed_per_rev_by_line : mapping line -> feed per revolution (mm/rev), optional
+        F words of G95 lines (a line given here and in ``feed_by_line`` is an error).
 
     Returns
     -------
@@ -109,11 +140,12 @@ def rewrite_program(text: str, feed_by_line: Mapping[int, float] | None = None,
     """
     feed_by_line = dict(feed_by_line or {})
     spindle_by_line = dict(spindle_by_line or {})
-    if not feed_by_line and not spindle_by_line:
+    per_rev_by_line = dict(feed_per_rev_by_line or {})
+    if not feed_by_line and not spindle_by_line and not per_rev_by_line:
         return text
     lines = split_lines(text, keepends=True)
-    targets = sorted(set(feed_by_line) | set(spindle_by_line))
-    inch_at = _inch_mode(lines, targets, file) if feed_by_line else {}
+    targets = sorted(set(feed_by_line) | set(spindle_by_line) | set(per_rev_by_line))
+    inch_at = _inch_mode(lines, targets, file) if (feed_by_line or per_rev_by_line) else {}
     per_rev = _per_rev_lines(lines, sorted(feed_by_line), file) if feed_by_line else set()
     for number in targets:
         if number < 1 or number > len(lines):
@@ -136,6 +168,15 @@ def rewrite_program(text: str, feed_by_line: Mapping[int, float] | None = None,
             inch = inch_at.get(number, False)
             edits.append(("F", value / MM_PER_INCH if inch else value,
                           FEED_DECIMALS_INCH if inch else FEED_DECIMALS_MM, True))
+        if number in per_rev_by_line:
+            value = float(per_rev_by_line[number])
+            _check(value, number, "F", file, body)
+            if number in feed_by_line:
+                raise GCodeError(file, number, "F", "one F value per line",
+                                 "the line is given a feed per minute and a feed per revolution", body.strip())
+            inch = inch_at.get(number, False)
+            edits.append(("F", value / MM_PER_INCH if inch else value,
+                          FEED_PER_REV_DECIMALS_INCH if inch else FEED_PER_REV_DECIMALS_MM, True))
         if number in spindle_by_line:
             value = float(spindle_by_line[number])
             _check(value, number, "S", file, body, allow_zero=True)
