@@ -30,6 +30,7 @@ def _cmd_optimize(args: argparse.Namespace) -> int:
         dask=args.dask, resume=args.resume, penalty_weight=args.penalty_weight, fitness_limit=args.fitness_limit,
         step=args.step * 1e-3, max_cycle_factor=args.max_cycle_factor, check_front=not args.no_front_check,
         feed_step=args.feed_step, spindle_step=args.spindle_step, feed_step_in_per_min=args.feed_step_in_per_min,
+        feed_step_mm_per_rev=args.feed_step_mm_per_rev, feed_step_in_per_rev=args.feed_step_in_per_rev,
     )
     result = optimize(program=args.program, case=args.case, settings=settings, out=args.out, machine=args.machine)
     keys = ("cycle_time_s", "cost_KRW", "max_cutting_load_N")
@@ -61,6 +62,10 @@ def add_parsers(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--feed-step", type=float, default=10.0, help="feed grid a machinist writes, mm/min (default 10)")
     p.add_argument("--feed-step-in-per-min", type=float, default=0.1,
                    help="feed grid of a program cutting under G20, in/min (default 0.1)")
+    p.add_argument("--feed-step-mm-per-rev", type=float, default=0.001,
+                   help="grid of the F words written on G95 (feed per revolution) lines, mm/rev (default 0.001)")
+    p.add_argument("--feed-step-in-per-rev", type=float, default=0.0001,
+                   help="the same under G20, in/rev (default 0.0001)")
     p.add_argument("--spindle-step", type=float, default=50.0, help="spindle grid, rpm (default 50)")
     p.add_argument("--pop", type=int, default=20, help="population size (default 20)")
     p.add_argument("--gens", type=int, default=10, help="generations (default 10, as the paper)")

@@ -274,17 +274,17 @@ def test_g95_errors_name_file_line_and_word(text, line, word, fragment):
     assert fragment in str(err)
 
 
-def test_optimize_refuses_g95_cutting_lines_naming_file_and_line(tmp_path):
+def test_optimize_takes_g95_cutting_lines_as_genes_in_mm_per_min(tmp_path):
     from orchestrator.case import load_case
     from orchestrator.optimize import build_reference
-    from orchestrator.optimize.errors import OptimizeError
 
     (tmp_path / "case.toml").write_text('program = "slot.nc"\n[stock]\nmin = [0.0, 0.0, -2.0]\n'
                                         'max = [5.0, 8.0, 0.0]\n')
     (tmp_path / "slot.nc").write_text("G21 G17 G90 G94 G54\nS3000 M3\nG0 X-4. Y4. Z2.\nG1 Z-1. F500.\n"
                                       "G95 X3. F0.08\nG0 Z2.\nM30\n")
-    with pytest.raises(OptimizeError, match=r"slot\.nc:5: feed per revolution \(G95\)"):
-        build_reference(load_case(tmp_path))
+    ctx = build_reference(load_case(tmp_path)).context
+    assert ctx.lines.tolist() == [5] and ctx.per_rev_lines == frozenset({5})
+    assert ctx.original_feed.tolist() == [pytest.approx(0.08 * 3000.0)]  # the gene is F x S, mm/min
 
 
 # ---------------------------------------------------------------------------- M19 spindle orientation

@@ -28,10 +28,25 @@ Rules (documented for machinists)
   non-cutting stretch before L (on the original S word of that stretch if it
   has one, else on its first block line), so that the spindle ramps while the
   tool retracts, rapids and plunges; only the remainder of the ramp (the NC
-  kernel's speed-arrival wait) costs time. Every cutting line always gets its
-  S word (also when unchanged), so the simulated and the written program are
-  the same program. An S word that repeats the speed in effect costs nothing:
-  the NC kernel neither stops the path nor waits for it.
+  kernel's speed-arrival wait) costs time.
+* **Which words are written** (:meth:`ProblemContext.words_for`): an S (F)
+  word only where it changes something. A line without an S (F) word of its
+  own gets one only when the value differs from the spindle speed (modal F)
+  in effect there in the written program in at least one run of the line
+  (subprograms, loops: the NC kernel's per-run view,
+  :func:`fmus_src.nck.overrides.modal_before`); an S (F) word of the
+  program keeps its text when its value is unchanged. A word left out would
+  repeat the value in effect, so the written program runs exactly as the
+  evaluated one, where every S-word line and every cutting line carries an
+  override (an S command that repeats the speed in effect is skipped by the
+  NC kernel's planner: it neither stops the path nor waits).
+* **Feed per revolution (G95)**: the feed gene stays mm/min. The F word
+  written on a G95 cutting line is ``gene / S`` (S = the line's spindle
+  gene, in effect on every run of it) on the ``feed_step_mm_per_rev`` grid
+  (0.001 mm/rev; ``feed_step_in_per_rev``, 0.0001 in/rev, under G20), kept
+  so that ``F x S`` stays within the feed range where the grid allows; the
+  feed in effect is that word x S, as the NC kernel computes every G95
+  feed. Pins on G95 lines keep their mm/rev (in/rev).
 """
 from __future__ import annotations
 
@@ -46,9 +61,9 @@ from fmus_src.cutting.table import EngagementTable
 from fmus_src.nck.blocks import (
     Arc, Block, Linear, Program, ProgramEnd, ProgramStop, SpindleSpeed, SpindleStop, ToolChange,
 )
-from fmus_src.nck.overrides import apply_overrides
+from fmus_src.nck.overrides import apply_overrides, modal_before
 from fmus_src.nck.settings import INCH, MM, RPM
-from fmus_src.nck.writer import MM_PER_INCH, feed_word_value, rewrite_program
+from fmus_src.nck.writer import MM_PER_INCH, feed_per_rev_word_value, feed_word_value, rewrite_program
 
 from ..case import Case
 from .errors import OptimizeError
@@ -73,6 +88,10 @@ class Ranges:
         Spindle grid, rpm.
     feed_step_in_per_min : float
         Feed grid of programs whose cutting lines run under G20, in/min.
+    feed_step_mm_per_rev : float
+        Grid of the F words written on G95 (feed per revolution) cutting lines under G21, mm/rev.
+    feed_step_in_per_rev : float
+        The same under G20, in/rev.
     """
 
     feed_mm_per_min: tuple[float, float] = (100.0, 500.0)
@@ -80,10 +99,16 @@ class Ranges:
     feed_step: float = 10.0
     spindle_step: float = 50.0
     feed_step_in_per_min: float = 0.1
+    feed_step_mm_per_rev: float = 0.001
+    feed_step_in_per_rev: float = 0.0001
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.feed_step_in_per_min) and self.feed_step_in_per_min > 0):
             raise OptimizeError(f"the inch feed grid step must be positive, got {self.feed_step_in_per_min} in/min")
+        for name, value, unit in (("feed-per-revolution", self.feed_step_mm_per_rev, "mm/rev"),
+                                  ("inch feed-per-revolution", self.feed_step_in_per_rev, "in/rev")):
+            if not (math.isfinite(value) and value > 0):
+                raise OptimizeError(f"the {name} grid step must be positive, got {value} {unit}")
         for name, (lo, hi), step in (("feed range", self.feed_mm_per_min, self.feed_step),
                                      ("spindle range", self.spindle_rpm, self.spindle_step)):
             if not (math.isfinite(lo) and math.isfinite(hi) and 0 < lo <= hi and step > 0):
@@ -128,7 +153,13 @@ class ProblemContext:
         the twin's path-mode cutting load. None: Z-map cutting per member.
     inch_lines : frozenset of int
         Cutting and pinned feed lines under G20: their F words are written, and their overrides converted, in
-        in/min (:func:`fmus_src.nck.writer.feed_word_value`).
+        in/min (:func:`fmus_src.nck.writer.feed_word_value`), or in/rev under G95.
+    per_rev_lines : frozenset of int
+        Cutting and pinned feed lines under G95 (every run): their F words are feeds per revolution, and
+        ``pinned_feeds`` holds mm/rev for them.
+    program : Program or None
+        The interpreted original program (the NC kernel's per-run view, :meth:`words_for`); None: interpreted
+        on first use.
     """
 
     case: Case
@@ -146,6 +177,8 @@ class ProblemContext:
     original_load_N: np.ndarray = field(default_factory=lambda: np.zeros(0))
     engagement: EngagementTable | None = field(default=None, repr=False, compare=False)
     inch_lines: frozenset[int] = frozenset()
+    per_rev_lines: frozenset[int] = frozenset()
+    program: Program | None = field(default=None, repr=False, compare=False)
 
     @property
     def inch(self) -> bool:
@@ -161,6 +194,25 @@ class ProblemContext:
     def feed_word(self, line: int, feed_mm_per_min: float) -> float:
         """The F word written on ``line`` for a feed in mm/min (in/min under G20), as read back."""
         return feed_word_value(feed_mm_per_min, int(line) in self.inch_lines)
+
+    def feed_per_rev_word(self, line: int, feed_mm_per_min: float, spindle_rpm: float) -> float:
+        """The F word written on G95 cutting line ``line`` for a feed gene (mm/min) at its spindle gene (rpm).
+
+        ``gene / S`` in mm/rev (in/rev under G20), rounded half up to the grid (``Ranges.feed_step_mm_per_rev``
+        or ``feed_step_in_per_rev``) and kept within the grid values whose feed ``F x S`` lies in the feed range
+        (when there is one), at least one grid step. Returned as the lexer reads the written word back.
+        """
+        inch = int(line) in self.inch_lines
+        r = self.ranges
+        step = r.feed_step_in_per_rev if inch else r.feed_step_mm_per_rev
+        per_unit = float(spindle_rpm) * (MM_PER_INCH if inch else 1.0)  # mm/min per (in or mm)/rev
+        q = math.floor(float(feed_mm_per_min) / per_unit / step + 0.5)
+        lo = math.ceil(r.feed_mm_per_min[0] / per_unit / step - 1e-9)
+        hi = math.floor(r.feed_mm_per_min[1] / per_unit / step + 1e-9)
+        if lo <= hi:
+            q = min(max(q, lo), hi)
+        word = max(q, 1) * step
+        return feed_per_rev_word_value(word * MM_PER_INCH if inch else word, inch)
 
     @property
     def n_lines(self) -> int:
@@ -179,8 +231,15 @@ class ProblemContext:
     def fingerprint(self) -> str:
         """Hash of program, genes and ranges (a checkpoint only resumes the same problem)."""
         h = hashlib.sha256(self.program_text.encode("utf-8"))
-        h.update(repr((self.lines.tolist(), self.spindle_lines.tolist(), sorted(self.pinned_feeds.items()),
-                       self.ranges, self.load_limit_N, self.step, sorted(self.inch_lines))).encode("utf-8"))
+        r = self.ranges
+        ranges = (f"Ranges(feed_mm_per_min={r.feed_mm_per_min!r}, spindle_rpm={r.spindle_rpm!r}, "
+                  f"feed_step={r.feed_step!r}, spindle_step={r.spindle_step!r}, "
+                  f"feed_step_in_per_min={r.feed_step_in_per_min!r})")  # as before G95 programs were optimised
+        key: tuple = (self.lines.tolist(), self.spindle_lines.tolist(), sorted(self.pinned_feeds.items()), ranges,
+                      self.load_limit_N, self.step, sorted(self.inch_lines))
+        if self.per_rev_lines:
+            key += (sorted(self.per_rev_lines), r.feed_step_mm_per_rev, r.feed_step_in_per_rev)
+        h.update(repr(key).encode("utf-8"))
         return h.hexdigest()[:16]
 
     # ------------------------------------------------------------------ genes <-> values
@@ -196,7 +255,8 @@ class ProblemContext:
                     math.floor(r.spindle_rpm[1] / r.spindle_step + 1e-9) * r.spindle_step)
         return f, s
 
-    def overrides(self, feeds: np.ndarray, spindles: np.ndarray) -> tuple[dict[int, object], dict[int, object]]:
+    def overrides(self, feeds: np.ndarray, spindles: np.ndarray
+                  ) -> tuple[dict[int, object], dict[int, object], dict[int, object]]:
         """NC-kernel overrides for a population.
 
         Parameters
@@ -208,38 +268,106 @@ class ProblemContext:
 
         Returns
         -------
-        feed, spindle : dict line -> ndarray (B,)
-            In m/s and rad/s, for :meth:`fmus_src.nck.NCKernel.set_overrides`.
+        feed, spindle, feed_per_rev : dict line -> ndarray (B,)
+            In m/s (G94 lines), rad/s and m/rev (G95 lines), for :meth:`fmus_src.nck.NCKernel.set_overrides`.
         """
         feeds = np.atleast_2d(np.asarray(feeds, float))
         spindles = np.atleast_2d(np.asarray(spindles, float))
         batch = feeds.shape[0]
-        # the interpreter's own conversions of the written words (F * MM / 60 or F * INCH / 60, S * RPM), so an
-        # override equals the written word bit for bit (also in inch, where the word is mm/min / 25.4, rounded)
-        feed: dict[int, object] = {int(line): np.full(batch, self._si_feed(line, f))
-                                   for line, f in self.pinned_feeds.items()}
+        # the interpreter's own conversions of the written words (F * MM / 60 or F * INCH / 60; under G95
+        # F * MM or F * INCH; S * RPM), so an override equals the written word bit for bit (also in inch, where
+        # the word is mm/min / 25.4, rounded)
+        feed: dict[int, object] = {}
+        per_rev: dict[int, object] = {}
+        for line, f in self.pinned_feeds.items():
+            if int(line) in self.per_rev_lines:
+                per_rev[int(line)] = np.full(batch, self._si_per_rev(line, feed_per_rev_word_value(
+                    f, int(line) in self.inch_lines)))
+            else:
+                feed[int(line)] = np.full(batch, self._si_feed(line, f))
         for i, line in enumerate(self.lines.tolist()):
-            feed[int(line)] = np.array([self._si_feed(line, f) for f in feeds[:, i].tolist()])
+            if int(line) in self.per_rev_lines:
+                per_rev[int(line)] = np.array([self._si_per_rev(line, self.feed_per_rev_word(line, f, s))
+                                               for f, s in zip(feeds[:, i].tolist(), spindles[:, i].tolist())])
+            else:
+                feed[int(line)] = np.array([self._si_feed(line, f) for f in feeds[:, i].tolist()])
         spindle: dict[int, object] = {int(line): spindles[:, i] * RPM
                                       for i, line in enumerate(self.spindle_lines.tolist())}
-        return feed, spindle
+        return feed, spindle, per_rev
 
     def _si_feed(self, line: int, feed_mm_per_min: float) -> float:
         """Feed of ``line``'s written F word in m/s, converted as the interpreter converts it."""
         return self.feed_word(line, feed_mm_per_min) * (INCH if int(line) in self.inch_lines else MM) / 60.0
 
+    def _si_per_rev(self, line: int, word: float) -> float:
+        """Feed per revolution (m/rev) of a G95 F word ``word`` (mm/rev, in/rev under G20) on ``line``."""
+        return word * (INCH if int(line) in self.inch_lines else MM)
+
+    def interpreted(self) -> Program:
+        """The interpreted original program (the twin's NC kernel reads it with the case's settings)."""
+        if self.program is None:
+            from ..twin import build_twin
+
+            nck = build_twin(self.case, batch=1, program_text=self.program_text).nck
+            nck.setup(0.0)
+            self.program = nck.program_
+        return self.program
+
+    def words_for(self, feeds: np.ndarray, spindles: np.ndarray
+                  ) -> tuple[dict[int, float], dict[int, float], dict[int, float]]:
+        """The F and S words the written program of one individual carries (the module rule).
+
+        Parameters
+        ----------
+        feeds, spindles : ndarray, shape (L,)
+            mm/min and rpm.
+
+        Returns
+        -------
+        feed_by_line, spindle_by_line, feed_per_rev_by_line : dict line -> value
+            mm/min (G94 lines), rpm, mm/rev (G95 lines; the writer turns both feeds into in/min, in/rev under
+            G20), as :func:`fmus_src.nck.writer.rewrite_program` takes them. Only lines whose word changes
+            something: an S (F) word of the program with its value unchanged keeps its text, and a line
+            without one gets one only where the value differs from the one in effect in at least one run.
+        """
+        f = np.ravel(np.asarray(feeds, float))
+        s = np.ravel(np.asarray(spindles, float))
+        feed, spindle, per_rev = self.overrides(f[None, :], s[None, :])
+        program = self.interpreted()
+        feed_before, speed_before = modal_before(program, 1, feed, spindle, per_rev)
+        own_f, own_s = _own_words(program)
+        keep_f = {line for over in (feed, per_rev) for line, v in over.items()
+                  if _changes(float(v[0]), own_f.get(line), feed_before.get(line))}
+        keep_s = {line for line, v in spindle.items()
+                  if _changes(float(v[0]), own_s.get(line), speed_before.get(line))}
+        feed_by_line: dict[int, float] = {}
+        per_rev_by_line: dict[int, float] = {}
+        for line, v in self.pinned_feeds.items():
+            if int(line) in keep_f:
+                (per_rev_by_line if int(line) in self.per_rev_lines else feed_by_line)[int(line)] = float(v)
+        for i, line in enumerate(self.lines.tolist()):
+            if int(line) not in keep_f:
+                continue
+            if int(line) in self.per_rev_lines:
+                word = self.feed_per_rev_word(line, f[i], s[i])
+                per_rev_by_line[int(line)] = word * MM_PER_INCH if int(line) in self.inch_lines else word
+            else:
+                feed_by_line[int(line)] = float(f[i])
+        spindle_by_line = {int(line): float(s[i]) for i, line in enumerate(self.spindle_lines.tolist())
+                           if int(line) in keep_s}
+        return feed_by_line, spindle_by_line, per_rev_by_line
+
     def program_for(self, feeds: np.ndarray, spindles: np.ndarray) -> str:
-        """The rewritten program of one individual (only F and S words change).
+        """The rewritten program of one individual (only F and S words change, see :meth:`words_for`).
 
         Parameters
         ----------
         feeds, spindles : ndarray, shape (L,)
             mm/min and rpm.
         """
-        feed_by_line = dict(self.pinned_feeds)
-        feed_by_line.update({int(line): float(f) for line, f in zip(self.lines.tolist(), np.ravel(feeds))})
-        spindle_by_line = {int(line): float(s) for line, s in zip(self.spindle_lines.tolist(), np.ravel(spindles))}
-        return rewrite_program(self.program_text, feed_by_line, spindle_by_line, file=str(self.case.program))
+        feed_by_line, spindle_by_line, per_rev_by_line = self.words_for(feeds, spindles)
+        return rewrite_program(self.program_text, feed_by_line, spindle_by_line, file=str(self.case.program),
+                               feed_per_rev_by_line=per_rev_by_line)
 
     def chip_load_feeds(self, spindles: np.ndarray, load_fraction: np.ndarray | float) -> np.ndarray:
         """Feeds that put each line at ``load_fraction`` of the limit at the given spindle speeds, mm/min.
@@ -269,6 +397,33 @@ class ProblemContext:
         return dict(zip(self.keys, x.tolist()))
 
 
+def _own_words(program: Program) -> tuple[dict[int, set[float]], dict[int, set[float]]]:
+    """Values (SI: m/s under G94, m/rev under G95, rad/s) of the F and S words each line sets itself, over all
+    its runs (a macro expression may give several)."""
+    feeds: dict[int, set[float]] = {}
+    speeds: dict[int, set[float]] = {}
+    for b in program.blocks:
+        if isinstance(b, (Linear, Arc)) and b.feed_line == b.line:
+            feeds.setdefault(b.line, set()).add(b.feed_per_rev if b.feed_per_rev > 0.0 else b.feed)
+        elif isinstance(b, SpindleSpeed) and b.speed_line == b.line:
+            speeds.setdefault(b.line, set()).add(b.speed)
+    return feeds, speeds
+
+
+def _changes(value: float, own: set[float] | None, before: np.ndarray | None) -> bool:
+    """Whether a word of ``value`` on a line changes the written program.
+
+    A line with a word of its own (values ``own``) keeps its text when the value is that word's in every run;
+    a line without one needs the word unless ``value`` is already in effect in every run (``before``, one value
+    per run, NaN where unknown).
+    """
+    if own is not None:
+        return own != {value}
+    if before is None or before.size == 0:
+        return True
+    return not bool(np.all(before == value))
+
+
 def classify_lines(blocks: tuple[Block, ...], removed_mm3: dict[int, float], min_removed_mm3: float,
                    program: Program | None = None
                    ) -> tuple[list[int], list[int], dict[int, float], list[float], list[float]]:
@@ -290,12 +445,17 @@ def classify_lines(blocks: tuple[Block, ...], removed_mm3: dict[int, float], min
     Returns
     -------
     lines, spindle_lines, pins, feeds_mm_per_min, spindles_rpm
+        ``pins`` maps a pinned line to its written feed: mm/min, or mm/rev on a G95 line. The feeds of G95
+        cutting lines are feeds per minute (F x S).
     """
     feed_runs: dict[int, list[tuple[float, int]]] = {}  # every run of a feed line: (written feed, F-word line)
+    per_minute: dict[int, float] = {}  # feed of a feed line's first run, mm/min (G95: F x S)
     for b in blocks:
         if isinstance(b, (Linear, Arc)):
-            feed_runs.setdefault(b.line, []).append((round(b.feed * MM_PER_MIN_PER_M_S, 6), b.feed_line))
-    feed_lines = {line: runs[0] for line, runs in feed_runs.items()}
+            written = b.feed_per_rev * 1e3 if b.feed_per_rev > 0.0 else b.feed * MM_PER_MIN_PER_M_S  # mm/rev, mm/min
+            feed_runs.setdefault(b.line, []).append((round(written, 6), b.feed_line))
+            per_minute.setdefault(b.line, round(b.feed * MM_PER_MIN_PER_M_S, 6))
+    feed_lines = {line: (per_minute[line], runs[0][1]) for line, runs in feed_runs.items()}
     tapping = {b.line for b in blocks if isinstance(b, Linear) and b.tap_pitch > 0.0}  # F tied to S: never genes
     retracts = _straight_retracts(blocks)
     cutting = sorted(line for line in feed_lines

@@ -140,8 +140,8 @@ def run_twin(ctx: ProblemContext, feeds: np.ndarray | None, spindles: np.ndarray
     twin = build_twin(ctx.case, batch=batch, options=options,
                       program_text=program_text if program_text is not None else ctx.program_text)
     if feeds is not None and spindles is not None:
-        feed, spindle = ctx.overrides(feeds, spindles)
-        twin.nck.set_overrides(feed=feed, spindle=spindle)
+        feed, spindle, per_rev = ctx.overrides(feeds, spindles)
+        twin.nck.set_overrides(feed=feed, spindle=spindle, feed_per_rev=per_rev)
     probes = twin.probes if channels is None else [p for p in twin.probes if p.channel in channels]
     settings = MasterSettings(step=twin.options.step, time_limit=ctx.time_limit_s, stop_when=twin.stop_when,
                               limits=getattr(twin, "limits", None) or {}, threads=threads)

@@ -5,6 +5,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fmus_src.nck.blocks import Arc, Linear
 from fmus_src.nck.writer import inch_lines
 
 from ..case import Case
@@ -53,6 +54,26 @@ def removed_volume_by_line(recording) -> dict[int, float]:
         mask = prev == line
         out[int(line)] = float(np.sum(mrr[mask] * dt[mask]))
     return out
+
+
+def _per_revolution_lines(blocks, lines: set[int], file: str) -> frozenset[int]:
+    """The given feed lines that run under G95 (feed per revolution); a line run in both modes is refused.
+
+    Raises
+    ------
+    OptimizeError
+        Naming the file and the line whose runs are in G94 and in G95 (a subprogram called in both modes).
+    """
+    modes: dict[int, set[bool]] = {}
+    for b in blocks:
+        if isinstance(b, (Linear, Arc)) and b.line in lines:
+            modes.setdefault(b.line, set()).add(b.feed_per_rev > 0.0)
+    mixed = sorted(line for line, m in modes.items() if len(m) > 1)
+    if mixed:
+        raise OptimizeError(f"{file}:{mixed[0]}: the line runs in feed per minute (G94) and in feed per "
+                            "revolution (G95); expected one feed mode in every run of a line whose F the "
+                            "optimiser writes (call the subprogram in one mode)")
+    return frozenset(line for line, m in modes.items() if m == {True})
 
 
 def build_reference(case: Case, program_text: str | None = None, ranges: Ranges | None = None,
@@ -109,14 +130,11 @@ def build_reference(case: Case, program_text: str | None = None, ranges: Ranges 
     removed = removed_volume_by_line(run.recording)
     lines, s_lines, pins, f0, s0 = classify_lines(blocks, removed, min_removed_mm3, twin.nck.program_)
     check_tapping_spindle(twin.nck.program_, s_lines, str(case.program))  # tapping: F tied to S
-    per_rev = sorted({b.line for b in blocks if getattr(b, "feed_per_rev", 0.0) > 0.0} & (set(lines) | set(pins)))
-    if per_rev:  # the feed genes are mm/min; an F word in mm/rev is not rewritten (fmus_src.nck.writer)
-        raise OptimizeError(f"{case.program}:{per_rev[0]}: feed per revolution (G95) on a line whose feed the "
-                            "optimiser would change; expected G94 feeds (F in mm/min) on the cutting lines")
+    per_rev = _per_revolution_lines(blocks, set(lines) | set(pins), str(case.program))  # F words in mm/rev
     inch = frozenset(inch_lines(text, list(lines) + list(pins), file=str(case.program)))  # F words in in/min
     ctx = ProblemContext(case, text, np.asarray(lines, int), np.asarray(s_lines, int), pins, np.asarray(f0, float),
                          np.asarray(s0, float), ranges, float(load_limit_N), removed, step, time_limit_s,
-                         engagement=engagement, inch_lines=inch)
+                         engagement=engagement, inch_lines=inch, per_rev_lines=per_rev, program=twin.nck.program_)
     check_context(ctx)
     evaluation = figures(ctx, run, 1)
     if not max_cycle_factor > 1.0:

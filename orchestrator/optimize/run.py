@@ -78,6 +78,9 @@ class OptimizeSettings:
         Grid a machinist writes: 10 mm/min, 50 rpm.
     feed_step_in_per_min : float
         Feed grid of a program whose cutting lines run under G20 (inch): 0.1 in/min (2.54 mm/min).
+    feed_step_mm_per_rev, feed_step_in_per_rev : float
+        [--feed-step-mm-per-rev, --feed-step-in-per-rev] grid of the F words written on G95 (feed per
+        revolution) cutting lines: 0.001 mm/rev, 0.0001 in/rev under G20.
     pop, gens : int
         [--pop, --gens] population size and number of generations.
     seed : int
@@ -118,6 +121,8 @@ class OptimizeSettings:
     feed_step: float = 10.0
     spindle_step: float = 50.0
     feed_step_in_per_min: float = 0.1
+    feed_step_mm_per_rev: float = 0.001
+    feed_step_in_per_rev: float = 0.0001
     pop: int = 20
     gens: int = 10
     seed: int = 1
@@ -153,7 +158,8 @@ class OptimizeSettings:
     def ranges(self) -> Ranges:
         """The search ranges and grid."""
         return Ranges(tuple(map(float, self.feed_range)), tuple(map(float, self.spindle_range)),  # type: ignore[arg-type]
-                      float(self.feed_step), float(self.spindle_step), float(self.feed_step_in_per_min))
+                      float(self.feed_step), float(self.spindle_step), float(self.feed_step_in_per_min),
+                      float(self.feed_step_mm_per_rev), float(self.feed_step_in_per_rev))
 
     def identity(self) -> dict[str, Any]:
         """Settings that must match for ``resume`` (everything but gens, workers, progress, plot)."""
