@@ -17,7 +17,7 @@ from fmus_src.nck.blocks import Arc, Linear, SpindleSpeed
 from fmus_src.nck.interpreter import interpret
 from fmus_src.nck.writer import rewrite_program
 from orchestrator.case import load_case
-from orchestrator.optimize import OptimizeError, OptimizeSettings, build_reference, optimize
+from orchestrator.optimize import OptimizeSettings, optimize
 from orchestrator.optimize.context import classify_lines
 from orchestrator.simulate import simulate
 
@@ -176,14 +176,6 @@ def test_plunge_in_a_loop_keeps_its_feed_in_every_run():
 def test_lower_case_program_gets_lower_case_words():
     text = rewrite_program("n10 g1 x5. (cut)\nN20 G1 X6.\n", {1: 300.0, 2: 310.0}, {1: 4000.0})
     assert text == "n10 g1 x5. f300 s4000 (cut)\nN20 G1 X6. F310\n"
-
-
-def test_g95_cutting_line_is_refused_naming_the_line(tmp_path):
-    (tmp_path / "case.toml").write_text(CASE_TOML)
-    (tmp_path / "program.nc").write_text("G21 G17 G90 G54\nS3000 M3\nG0 X-3.5 Y2. Z1.\nG95 G1 Z-1. F0.1\n"
-                                         "X7.5 F0.05\nG0 Z1.\nG94\nM30\n")
-    with pytest.raises(OptimizeError, match=r"program\.nc:5: feed per revolution \(G95\)"):
-        build_reference(load_case(tmp_path))
 
 
 @pytest.fixture(scope="module")

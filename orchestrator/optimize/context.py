@@ -303,6 +303,12 @@ class ProblemContext:
         """Feed per revolution (m/rev) of a G95 F word ``word`` (mm/rev, in/rev under G20) on ``line``."""
         return word * (INCH if int(line) in self.inch_lines else MM)
 
+    def original_feed_per_rev_word(self, line: int) -> float:
+        """The F in effect on G95 line ``line`` in the original program (its first run), mm/rev (in/rev under
+        G20), as written."""
+        b = next(x for x in self.interpreted().blocks if isinstance(x, (Linear, Arc)) and x.line == int(line))
+        return round(b.feed_per_rev / (INCH if int(line) in self.inch_lines else MM), 9)
+
     def interpreted(self) -> Program:
         """The interpreted original program (the twin's NC kernel reads it with the case's settings)."""
         if self.program is None:

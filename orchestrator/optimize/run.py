@@ -524,7 +524,11 @@ def optimize(program: str | Path | None = None, case: str | Path | Case | None =
             "max_load_before_N": float(before.line_max_load_N[0, i]),
             "max_load_after_N": float(ev_after.line_max_load_N[0, i]),
         })
-        if int(line) in ctx.inch_lines:  # G20: the F words as written, in/min
+        if int(line) in ctx.per_rev_lines:  # G95: the F words as written, mm/rev (in/rev under G20)
+            unit = "in_per_rev" if int(line) in ctx.inch_lines else "mm_per_rev"
+            lines[-1][f"feed_before_{unit}"] = ctx.original_feed_per_rev_word(line)
+            lines[-1][f"feed_after_{unit}"] = ctx.feed_per_rev_word(line, f[i], s[i])
+        elif int(line) in ctx.inch_lines:  # G20: the F words as written, in/min
             lines[-1]["feed_before_in_per_min"] = ctx.feed_word(line, ctx.original_feed[i])
             lines[-1]["feed_after_in_per_min"] = ctx.feed_word(line, f[i])
     result = OptimizeResult(
