@@ -11,10 +11,10 @@ Conventions
   feed. A G95 feed move (or canned cycle) with the spindle stopped (M5, no
   M3/M4 yet) or at S0 is an error naming the line, and so is a feed move
   whose modal F was given in the other feed mode (switching G94/G95 needs a
-  new F). Per-line overrides: a spindle override rescales G95 feeds; a feed
-  override (m/s) cannot govern a G95 block (:mod:`.overrides`), the writer
-  does not rewrite a G95 F word and ``optimize`` refuses G95 cutting lines
-  naming the file and line.
+  new F). Per-line overrides: a spindle override rescales G95 feeds; a G95
+  F word is overridden in m/rev (``feed_per_rev``, :mod:`.overrides`), not
+  by a feed override in m/s; the writer writes G95 F words in mm/rev
+  (in/rev), and ``optimize`` writes F = feed gene / S on G95 cutting lines.
 * The G94/G95 code of a block applies to the block's own F word.
 """
 from __future__ import annotations

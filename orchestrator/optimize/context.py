@@ -132,9 +132,9 @@ class ProblemContext:
     spindle_lines : ndarray of int, shape (L,)
         Line that carries the S word of each cutting line.
     pinned_feeds : dict[int, float]
-        Non-cutting feed lines whose original feed is written explicitly, mm/min.
+        Non-cutting feed lines whose original feed is written explicitly, mm/min (mm/rev on ``per_rev_lines``).
     original_feed, original_spindle : ndarray, shape (L,)
-        Feed (mm/min) and spindle speed (rpm) of each cutting line in the original program.
+        Feed (mm/min; F x S on a G95 line) and spindle speed (rpm) of each cutting line in the original program.
     ranges : Ranges
         Search ranges and grid.
     load_limit_N : float
