@@ -235,11 +235,11 @@ class ProblemContext:
         ranges = (f"Ranges(feed_mm_per_min={r.feed_mm_per_min!r}, spindle_rpm={r.spindle_rpm!r}, "
                   f"feed_step={r.feed_step!r}, spindle_step={r.spindle_step!r}, "
                   f"feed_step_in_per_min={r.feed_step_in_per_min!r})")  # as before G95 programs were optimised
-        key: tuple = (self.lines.tolist(), self.spindle_lines.tolist(), sorted(self.pinned_feeds.items()), ranges,
-                      self.load_limit_N, self.step, sorted(self.inch_lines))
+        parts = [repr(self.lines.tolist()), repr(self.spindle_lines.tolist()), repr(sorted(self.pinned_feeds.items())),
+                 ranges, repr(self.load_limit_N), repr(self.step), repr(sorted(self.inch_lines))]
         if self.per_rev_lines:
-            key += (sorted(self.per_rev_lines), r.feed_step_mm_per_rev, r.feed_step_in_per_rev)
-        h.update(repr(key).encode("utf-8"))
+            parts += [repr(sorted(self.per_rev_lines)), repr(r.feed_step_mm_per_rev), repr(r.feed_step_in_per_rev)]
+        h.update(("(" + ", ".join(parts) + ")").encode("utf-8"))  # the tuple's repr
         return h.hexdigest()[:16]
 
     # ------------------------------------------------------------------ genes <-> values
