@@ -362,3 +362,46 @@ def test_kernel_feed_per_rev_override_equals_the_rewritten_word_and_mode_errors(
         k.set_overrides(**kwargs)
         with pytest.raises(NCParameterError, match=match):
             k.setup(0.0)
+
+
+def _zigzag(n: int) -> str:
+    """A slot through the 4 mm block in ``n`` short moves (an adaptive-style path), one F and one S word."""
+    lines = ["G21 G17 G90 G94 G54", "S3000 M3", "G0 X-3.5 Y3. Z1.", "G1 Z-1. F600"]
+    for k in range(n):
+        lines.append(f"X{-3.5 + 11.0 * (k + 1) / n:.3f} Y{3.1 if k % 2 else 2.9:.1f}" + (" F300" if k == 0 else ""))
+    return "\n".join(lines + ["G0 Z1.", "M30"]) + "\n"
+
+
+def test_adaptive_program_end_to_end_words_where_genes_change_and_after_resimulated(tmp_path):
+    text = _zigzag(30)
+    (tmp_path / "case.toml").write_text(CASE_TOML)
+    (tmp_path / "program.nc").write_text(text)
+    settings = OptimizeSettings(objective="time", load_limit_N=60.0, feed_range=(100.0, 600.0), pop=4, gens=1,
+                                seed=1, progress=False, plot=False, check_front=False)
+    result = optimize(case=tmp_path, settings=settings, out=tmp_path / "opt")
+    written = (tmp_path / "opt" / "optimized.nc").read_text()
+    rows = result.lines
+    assert len(rows) >= 15  # the moves through the block
+    diff = _word_diff(text, written)
+    assert all(t[0] in "FS" for removed, added in diff.values() for t in removed + added)
+    # the air moves after the block inherit the F written on the first cutting line: they keep F300, written once
+    cut = {row["line"] for row in rows}
+    before = {b.line: b.feed for b in interpret(text, "p.nc").blocks if isinstance(b, Linear)}
+    after = {b.line: b.feed for b in interpret(written, "p.nc").blocks if isinstance(b, Linear)}
+    assert {n: f for n, f in after.items() if n not in cut} == {n: f for n, f in before.items() if n not in cut}
+    first_air = max(cut) + 1
+    assert diff.get(first_air, ([], []))[1] == ([] if rows[-1]["feed_after_mm_per_min"] == 300.0 else ["F300"])
+    assert not any(diff.get(n) for n in range(first_air + 1, len(text.splitlines()) + 1))
+    # consecutive cutting lines: an S (F) word exactly where the gene differs from the line before
+    for prev, row in zip(rows, rows[1:]):
+        assert row["line"] == prev["line"] + 1 and row["s_word_line"] == row["line"]
+        added = diff.get(row["line"], ([], []))[1]
+        assert sorted(t[0] for t in added) == sorted(
+            (["F"] if row["feed_after_mm_per_min"] != prev["feed_after_mm_per_min"] else [])
+            + (["S"] if row["spindle_after_rpm"] != prev["spindle_after_rpm"] else [])), row["line"]
+    changes = sum(a["spindle_after_rpm"] != b["spindle_after_rpm"] for a, b in zip(rows, rows[1:]))
+    assert _s_words(written) == 1 + changes
+    again = simulate(program=tmp_path / "opt" / "optimized.nc", case=load_case(tmp_path), plot=False)
+    assert again.success
+    assert again.summary["cycle_time_s"] == pytest.approx(result.after["cycle_time_s"], abs=1e-9)
+    assert again.summary["max_cutting_load_N"] == pytest.approx(result.after["max_cutting_load_N"], rel=1e-9)

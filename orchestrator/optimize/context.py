@@ -471,9 +471,13 @@ def classify_lines(blocks: tuple[Block, ...], removed_mm3: dict[int, float], min
     tap_modal = {b.line for b in blocks if isinstance(b, Linear) and b.tap_pitch > 0.0 and b.feed_per_rev == 0.0
                  and b.feed_line != b.line}
     # a non-cutting line that inherits F from a cutting line in ANY of its runs (a loop, a subprogram called
-    # twice) gets its original F written; when its runs had different feeds, the lowest of them
+    # twice) gets its original F written; when its runs had different feeds, the lowest of them. "From a cutting
+    # line" as the written program runs: also when the F it inherits was written before a cutting line without
+    # an F word of its own, which gets one (the NC kernel's view, with a feed override on every cutting line)
+    governed = _governed_feed_lines(program, cutting) if program is not None else set()
     pins = {line: min(f for f, _ in runs) for line, runs in feed_runs.items()
-            if line not in cut_set and (any(src in cut_set for _, src in runs) or line in tap_modal)}
+            if line not in cut_set and (any(src in cut_set for _, src in runs) or line in tap_modal
+                                        or line in governed)}
     # spindle speed in effect at each cutting line, and where its S word goes
     speed_at: dict[int, float] = {}
     speed = 0.0
@@ -490,6 +494,26 @@ def classify_lines(blocks: tuple[Block, ...], removed_mm3: dict[int, float], min
     # values as written in the program (undo the SI round trip)
     return (cutting, [target_of[line] for line in cutting], {k: round(v, 6) for k, v in pins.items()},
             [round(feed_lines[line][0], 6) for line in cutting], [round(speed_at.get(line, 0.0), 6) for line in cutting])
+
+
+def _governed_feed_lines(program: Program, cutting: list[int]) -> set[int]:
+    """Feed lines whose feed, in at least one run, an F word on a cutting line would govern.
+
+    Puts a feed override of an unmistakable value on every cutting line (m/s under G94, m/rev under G95: the
+    NC kernel's modal rule, exactly as written F words act) and returns the lines of the feed blocks whose feed
+    then changes. A cutting line run in both feed modes is left out (it is refused later, naming it).
+    """
+    modes: dict[int, set[bool]] = {}
+    for b in program.blocks:
+        if isinstance(b, (Linear, Arc)) and b.line in cutting:
+            modes.setdefault(b.line, set()).add(b.feed_per_rev > 0.0)
+    mark = {line: 1.0e3 + k for k, line in enumerate(cutting)}  # 1000 m/s or m/rev: no program's feed
+    feed = {line: v for line, v in mark.items() if modes.get(line) == {False}}
+    per_rev = {line: v for line, v in mark.items() if modes.get(line) == {True}}
+    _, plain, _ = apply_overrides(program, 1)
+    blocks, feeds, _ = apply_overrides(program, 1, feed, None, per_rev)
+    return {b.line for i, b in enumerate(blocks)
+            if isinstance(b, (Linear, Arc)) and not feeds[0, i] == plain[0, i]}
 
 
 def _straight_retracts(blocks: tuple[Block, ...]) -> set[int]:
