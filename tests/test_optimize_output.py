@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from fmus_src.nck.blocks import Arc, Linear, SpindleSpeed
-from fmus_src.nck.errors import NCParameterError
+from fmus_src.nck.errors import GCodeError, NCParameterError
 from fmus_src.nck.interpreter import interpret
 from fmus_src.nck.settings import MM, RPM
 from fmus_src.nck.writer import inch_lines, rewrite_program
@@ -405,3 +405,15 @@ def test_adaptive_program_end_to_end_words_where_genes_change_and_after_resimula
     assert again.success
     assert again.summary["cycle_time_s"] == pytest.approx(result.after["cycle_time_s"], abs=1e-9)
     assert again.summary["max_cutting_load_N"] == pytest.approx(result.after["max_cutting_load_N"], rel=1e-9)
+
+
+def test_writer_feed_per_rev_words():
+    text = "G21 G95 G1 X1. F0.1\nX2.\nG20\nx0.1\nM30\n"
+    out = rewrite_program(text, None, None, feed_per_rev_by_line={1: 0.082, 2: 0.05, 4: 0.0026 * 25.4})
+    assert out == "G21 G95 G1 X1. F0.082\nX2. F0.05\nG20\nx0.1 f0.0026\nM30\n"
+    with pytest.raises(GCodeError, match="feed in mm/min cannot be written there") as info:  # a G95 line
+        rewrite_program(text, {2: 300.0}, None, file="p.nc")
+    assert (info.value.file, info.value.line) == ("p.nc", 2)
+    with pytest.raises(GCodeError, match="feed per minute and a feed per revolution") as info:
+        rewrite_program("G94 G1 X1. F300\nM30\n", {1: 300.0}, None, file="p.nc", feed_per_rev_by_line={1: 0.05})
+    assert (info.value.file, info.value.line) == ("p.nc", 1)

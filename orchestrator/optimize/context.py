@@ -200,7 +200,21 @@ class ProblemContext:
 
         ``gene / S`` in mm/rev (in/rev under G20), rounded half up to the grid (``Ranges.feed_step_mm_per_rev``
         or ``feed_step_in_per_rev``) and kept within the grid values whose feed ``F x S`` lies in the feed range
-        (when there is one), at least one grid step. Returned as the lexer reads the written word back.
+        (when there is one), at least one grid step.
+
+        Parameters
+        ----------
+        line : int
+            The G95 line (1-based).
+        feed_mm_per_min : float
+            Feed gene, mm/min.
+        spindle_rpm : float
+            Spindle gene of the line, rpm (in effect on every run of it).
+
+        Returns
+        -------
+        float
+            The word as the lexer reads it back: mm/rev, in/rev under G20.
         """
         inch = int(line) in self.inch_lines
         r = self.ranges
