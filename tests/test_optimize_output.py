@@ -334,6 +334,23 @@ def test_g95_program_optimised_and_resimulated_gives_after(g95_run):
     assert report["after"]["max_cutting_load_N"] <= 60.0 < report["before"]["max_cutting_load_N"]
 
 
+def test_g95_batched_evaluation_equals_the_written_program_alone(g95_run):
+    """The search's batched member (m/rev overrides) and ``optimized.nc`` run alone: the same figures."""
+    from orchestrator.optimize import build_reference, evaluate_population
+    from orchestrator.optimize.evaluate import figures, run_twin
+
+    folder, result = g95_run
+    ctx = build_reference(load_case(folder), ranges=Ranges((100.0, 600.0))).context
+    keys = ctx.keys
+    f = np.array([result.X[k] for k in keys[0::2]])
+    s = np.array([result.X[k] for k in keys[1::2]])
+    batch = evaluate_population(ctx, np.stack([ctx.original_feed, f]), np.stack([ctx.original_spindle, s]))
+    alone = figures(ctx, run_twin(ctx, None, None, 1, program_text=result.program_text), 1)
+    assert batch.cycle_time_s[1] == alone.cycle_time_s[0]
+    assert batch.max_load_N[1] == alone.max_load_N[0]
+    assert batch.line_time_s[1].tolist() == alone.line_time_s[0].tolist()
+
+
 def test_a_line_run_in_g94_and_g95_is_refused_naming_it():
     text = ("S3000 M3\nG0 X-3.5 Y3. Z1.\nG1 Z-1. F300\nM98 P10\nG95 G1 Z-1.5 F0.1\nM98 P10\nG94 G0 Z1.\nM30\n"
             "O10\nG1 X2.5\nG0 X-3.5\nM99\n")
