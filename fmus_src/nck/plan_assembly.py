@@ -30,7 +30,9 @@ NONE, OUTSIDE, AMBIGUOUS = 0, 1, 2
 
 @njit
 def fir(x: np.ndarray, boxes: np.ndarray) -> np.ndarray:
-    """:func:`.filters.apply_fir` of increments ``x`` (K, 3) with box lengths ``boxes`` (int64); ``x`` itself if none."""
+    """:func:`.filters.apply_fir` of increments ``x`` (K, 3) with box lengths ``boxes`` (int64), as a new array."""
+    if boxes.shape[0] == 0:
+        return x.copy()
     y = x
     K = x.shape[0]
     for nb in boxes:
