@@ -197,3 +197,45 @@ def test_in_position_decision_at_the_width_is_numpy_s():
     out = np.nonzero(np.linalg.norm(p - target, axis=1) > width)[0]
     assert last_outside(p, target, width) == (int(out[-1]) if len(out) else -1)
     assert last_outside(p, target, 0.0) == int(np.nonzero(np.linalg.norm(p - target, axis=1) > 0.0)[0][-1])
+
+
+def _numpy_assembly(segments, K, cut_boxes, rapid_boxes, initial, final):
+    """The numpy steps of plan_member (reference path) from segments to positions and feed."""
+    inc = {"cut": np.zeros((K, 3)), "rapid": np.zeros((K, 3)), "sync": np.zeros((K, 3))}
+    feed = np.zeros(K)
+    for k0, kind, seg in segments:
+        if seg.n == 0:
+            continue
+        inc[kind][k0 + 1: k0 + seg.n + 1] += np.diff(seg.position, axis=0)
+        feed[k0: k0 + seg.n + 1] = seg.speed
+    y = apply_fir(inc["cut"], cut_boxes) + apply_fir(inc["rapid"], rapid_boxes) + inc["sync"]
+    position = initial + np.cumsum(y, axis=0)
+    moving = np.nonzero(np.any(y != 0.0, axis=1))[0]
+    if len(moving):
+        position[moving[-1]:] = final
+    return position, feed
+
+
+@pytest.mark.parametrize("overlap", [False, True])
+def test_assembly_kernels_equal_numpy(overlap):
+    # segments one after the other (streamed kernel, with rests between them) and overlapping ones (the
+    # general kernel); zero-length segments and -0.0 increments included
+    from fmus_src.nck.interpolator import Segment
+    from fmus_src.nck.plan_assembly import assemble_positions
+
+    rng = np.random.default_rng(4)
+    segments, k = [], 0
+    point = np.array([0.01, -0.02, 0.03])
+    for i in range(12):
+        n = int(rng.choice([0, 1, 5, 40, 300]))
+        pos = point + np.cumsum(rng.standard_normal((n + 1, 3)) * 1e-5 * (i % 3 != 2), axis=0)
+        pos[:, 2] = -0.0 if i == 4 else pos[:, 2]
+        point = pos[-1]
+        segments.append((k, ("cut", "rapid", "sync")[i % 3], Segment(pos, rng.uniform(0, 0.1, n + 1), np.zeros(1), 0.0)))
+        k += n + int(rng.integers(0, 90)) - (25 if overlap and n > 30 else 0)
+    K = k + 400
+    initial, final = np.array([0.0, 0.1, -0.0]), segments[-1][2].position[-1]
+    for cut, rapid in (([16], [30, 30]), ([], [7]), ([8, 8], [])):
+        want = _numpy_assembly(segments, K, cut, rapid, initial, final)
+        got = assemble_positions(segments, K, cut, rapid, initial, final)
+        assert got[0].tobytes() == want[0].tobytes() and got[1].tobytes() == want[1].tobytes()

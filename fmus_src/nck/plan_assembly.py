@@ -15,6 +15,8 @@ so the decision is numpy's. Samples inside that band (or NaN) are decided by num
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from ..jit import njit
@@ -109,6 +111,138 @@ def _assemble(K: int, seg_k0: np.ndarray, seg_kind: np.ndarray, seg_offset: np.n
     for k in range(K):
         for a in range(3):
             y = y_cut[k, a] + y_rapid[k, a] + inc_sync[k, a]
+            if y != 0.0:
+                last_moving = k
+            acc[a] = y if k == 0 else acc[a] + y
+            position[k, a] = initial[a] + acc[a]
+    if last_moving >= 0:
+        for k in range(last_moving, K):
+            for a in range(3):
+                position[k, a] = final[a]
+    return position, feed
+
+
+@njit
+def _fir_sample(x: float, k: int, a: int, boxes: np.ndarray, slot0: np.ndarray, ring: np.ndarray, acc: np.ndarray,
+                z_prev: np.ndarray) -> float:
+    """Sample ``k`` of column ``a`` of :func:`fir`, streamed from its input sample ``x`` (same operations).
+
+    ``acc`` (boxes, 3) holds each box's cumulative sum, ``ring`` rows ``slot0[i] .. slot0[i + 1] - 1`` box ``i``'s
+    last ``nb`` sums (``c[k - nb]`` in slot ``k % nb``), ``z_prev`` (boxes, 3) each box's previous average.
+    """
+    for i in range(boxes.shape[0]):
+        nb = boxes[i]
+        c = x if k == 0 else acc[i, a] + x
+        acc[i, a] = c
+        slot = slot0[i] + k % nb
+        z = c - ring[slot, a] if k >= nb else c
+        ring[slot, a] = c
+        z = z / nb
+        x = (z * 0.5) if k == 0 else ((z + z_prev[i, a]) * 0.5)
+        z_prev[i, a] = z
+    return x
+
+
+@njit
+def _at_rest(boxes: np.ndarray, slot0: np.ndarray, ring: np.ndarray, acc: np.ndarray, z_prev: np.ndarray) -> bool:
+    """Whether streamed boxes are at a fixed point: for an input of +0.0 they output +0.0 and keep their state.
+
+    That holds when every box's sum ``C`` is finite and not -0.0 (so ``C + 0.0`` is ``C``), all its last ``nb``
+    sums equal ``C`` (so ``(C - C) / nb`` is +0.0) and its previous average is a zero (so the two-tap average is
+    +0.0). Only valid once ``k >= max(boxes)``.
+    """
+    for i in range(boxes.shape[0]):
+        for a in range(3):
+            C = acc[i, a]
+            if not math.isfinite(C) or (C == 0.0 and math.copysign(1.0, C) < 0.0) or z_prev[i, a] != 0.0:
+                return False
+            for j in range(slot0[i], slot0[i + 1]):
+                if ring[j, a] != C:
+                    return False
+    return True
+
+
+@njit
+def _is_plus_zero(x: float) -> bool:
+    return x == 0.0 and math.copysign(1.0, x) > 0.0
+
+
+@njit
+def _assemble_streamed(K: int, seg_k0: np.ndarray, seg_kind: np.ndarray, seg_offset: np.ndarray,
+                       flat_position: np.ndarray, flat_speed: np.ndarray, cut_boxes: np.ndarray,
+                       rapid_boxes: np.ndarray, initial: np.ndarray, final: np.ndarray):
+    """:func:`_assemble` in one pass over the samples, without (K, 3) temporaries.
+
+    Parameters and returns as :func:`_assemble`; the moving segments must follow one another
+    (``seg_k0[s] + n_s <= seg_k0[s']`` for the next moving segment ``s'``), as the planner's items do, so each
+    sample takes the increment of at most one segment. A filter whose input is +0.0 while it rests at a fixed
+    point (:func:`_at_rest`) outputs +0.0 without being stepped: the rapid filter between rapids, the cutting
+    filter during rapids and waits.
+    """
+    feed = np.zeros(K)
+    S = seg_k0.shape[0]
+    for s in range(S):
+        o = seg_offset[s]
+        n = seg_offset[s + 1] - o - 1
+        if n == 0:
+            continue
+        for i in range(n + 1):
+            feed[seg_k0[s] + i] = flat_speed[o + i]
+    c_slot0 = np.zeros(cut_boxes.shape[0] + 1, dtype=np.int64)
+    for i in range(cut_boxes.shape[0]):
+        c_slot0[i + 1] = c_slot0[i] + cut_boxes[i]
+    r_slot0 = np.zeros(rapid_boxes.shape[0] + 1, dtype=np.int64)
+    for i in range(rapid_boxes.shape[0]):
+        r_slot0[i + 1] = r_slot0[i] + rapid_boxes[i]
+    c_ring = np.zeros((c_slot0[-1], 3))
+    r_ring = np.zeros((r_slot0[-1], 3))
+    c_acc = np.zeros((cut_boxes.shape[0], 3))
+    c_z = np.zeros((cut_boxes.shape[0], 3))
+    r_acc = np.zeros((rapid_boxes.shape[0], 3))
+    r_z = np.zeros((rapid_boxes.shape[0], 3))
+    c_warm = cut_boxes.max() + 1 if cut_boxes.shape[0] else 1  # rest needs k >= every nb
+    r_warm = rapid_boxes.max() + 1 if rapid_boxes.shape[0] else 1
+    c_rest = False
+    r_rest = False
+    position = np.empty((K, 3))
+    acc = np.zeros(3)
+    x = np.zeros(3)
+    y_cut = np.zeros(3)
+    y_rapid = np.zeros(3)
+    last_moving = -1
+    s = 0
+    for k in range(K):
+        while s < S and seg_k0[s] + (seg_offset[s + 1] - seg_offset[s] - 1) < k:  # segments ended before k
+            s += 1
+        kind = -1
+        row = 0
+        if s < S and seg_k0[s] + 1 <= k:
+            kind = seg_kind[s]
+            row = seg_offset[s] + (k - seg_k0[s] - 1)
+        for a in range(3):
+            x[a] = (0.0 + (flat_position[row + 1, a] - flat_position[row, a])) if kind >= 0 else 0.0
+        # cutting filter
+        if kind != 0 and c_rest:
+            y_cut[:] = 0.0
+        else:
+            zero_in = True
+            for a in range(3):
+                xa = x[a] if kind == 0 else 0.0
+                zero_in = zero_in and _is_plus_zero(xa)
+                y_cut[a] = _fir_sample(xa, k, a, cut_boxes, c_slot0, c_ring, c_acc, c_z)
+            c_rest = zero_in and k >= c_warm and _at_rest(cut_boxes, c_slot0, c_ring, c_acc, c_z)
+        # rapid filter
+        if kind != 1 and r_rest:
+            y_rapid[:] = 0.0
+        else:
+            zero_in = True
+            for a in range(3):
+                xa = x[a] if kind == 1 else 0.0
+                zero_in = zero_in and _is_plus_zero(xa)
+                y_rapid[a] = _fir_sample(xa, k, a, rapid_boxes, r_slot0, r_ring, r_acc, r_z)
+            r_rest = zero_in and k >= r_warm and _at_rest(rapid_boxes, r_slot0, r_ring, r_acc, r_z)
+        for a in range(3):
+            y = y_cut[a] + y_rapid[a] + (x[a] if kind == 2 else 0.0)
             if y != 0.0:
                 last_moving = k
             acc[a] = y if k == 0 else acc[a] + y
@@ -291,7 +425,12 @@ def assemble_positions(segments: list, K: int, cut_boxes: list[int], rapid_boxes
         flat_speed = np.concatenate([s[2].speed for s in segments])
     else:
         flat_position, flat_speed = np.zeros((0, 3)), np.zeros(0)
-    return _assemble(K, seg_k0, seg_kind, seg_offset, np.ascontiguousarray(flat_position, dtype=float),
+    n = seg_offset[1:] - seg_offset[:-1] - 1
+    moving = n > 0
+    ends = (seg_k0 + n)[moving]
+    in_turn = bool(np.all(seg_k0[1:] >= seg_k0[:-1])) and bool(np.all(ends[:-1] <= seg_k0[moving][1:]))
+    kernel = _assemble_streamed if in_turn else _assemble  # the items run one after the other: always streamed
+    return kernel(K, seg_k0, seg_kind, seg_offset, np.ascontiguousarray(flat_position, dtype=float),
                      np.ascontiguousarray(flat_speed, dtype=float), np.asarray(cut_boxes, dtype=np.int64),
                      np.asarray(rapid_boxes, dtype=np.int64), np.asarray(initial, dtype=float),
                      np.asarray(final, dtype=float))

@@ -554,7 +554,7 @@ def plan_batch(schedule: Schedule, params: Sequence[NCParams], feeds: np.ndarray
         compiled kernels run and the members share what does not depend on their F and S
         (:class:`.plan_reuse.PlanReuse`), with bit-identical plans.
     """
-    builder = BatchPlanBuilder()
+    builder = BatchPlanBuilder(reference=reference)
     stored: dict[tuple, int] = {}
     members: list[int] = []
     reuse = None if reference else PlanReuse()
