@@ -231,7 +231,8 @@ def test_assembly_kernels_equal_numpy(overlap):
         pos = point + np.cumsum(rng.standard_normal((n + 1, 3)) * 1e-5 * (i % 3 != 2), axis=0)
         pos[:, 2] = -0.0 if i == 4 else pos[:, 2]
         point = pos[-1]
-        segments.append((k, ("cut", "rapid", "sync")[i % 3], Segment(pos, rng.uniform(0, 0.1, n + 1), np.zeros(1), 0.0)))
+        seg = Segment(pos, rng.uniform(0, 0.1, n + 1), np.zeros(1), 0.0)
+        segments.append((k, ("cut", "rapid", "sync")[i % 3], seg))
         k += n + int(rng.integers(0, 90)) - (25 if overlap and n > 30 else 0)
     K = k + 400
     initial, final = np.array([0.0, 0.1, -0.0]), segments[-1][2].position[-1]

@@ -4,14 +4,15 @@ After its items are interpolated, a member's plan is built over all its K sample
 increments of every segment summed per kind, the acc/dec filters after interpolation (:func:`.filters.apply_fir`,
 two cumulative sums per box), the final cumulative sum, the in-position distance, the spindle samples
 (:func:`.spindle.sample_spindle`) and the executing line and tool. In numpy each of these is a pass over
-(K, 3) temporaries; here each is one compiled loop with the same floating-point operations in the same order
-(numpy's ``cumsum`` is sequential; ``np.sign``/``np.minimum`` keep their signed-zero rules, :mod:`.numpy_ops`).
+(K, 3) temporaries; here the positions are one streamed loop over the samples (:func:`_assemble_streamed`) and
+the rest one compiled loop each, with the same floating-point operations in the same order (numpy's
+``cumsum`` is sequential; ``np.sign``/``np.minimum`` keep their signed-zero rules, :mod:`.numpy_ops`).
 
-The in-position tests ``np.linalg.norm(p - target, axis=1) > width`` are not recomputed: numpy's sum of the three
-squares need not be sequential. A sample is decided here only when its sequential squared distance is outside
-``width² (1 ± 1e-9)``; any order of summing three non-negative squares is within a relative 5 × 2⁻⁵³ of any other,
-so the decision is numpy's. Samples inside that band (or NaN) are decided by numpy's own ``norm`` of that row
-(:func:`last_outside`).
+The in-position tests ``np.linalg.norm(p - target, axis=1) > width`` are not recomputed: numpy's sum of the
+three squares need not be sequential. A sample is decided here only when its sequential squared distance is
+outside ``width² (1 ± 1e-9)``; any order of summing three non-negative squares is within a relative
+5 × 2⁻⁵³ of any other, so the decision is numpy's. Samples inside that band (or NaN) are decided by numpy's
+own ``norm`` of that row (:func:`last_outside`).
 """
 from __future__ import annotations
 

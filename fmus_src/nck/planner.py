@@ -47,9 +47,10 @@ naming the block instead of exhausting memory.
 """
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
-from typing import Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 
@@ -380,12 +381,15 @@ def plan_member(schedule: Schedule, params: NCParams, feeds: np.ndarray, speeds:
     tap_accel = rigid_tap_accel(params.spindle_ramp, params.spindle_max_speed, params.rigid_tapping_time_constant)
 
     def in_position(seg: Segment, boxes: list[int]) -> int:
-        if not compiled:
-            count = lambda: _in_position(seg, boxes, params.in_position_width)  # noqa: E731
+        if compiled:
+            count = functools.partial(in_position_compiled, seg.position, np.asarray(boxes, dtype=np.int64),
+                                      params.in_position_width)
         else:
-            count = lambda: in_position_compiled(seg.position, np.asarray(boxes, dtype=np.int64),  # noqa: E731
-                                                 params.in_position_width)
+            count = functools.partial(_in_position, seg, boxes, params.in_position_width)
         return count() if reuse is None else reuse.in_position(seg, boxes, params.in_position_width, count)
+
+    def shared(key: tuple, make: Callable[[], Segment]) -> Segment:
+        return make() if reuse is None else reuse.segment(key, make)
 
     def settled(k_now: int) -> int:
         if last is None:
@@ -418,11 +422,7 @@ def plan_member(schedule: Schedule, params: NCParams, feeds: np.ndarray, speeds:
             line_cp.append((k, b.line))
             k0 = max(k, ready)
             f = feeds[list(item.blocks)]
-            if reuse is None:
-                seg = chain_segment(item, f)
-            else:
-                seg = reuse.segment(("chain", params, item.blocks, f.tobytes()),
-                                    lambda: chain_segment(item, f))  # noqa: B023 (called at once)
+            seg = shared(("chain", params, item.blocks, f.tobytes()), functools.partial(chain_segment, item, f))
             for bi, tb in zip(item.blocks, seg.block_start.tolist()):
                 line_cp.append((k0 + _ceil_periods(tb, ts), blocks[bi].line))
             segments.append((k0, "cut", seg))
@@ -441,8 +441,8 @@ def plan_member(schedule: Schedule, params: NCParams, feeds: np.ndarray, speeds:
             sp_last = (k, 0.0, 0.0)
         elif item.kind == "rapid":
             line_cp.append((k, b.line))
-            make = lambda: interpolate_rapid(np.array(b.start), np.array(b.end), params.rapid_feed, ts)  # noqa: E731, B023
-            seg = make() if reuse is None else reuse.segment(("rapid", params, item.blocks), make)
+            seg = shared(("rapid", params, item.blocks), functools.partial(
+                interpolate_rapid, np.array(b.start), np.array(b.end), params.rapid_feed, ts))  # type: ignore[union-attr]
             segments.append((k, "rapid", seg))
             last = (k, seg, rapid_boxes)
             k = settled(k)
@@ -522,7 +522,8 @@ def plan_member(schedule: Schedule, params: NCParams, feeds: np.ndarray, speeds:
         spindle_speed[k0 : k0 + len(omega)] = omega
     line = _step_function(line_cp, k_total, compiled)
     tool = _step_function(tool_cp, k_total, compiled)
-    return MemberPlan(position, feed, line.astype(np.int64), tool.astype(np.int64), spindle_ref, spindle_speed, done)
+    return MemberPlan(position, feed, line.astype(np.int64, copy=False), tool.astype(np.int64, copy=False),
+                      spindle_ref, spindle_speed, done)
 
 
 def _step_function(checkpoints: list[tuple[int, int]], n: int, compiled: bool) -> np.ndarray:
