@@ -240,3 +240,21 @@ def test_assembly_kernels_equal_numpy(overlap):
         want = _numpy_assembly(segments, K, cut, rapid, initial, final)
         got = assemble_positions(segments, K, cut, rapid, initial, final)
         assert got[0].tobytes() == want[0].tobytes() and got[1].tobytes() == want[1].tobytes()
+
+
+def test_reuse_keeps_a_segment_from_its_second_request_on():
+    from fmus_src.nck.interpolator import Segment
+
+    reuse = PlanReuse()
+    made = []
+
+    def make():
+        made.append(Segment(np.zeros((2, 3)), np.zeros(2), np.zeros(1), 0.0))
+        return made[-1]
+
+    first = reuse.segment("a", make)
+    assert reuse.in_position(first, [4], 1e-5, lambda: 7) == 7 and not reuse._segments  # seen once: not kept
+    second = reuse.segment("a", make)
+    assert reuse.segment("a", make) is second and len(made) == 2
+    assert reuse.in_position(second, [4], 1e-5, lambda: 9) == 9
+    assert reuse.in_position(second, [4], 1e-5, lambda: -1) == 9  # counted once for a kept segment

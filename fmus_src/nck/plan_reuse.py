@@ -5,8 +5,12 @@ the same rapids, and the chains whose feeds no override touches (approach and pl
 gene happens to be equal) are identical in many members. :class:`PlanReuse` keeps, for one
 :func:`.planner.plan_batch` call, the interpolated rapids and chains and the in-position counts of the segments,
 keyed on everything they depend on (the member's :class:`.params.NCParams`, the block indices, the chain's
-feeds), so each is computed once per batch. The cached segments are the very objects a member would compute
-itself (same function, same inputs), so reuse cannot change a bit; they are read, never written.
+feeds), so each is computed at most twice per batch. The cached segments are the very objects a member would
+compute itself (same function, same inputs), so reuse cannot change a bit; they are read, never written.
+
+Memory: a segment is kept only from its second request on (a key seen once is remembered without its
+segment), so a population whose chains all differ holds none of them: the batch plan stays the only dense copy
+of the members' references (:mod:`.batch_plan`).
 """
 from __future__ import annotations
 
@@ -19,11 +23,13 @@ class PlanReuse:
     """Segments and in-position counts shared by the members of one batch (see the module docstring)."""
 
     def __init__(self) -> None:
+        self._seen: set[Hashable] = set()
         self._segments: dict[Hashable, Segment] = {}
-        self._settle: dict[tuple[int, tuple[int, ...], float], tuple[Segment, int]] = {}
+        self._kept: set[int] = set()  # id() of the kept segments (alive as long as this object)
+        self._settle: dict[tuple[int, tuple[int, ...], float], int] = {}
 
     def segment(self, key: Hashable, make: Callable[[], Segment]) -> Segment:
-        """The segment stored under ``key``, made by ``make()`` the first time.
+        """The segment of ``key``: made by ``make()``, kept from the second request of ``key`` on.
 
         Parameters
         ----------
@@ -33,17 +39,23 @@ class PlanReuse:
             Computes the segment.
         """
         seg = self._segments.get(key)
-        if seg is None:
-            seg = self._segments[key] = make()
+        if seg is not None:
+            return seg
+        seg = make()
+        if key in self._seen:
+            self._segments[key] = seg
+            self._kept.add(id(seg))
+        else:
+            self._seen.add(key)
         return seg
 
     def in_position(self, seg: Segment, boxes: list[int], width: float, count: Callable[[], int]) -> int:
-        """Samples after ``seg``'s start until its own filtered reference is in position, computed once.
+        """Samples after ``seg``'s start until its own filtered reference is in position (kept for kept segments).
 
         Parameters
         ----------
         seg : Segment
-            The move (the cache holds it, so its ``id`` stays unique).
+            The move.
         boxes : list of int
             Its after-interpolation filter boxes.
         width : float
@@ -51,8 +63,10 @@ class PlanReuse:
         count : callable
             Computes the count (:func:`.planner._in_position`).
         """
+        if id(seg) not in self._kept:
+            return count()
         key = (id(seg), tuple(boxes), float(width))
-        hit = self._settle.get(key)
-        if hit is None or hit[0] is not seg:
-            hit = self._settle[key] = (seg, count())
-        return hit[1]
+        n = self._settle.get(key)
+        if n is None:
+            n = self._settle[key] = count()
+        return n
