@@ -44,6 +44,10 @@ lower bound of its duration (length / programmed feed, slowest-axis rapid
 time, dwell, tool change time) is checked against the limit, and a program
 that would exceed it (a tiny F, a huge dwell) raises :class:`GCodeError`
 naming the block instead of exhausting memory.
+
+Two paths give the same plans bit for bit: the numpy specification (``reference=True``) and, by default, compiled
+kernels for the steps over all samples (:mod:`.chain_sampling`, :mod:`.plan_assembly`, :mod:`.plan_runs`) with
+the segments that do not depend on a member's F and S shared across a batch (:mod:`.plan_reuse`).
 """
 from __future__ import annotations
 
@@ -54,15 +58,15 @@ from typing import Callable, Sequence
 
 import numpy as np
 
+from ..jit import NUMBA_AVAILABLE
 from .blocks import (
     Arc, Block, Coolant, Dwell, Linear, ProgramEnd, ProgramStop, Rapid, SpindleSpeed, SpindleStop, ToolChange,
 )
 from .batch_plan import BatchPlan, BatchPlanBuilder
+from .chain_sampling import sample_chain_compiled
 from .errors import GCodeError, NCParameterError
 from .filters import apply_fir, box_lengths, filter_extension
 from .geometry import ChainGeometry, chain_geometry
-from ..jit import NUMBA_AVAILABLE
-from .chain_sampling import sample_chain_compiled
 from .interpolator import Segment, chain_pieces, interpolate_chain, interpolate_rapid
 from .lookahead import block_windows, plan_chain_speeds
 from .params import NCParams
