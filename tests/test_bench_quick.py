@@ -28,6 +28,7 @@ def result(tmp_path_factory):
     settings.servo_steps = 5
     settings.fused_seconds = 0.3
     settings.replay_seconds = 0.3
+    settings.planning_batch = 10
     settings.fmu_dir = str(tmp_path_factory.mktemp("bench_fmus"))
     return run_bench(settings)
 
@@ -66,6 +67,9 @@ def test_keys(result):
         result["ratios"])
     assert {"native_single_rt_factor", "native_population_100_rt_factor", "c_fmu_fast_loop_us_per_step"} <= set(
         result["targets"])
+    plan = result["planning"]
+    assert plan["identical"] and plan["batch"] == result["settings"]["planning_batch"]
+    assert f"nc_planning_{plan['batch']}_reference_over_compiled" in result["ratios"]
 
 
 def test_values_are_consistent(result):

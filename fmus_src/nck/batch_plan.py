@@ -29,6 +29,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..jit import NUMBA_AVAILABLE
+from .plan_runs import run_starts
+
 if TYPE_CHECKING:
     from .planner import MemberPlan
 
@@ -157,9 +160,17 @@ def _bits(a: np.ndarray) -> np.ndarray:
 
 
 class BatchPlanBuilder:
-    """Collects distinct member plans into the ragged storage of a :class:`BatchPlan`."""
+    """Collects distinct member plans into the ragged storage of a :class:`BatchPlan`.
 
-    def __init__(self) -> None:
+    Parameters
+    ----------
+    reference : bool
+        Find the runs with numpy only (the specification); by default the compiled
+        :func:`.plan_runs.run_starts` does it, with identical results.
+    """
+
+    def __init__(self, reference: bool = False) -> None:
+        self._compiled = NUMBA_AVAILABLE and not reference
         self._position = np.empty((0, 3))
         self._n = 0
         self._runs: list[tuple[np.ndarray, ...]] = []
@@ -179,6 +190,16 @@ class BatchPlanBuilder:
         self._position[o:o + K] = plan.position
         self._position[o + K] = plan.position[K - 1]
         self._n = need
+        if self._compiled and all(getattr(plan, name).dtype == (np.int64 if name in ("line", "tool") else np.float64)
+                                  for name in RUN_FIELDS):
+            starts, *values = run_starts(*(_bits(np.ascontiguousarray(getattr(plan, name))) for name in RUN_FIELDS))
+            runs = tuple(v.view(np.float64) if name not in ("line", "tool") else v
+                         for name, v in zip(RUN_FIELDS, values))
+            self._runs.append((starts + o,) + runs)
+            self._offsets.append(o)
+            self._lengths.append(K)
+            self._done.append(int(plan.done_index))
+            return len(self._lengths) - 1
         values = []
         changed = np.zeros(K + 1, dtype=bool)
         changed[0] = True

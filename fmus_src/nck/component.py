@@ -25,7 +25,7 @@ from .interpreter import interpret
 from .m_aliases import DEFAULT_M_CODES, format_m_codes, parse_m_codes
 from .overrides import apply_overrides
 from .params import NCParams
-from .planner import BatchPlan, build_schedule, plan_batch
+from .planner import BatchPlan, Schedule, build_schedule, plan_batch
 from .sampling import read_plan
 from .settings import DEFAULT_REFERENCE, InterpreterSettings
 from .source import read_program
@@ -216,6 +216,23 @@ class NCKernel(Component):
 
     # ------------------------------------------------------------------ protocol
     def _setup(self, t0: float) -> None:
+        schedule, params, feeds, speeds = self.planning_inputs()
+        self.plan_: BatchPlan = plan_batch(schedule, params, feeds, speeds)
+        self.duration_ = self.plan_.duration.astype(float)
+        self._write(0.0)
+
+    def planning_inputs(self) -> tuple[Schedule, list[NCParams], np.ndarray, np.ndarray]:
+        """Interpret the program with the overrides: the arguments of :func:`.planner.plan_batch`.
+
+        Sets ``program_`` and ``blocks_`` (as ``setup`` does).
+
+        Returns
+        -------
+        schedule : Schedule
+        params : list of NCParams, length B
+        feeds, speeds : ndarray (B, n_blocks)
+            Feed (m/s) of each feed block and speed (rad/s) of each spindle command per member, NaN elsewhere.
+        """
         text, file = self._read_program()
         settings = InterpreterSettings(
             initial=tuple(self._uniform(f"{a}_initial") for a in "xyz"),  # type: ignore[arg-type]
@@ -244,10 +261,7 @@ class NCKernel(Component):
         self.blocks_ = blocks
         self._uniform("interpolation_period")
         params = [self._member_params(b) for b in range(self.batch)]
-        schedule = build_schedule(blocks, settings.initial, file)
-        self.plan_: BatchPlan = plan_batch(schedule, params, feeds, speeds)
-        self.duration_ = self.plan_.duration.astype(float)
-        self._write(0.0)
+        return build_schedule(blocks, settings.initial, file), params, feeds, speeds
 
     def _write(self, kf: float) -> None:
         plan = self.plan_

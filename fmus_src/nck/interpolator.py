@@ -51,8 +51,33 @@ def _n_periods(duration: float, period: float) -> int:
     return max(int(math.ceil(duration / period - 1e-9)), 0)
 
 
-def interpolate_chain(geo: ChainGeometry, speeds: ChainSpeeds, sc: SpeedChange, period: float) -> Segment:
-    """Sample a chain of feed blocks with acc/dec before interpolation over its acc/dec spans.
+@dataclass(frozen=True)
+class ChainPieces:
+    """Constant-jerk pieces of a chain's speed profile over its acc/dec spans (continuous time).
+
+    Attributes
+    ----------
+    t0, s0, v0, a0, jerk : list of float, length P
+        Start time (s), arc length (m), speed (m/s), acceleration (m/s2) and jerk (m/s3) of each piece,
+        in time order.
+    block_start : list of float, length nb
+        Start time of each block relative to the chain start (s); a block that starts inside a span starts
+        where the profile reaches it.
+    duration : float
+        Continuous-time duration of the chain (s).
+    """
+
+    t0: list[float]
+    s0: list[float]
+    v0: list[float]
+    a0: list[float]
+    jerk: list[float]
+    block_start: list[float]
+    duration: float
+
+
+def chain_pieces(geo: ChainGeometry, speeds: ChainSpeeds, sc: SpeedChange) -> ChainPieces:
+    """The acc/dec profile of a chain as constant-jerk pieces (the first half of :func:`interpolate_chain`).
 
     Each span (:mod:`.spans`) runs its entry speed → cruise → exit speed profile as one piece of the path, so
     a speed change may cross the block ends inside it; the start time of a block inside a span is where the
@@ -65,12 +90,10 @@ def interpolate_chain(geo: ChainGeometry, speeds: ChainSpeeds, sc: SpeedChange, 
         Span boundaries, junction speeds and block limits from :func:`plan_chain_speeds`.
     sc : SpeedChange
         Acc/dec law.
-    period : float
-        Interpolation period Ts (s).
 
     Returns
     -------
-    Segment
+    ChainPieces
     """
     v = speeds.junction.tolist()
     vmax = speeds.vmax.tolist()
@@ -105,19 +128,64 @@ def interpolate_chain(geo: ChainGeometry, speeds: ChainSpeeds, sc: SpeedChange, 
             s += vel * dur + 0.5 * acc * dur * dur + jerk * dur ** 3 / 6.0
             vel += acc * dur + 0.5 * jerk * dur * dur
             t += dur
-    duration = t
+    if inner and t0:
+        times = _times_at(np.array([cum[i] for i in inner]), np.array(t0), np.array(s0), np.array(v0),
+                          np.array(a0), np.array(jk), t)
+        for i, tb in zip(inner, times.tolist()):
+            block_start[i] = tb
+    return ChainPieces(t0, s0, v0, a0, jk, block_start, t)
+
+
+def interpolate_chain(geo: ChainGeometry, speeds: ChainSpeeds, sc: SpeedChange, period: float) -> Segment:
+    """Sample a chain of feed blocks with acc/dec before interpolation over its acc/dec spans.
+
+    This numpy implementation is the specification of the compiled sampling
+    (:func:`.chain_sampling.interpolate_chain_compiled`, bit-identical).
+
+    Parameters
+    ----------
+    geo : ChainGeometry
+    speeds : ChainSpeeds
+        Span boundaries, junction speeds and block limits from :func:`plan_chain_speeds`.
+    sc : SpeedChange
+        Acc/dec law.
+    period : float
+        Interpolation period Ts (s).
+
+    Returns
+    -------
+    Segment
+    """
+    pieces = chain_pieces(geo, speeds, sc)
+    return sample_chain(geo, pieces, period)
+
+
+def sample_chain(geo: ChainGeometry, pieces: ChainPieces, period: float) -> Segment:
+    """Sample a chain's pieces at ``k Ts`` (numpy; the second half of :func:`interpolate_chain`).
+
+    Parameters
+    ----------
+    geo : ChainGeometry
+    pieces : ChainPieces
+        From :func:`chain_pieces`.
+    period : float
+        Interpolation period Ts (s).
+
+    Returns
+    -------
+    Segment
+    """
+    t0, s0, v0, a0, jk = pieces.t0, pieces.s0, pieces.v0, pieces.a0, pieces.jerk
+    block_start, duration = pieces.block_start, pieces.duration
+    L = geo.length
     n = _n_periods(duration, period)
     tk = np.arange(n + 1) * period
-    total = cum[-1]
+    total = geo.cum.tolist()[-1]
     if not t0:
         pos = np.repeat(geo.start[:1], n + 1, axis=0)
         return Segment(pos, np.zeros(n + 1), np.array(block_start), duration)
     T0 = np.array(t0)
     S0, V0, A0, JK = np.array(s0), np.array(v0), np.array(a0), np.array(jk)
-    if inner:
-        times = _times_at(np.array([cum[i] for i in inner]), T0, S0, V0, A0, JK, duration)
-        for i, tb in zip(inner, times.tolist()):
-            block_start[i] = tb
     idx = np.searchsorted(T0, tk, side="right") - 1
     tau = tk - T0[idx]
     s = S0[idx] + tau * (V0[idx] + tau * (0.5 * A0[idx] + tau * JK[idx] / 6.0))

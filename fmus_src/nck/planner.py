@@ -44,25 +44,36 @@ lower bound of its duration (length / programmed feed, slowest-axis rapid
 time, dwell, tool change time) is checked against the limit, and a program
 that would exceed it (a tiny F, a huge dwell) raises :class:`GCodeError`
 naming the block instead of exhausting memory.
+
+Two paths give the same plans bit for bit: the numpy specification (``reference=True``) and, by default, compiled
+kernels for the steps over all samples (:mod:`.chain_sampling`, :mod:`.plan_assembly`, :mod:`.plan_runs`) with
+the segments that do not depend on a member's F and S shared across a batch (:mod:`.plan_reuse`).
 """
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
-from typing import Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 
+from ..jit import NUMBA_AVAILABLE
 from .blocks import (
     Arc, Block, Coolant, Dwell, Linear, ProgramEnd, ProgramStop, Rapid, SpindleSpeed, SpindleStop, ToolChange,
 )
 from .batch_plan import BatchPlan, BatchPlanBuilder
+from .chain_sampling import sample_chain_compiled
 from .errors import GCodeError, NCParameterError
 from .filters import apply_fir, box_lengths, filter_extension
 from .geometry import ChainGeometry, chain_geometry
-from .interpolator import Segment, interpolate_chain, interpolate_rapid
+from .interpolator import Segment, chain_pieces, interpolate_chain, interpolate_rapid
 from .lookahead import block_windows, plan_chain_speeds
 from .params import NCParams
+from .plan_assembly import (
+    assemble_positions, in_position_compiled, last_outside, sample_spindle_compiled, step_values,
+)
+from .plan_reuse import PlanReuse
 from .profiles import SpeedChange
 from .spindle import arrival_time, sample_spindle, speed_after
 from .tapping import rigid_tap_accel, rigid_tap_stroke
@@ -329,7 +340,8 @@ def _tap_item(schedule: Schedule, item: Item, feeds: np.ndarray, params: NCParam
     return k0, seg, omega
 
 
-def plan_member(schedule: Schedule, params: NCParams, feeds: np.ndarray, speeds: np.ndarray) -> MemberPlan:
+def plan_member(schedule: Schedule, params: NCParams, feeds: np.ndarray, speeds: np.ndarray, *,
+                reference: bool = False, reuse: PlanReuse | None = None) -> MemberPlan:
     """Plan one batch member.
 
     Parameters
@@ -340,11 +352,19 @@ def plan_member(schedule: Schedule, params: NCParams, feeds: np.ndarray, speeds:
         Feed of each feed block (m/s), NaN elsewhere.
     speeds : ndarray (n_blocks,)
         Speed of each spindle command (rad/s), NaN elsewhere.
+    reference : bool
+        Plan with the numpy specification only (no compiled kernels, no ``reuse``): the plan the fast path
+        must equal bit for bit (``tests/test_nck_plan_speed.py``).
+    reuse : PlanReuse, optional
+        Segments shared with the other members of a batch (ignored with ``reference``).
 
     Returns
     -------
     MemberPlan
     """
+    compiled = NUMBA_AVAILABLE and not reference
+    if reference:
+        reuse = None
     schedule = schedule.without(unchanged_spindle_commands(schedule.blocks, speeds, params.spindle_max_speed))
     ts = params.interpolation_period
     sc = SpeedChange(params.accel_before_interp, params.accel_change_time_before_interp)
@@ -364,11 +384,36 @@ def plan_member(schedule: Schedule, params: NCParams, feeds: np.ndarray, speeds:
     synced: list[tuple[int, np.ndarray]] = []  # (first sample, signed spindle speed) of rigid-tapping strokes
     tap_accel = rigid_tap_accel(params.spindle_ramp, params.spindle_max_speed, params.rigid_tapping_time_constant)
 
+    def in_position(seg: Segment, boxes: list[int]) -> int:
+        if compiled:
+            count = functools.partial(in_position_compiled, seg.position, np.asarray(boxes, dtype=np.int64),
+                                      params.in_position_width)
+        else:
+            count = functools.partial(_in_position, seg, boxes, params.in_position_width)
+        return count() if reuse is None else reuse.in_position(seg, boxes, params.in_position_width, count)
+
+    def shared(key: tuple, make: Callable[[], Segment]) -> Segment:
+        return make() if reuse is None else reuse.segment(key, make)
+
     def settled(k_now: int) -> int:
         if last is None:
             return k_now
         k0, seg, boxes = last
-        return max(k_now, k0 + _in_position(seg, boxes, params.in_position_width))
+        return max(k_now, k0 + in_position(seg, boxes))
+
+    def chain_segment(item: Item, f: np.ndarray) -> Segment:
+        geo = item.geometry
+        assert geo is not None
+        limits = [blocks[i].lookahead_limit for i in item.blocks]  # type: ignore[union-attr]
+        window: int | list[int] = params.lookahead_blocks
+        if any(limits):  # Haas G103 P<n> (see .block_buffering)
+            window = block_windows(limits, params.lookahead_blocks)
+        sp = plan_chain_speeds(geo, f, sc, max_cutting_feed=params.max_cutting_feed, arc_accel=params.arc_accel,
+                               corner_velocity_difference=params.corner_velocity_difference,
+                               lookahead_blocks=window)
+        if not compiled:
+            return interpolate_chain(geo, sp, sc, ts)
+        return sample_chain_compiled(geo, chain_pieces(geo, sp, sc), ts)
 
     def spindle_now(k_now: int) -> float:
         k_e, w_e, cmd = sp_last
@@ -380,17 +425,8 @@ def plan_member(schedule: Schedule, params: NCParams, feeds: np.ndarray, speeds:
         if item.kind == "chain":
             line_cp.append((k, b.line))
             k0 = max(k, ready)
-            geo = item.geometry
-            assert geo is not None
             f = feeds[list(item.blocks)]
-            limits = [blocks[i].lookahead_limit for i in item.blocks]  # type: ignore[union-attr]
-            window: int | list[int] = params.lookahead_blocks
-            if any(limits):  # Haas G103 P<n> (see .block_buffering)
-                window = block_windows(limits, params.lookahead_blocks)
-            sp = plan_chain_speeds(geo, f, sc, max_cutting_feed=params.max_cutting_feed, arc_accel=params.arc_accel,
-                                   corner_velocity_difference=params.corner_velocity_difference,
-                                   lookahead_blocks=window)
-            seg = interpolate_chain(geo, sp, sc, ts)
+            seg = shared(("chain", params, item.blocks, f.tobytes()), functools.partial(chain_segment, item, f))
             for bi, tb in zip(item.blocks, seg.block_start.tolist()):
                 line_cp.append((k0 + _ceil_periods(tb, ts), blocks[bi].line))
             segments.append((k0, "cut", seg))
@@ -409,7 +445,8 @@ def plan_member(schedule: Schedule, params: NCParams, feeds: np.ndarray, speeds:
             sp_last = (k, 0.0, 0.0)
         elif item.kind == "rapid":
             line_cp.append((k, b.line))
-            seg = interpolate_rapid(np.array(b.start), np.array(b.end), params.rapid_feed, ts)  # type: ignore[union-attr]
+            seg = shared(("rapid", params, item.blocks), functools.partial(
+                interpolate_rapid, np.array(b.start), np.array(b.end), params.rapid_feed, ts))  # type: ignore[union-attr]
             segments.append((k, "rapid", seg))
             last = (k, seg, rapid_boxes)
             k = settled(k)
@@ -448,22 +485,26 @@ def plan_member(schedule: Schedule, params: NCParams, feeds: np.ndarray, speeds:
     k_interp_end = k
     ext = filter_extension(cut_boxes) + filter_extension(rapid_boxes)
     K = max(k_interp_end, max((k0 + s.n for k0, _, s in segments), default=0)) + ext + 2
-    inc = {"cut": np.zeros((K, 3)), "rapid": np.zeros((K, 3)), "sync": np.zeros((K, 3))}
-    feed = np.zeros(K)
-    for k0, kind, seg in segments:
-        if seg.n == 0:
-            continue
-        inc[kind][k0 + 1 : k0 + seg.n + 1] += np.diff(seg.position, axis=0)
-        feed[k0 : k0 + seg.n + 1] = seg.speed
-    y = apply_fir(inc["cut"], cut_boxes) + apply_fir(inc["rapid"], rapid_boxes) + inc["sync"]
-    position = schedule.initial + np.cumsum(y, axis=0)
     final = segments[-1][2].position[-1] if segments else schedule.initial
-    moving = np.nonzero(np.any(y != 0.0, axis=1))[0]
-    if len(moving):
-        position[moving[-1]:] = final  # the last increment lands exactly on the end point
-    dist = np.linalg.norm(position - final, axis=1)
-    out = np.nonzero(dist > params.in_position_width)[0]
-    done = max(k_interp_end, int(out[-1]) + 1 if len(out) else 0)
+    if compiled:
+        position, feed = assemble_positions(segments, K, cut_boxes, rapid_boxes, schedule.initial, final)
+        done = max(k_interp_end, last_outside(position, final, params.in_position_width) + 1)
+    else:
+        inc = {"cut": np.zeros((K, 3)), "rapid": np.zeros((K, 3)), "sync": np.zeros((K, 3))}
+        feed = np.zeros(K)
+        for k0, kind, seg in segments:
+            if seg.n == 0:
+                continue
+            inc[kind][k0 + 1 : k0 + seg.n + 1] += np.diff(seg.position, axis=0)
+            feed[k0 : k0 + seg.n + 1] = seg.speed
+        y = apply_fir(inc["cut"], cut_boxes) + apply_fir(inc["rapid"], rapid_boxes) + inc["sync"]
+        position = schedule.initial + np.cumsum(y, axis=0)
+        moving = np.nonzero(np.any(y != 0.0, axis=1))[0]
+        if len(moving):
+            position[moving[-1]:] = final  # the last increment lands exactly on the end point
+        dist = np.linalg.norm(position - final, axis=1)
+        out = np.nonzero(dist > params.in_position_width)[0]
+        done = max(k_interp_end, int(out[-1]) + 1 if len(out) else 0)
     # spindle: stopped by M30/M2 when the program is done; keep samples until it stands still
     k_total = K
     if stop_spindle_at_end:
@@ -474,21 +515,33 @@ def plan_member(schedule: Schedule, params: NCParams, feeds: np.ndarray, speeds:
     if k_total > K:
         position = np.concatenate((position, np.repeat(position[-1:], k_total - K, axis=0)))
         feed = np.concatenate((feed, np.zeros(k_total - K)))
-    spindle_ref, spindle_speed = sample_spindle(sp_events, k_total, ts, params.spindle_ramp)
+    if compiled:
+        spindle_ref, spindle_speed = sample_spindle_compiled(
+            np.array([e[0] for e in sp_events], dtype=np.int64), np.array([e[1] for e in sp_events], dtype=float),
+            k_total, ts, params.spindle_ramp)
+    else:
+        spindle_ref, spindle_speed = sample_spindle(sp_events, k_total, ts, params.spindle_ramp)
     for k0, omega in synced:  # rigid tapping: the spindle runs synchronised with Z
         spindle_ref[k0 : k0 + len(omega)] = omega
         spindle_speed[k0 : k0 + len(omega)] = omega
-    grid = np.arange(k_total)
-    lk = np.array([c[0] for c in line_cp])
-    lv = np.array([c[1] for c in line_cp])
-    line = lv[np.searchsorted(lk, grid, side="right") - 1]
-    tk = np.array([c[0] for c in tool_cp])
-    tv = np.array([c[1] for c in tool_cp])
-    tool = tv[np.searchsorted(tk, grid, side="right") - 1]
-    return MemberPlan(position, feed, line.astype(np.int64), tool.astype(np.int64), spindle_ref, spindle_speed, done)
+    line = _step_function(line_cp, k_total, compiled)
+    tool = _step_function(tool_cp, k_total, compiled)
+    return MemberPlan(position, feed, line.astype(np.int64, copy=False), tool.astype(np.int64, copy=False),
+                      spindle_ref, spindle_speed, done)
 
 
-def plan_batch(schedule: Schedule, params: Sequence[NCParams], feeds: np.ndarray, speeds: np.ndarray) -> BatchPlan:
+def _step_function(checkpoints: list[tuple[int, int]], n: int, compiled: bool) -> np.ndarray:
+    """Value of the last checkpoint ``(sample, value)`` at or before each sample ``0 .. n-1`` (int64, shape (n,))."""
+    keys = np.array([c[0] for c in checkpoints])
+    values = np.array([c[1] for c in checkpoints])
+    if (compiled and keys.dtype == np.int64 and values.dtype == np.int64 and keys[0] <= 0
+            and bool(np.all(keys[1:] >= keys[:-1]))):
+        return step_values(keys, values, n)
+    return values[np.searchsorted(keys, np.arange(n), side="right") - 1]
+
+
+def plan_batch(schedule: Schedule, params: Sequence[NCParams], feeds: np.ndarray, speeds: np.ndarray, *,
+               reference: bool = False) -> BatchPlan:
     """Plan B members into a ragged :class:`~.batch_plan.BatchPlan` (identical members are planned and stored once).
 
     Each member is planned, copied into the batch storage and released before the next one, so memory
@@ -501,13 +554,18 @@ def plan_batch(schedule: Schedule, params: Sequence[NCParams], feeds: np.ndarray
         All with the same interpolation period.
     feeds, speeds : ndarray (B, n_blocks)
         From :func:`fmus_src.nck.overrides.resolve_values`.
+    reference : bool
+        Plan every member with the numpy specification (:func:`plan_member` ``reference=True``); by default the
+        compiled kernels run and the members share what does not depend on their F and S
+        (:class:`.plan_reuse.PlanReuse`), with bit-identical plans.
     """
-    builder = BatchPlanBuilder()
+    builder = BatchPlanBuilder(reference=reference)
     stored: dict[tuple, int] = {}
     members: list[int] = []
+    reuse = None if reference else PlanReuse()
     for b, p in enumerate(params):
         key = (p, feeds[b].tobytes(), speeds[b].tobytes())
         if key not in stored:
-            stored[key] = builder.add(plan_member(schedule, p, feeds[b], speeds[b]))
+            stored[key] = builder.add(plan_member(schedule, p, feeds[b], speeds[b], reference=reference, reuse=reuse))
         members.append(stored[key])
     return builder.finish(members, params[0].interpolation_period)

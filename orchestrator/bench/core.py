@@ -26,6 +26,7 @@ from .cfmu import build_lag_fmu, lag_ring
 from .fused import prepare_fused, reference_run
 from ..twin import TwinOptions, engagement_table
 from .native import bench_case, time_fused, time_twin
+from .planning import time_planning
 from .replays import time_servo_replay
 from .systems import build_servo_fmus, native_lag_ring, plain_fmpy_loop, servo_fmu_system
 
@@ -69,6 +70,10 @@ class BenchSettings:
         replay it is compared with replays ``compare_seconds``.
     replay_batch : int
         Parameter sets of the servo replays.
+    planning_batch : int
+        Distinct variants of the NC planning row (compiled planner against the numpy reference).
+    planning_repeats : int
+        Runs of each planning path (interleaved; the best counts).
     fmu_dir : str or None
         Where the pythonfmu FMUs are built (a temp folder by default).
     """
@@ -85,6 +90,8 @@ class BenchSettings:
     fused_seconds: float = 30.0
     replay_seconds: float = 30.0
     replay_batch: int = 10
+    planning_batch: int = 100
+    planning_repeats: int = 3
     fmu_dir: str | None = None
 
     @classmethod
@@ -92,7 +99,7 @@ class BenchSettings:
         """A run of well under a minute (figures are then rough)."""
         return cls(twin_seconds=2.0, batch_seconds=2.0, compare_seconds=2.0, length_seconds=(0.5, 1.0),
                    population_sizes=(1, 10), population_seconds=0.5, ring_steps=1000, servo_steps=20,
-                   fused_seconds=2.0, replay_seconds=2.0)
+                   fused_seconds=2.0, replay_seconds=2.0, planning_batch=20, planning_repeats=1)
 
 
 def machine_info() -> dict:
@@ -228,6 +235,7 @@ def run_bench(settings: BenchSettings | None = None, quick: bool = False,
     -------
     dict
         ``machine``, ``settings``, ``native_twin`` (single, single_air, batch_10, batch_100, ...),
+        ``planning`` (NC planning of a population, :func:`.planning.time_planning`),
         ``fused`` (same keys), ``servo_replay`` (compiled, tick_by_tick), ``master_us_per_step`` (every path),
         ``c_fmu``, ``pythonfmu``,
         ``scaling`` (length, population), ``ratios`` and ``targets`` (value, target, met).
@@ -293,6 +301,10 @@ def run_bench(settings: BenchSettings | None = None, quick: bool = False,
     out["servo_replay"] = {"compiled": time_servo_replay(case, s.replay_seconds, s.replay_batch),
                            "tick_by_tick": time_servo_replay(case, s.compare_seconds, s.replay_batch,
                                                              compiled=False)}
+
+    # --- NC planning of a population: the compiled planner against the numpy reference (same inputs, interleaved)
+    say(f"NC planning: {s.planning_batch} distinct variants, compiled and numpy reference")
+    out["planning"] = time_planning(s.planning_batch, s.planning_repeats, case)
 
     # --- C FMUs (four Lag instances in a ring) and the same ring of native components
     say("C-FMU ring: master, FastFMULoop, plain fmpy loop")
@@ -377,6 +389,8 @@ def run_bench(settings: BenchSettings | None = None, quick: bool = False,
     replay = out["servo_replay"]
     ratios["servo_replay_tick_by_tick_over_compiled"] = ratio(replay["tick_by_tick"]["us_per_member_tick"],
                                                               replay["compiled"]["us_per_member_tick"])
+    ratios[f"nc_planning_{s.planning_batch}_reference_over_compiled"] = ratio(out["planning"]["reference_s"],
+                                                                          out["planning"]["compiled_s"])
     for b in s.batches:
         ratios[f"native_twin_over_fused_batch_{b}"] = ratio(us[f"native_twin_batch_{b}"], us[f"fused_batch_{b}"])
         ratios[f"native_twin_batch_{b}_per_member_over_single"] = ratio(
@@ -422,6 +436,13 @@ def format_table(result: dict) -> str:
     for key, r in result.get("servo_replay", {}).items():
         lines.append(f"{key:<40}{r['batch']:>5}{r['sim_s']:>8.2f}{r['wall_s']:>9.3f}{r['rt_factor']:>13.1f}"
                      f"{r['us_per_member_tick']:>16.3f}")
+    plan = result.get("planning")
+    if plan:
+        lines += ["", f"{'NC planning of distinct variants':<40}{'B':>5}{'wall s':>9}{'ms/member':>11}",
+                  f"{'numpy reference':<40}{plan['batch']:>5}{plan['reference_s']:>9.3f}"
+                  f"{plan['ms_per_member_reference']:>11.2f}",
+                  f"{'compiled':<40}{plan['batch']:>5}{plan['compiled_s']:>9.3f}{plan['ms_per_member_compiled']:>11.2f}"
+                  f"   ratio {plan['ratio']:.2f}, bit-identical: {'yes' if plan['identical'] else 'NO'}"]
     lines += ["", f"{'communication step of':<44}{'us/step':>10}"]
     for key, value in result["master_us_per_step"].items():
         lines.append(f"{key:<44}{value:>10.2f}")
