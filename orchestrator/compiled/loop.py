@@ -199,11 +199,14 @@ def run_chunk(
     c_alpha = cut[7]
     intervals, acc, rot, rot_key = path_work(c_alpha.shape[1], max_flutes(c_par))
     cursor = np.zeros(V.shape[1], dtype=np.int64)
+    comp_h = np.empty(comp_rate.shape[0])
+    for c in range(comp_rate.shape[0]):
+        comp_h[c] = h / comp_rate[c]
     return _run_chunk(k, k_limit, max_steps, t0, h, n_fine, check_every, decimation, V, tick_ptr, tick_comp,
                       comp_kind, comp_index, comp_rate, comp_base, wire_ptr, wire_src, wire_dst, wire_factor,
                       check_rows, check_lo, check_hi, stop_rows, stopped_at, failed, probe_rows, probe_factor,
                       rec_t, rec, n_rec, real_ptr, real_rows, comp_failed, comp_has_failed, nck, mcu, drives, cut,
-                      zmap, stop_record, all_done_at, cursor, intervals, acc, rot, rot_key)
+                      zmap, stop_record, all_done_at, cursor, intervals, acc, rot, rot_key, comp_h)
 
 
 @njit_borrowed
@@ -219,6 +222,7 @@ def _run_chunk(
     real_ptr: np.ndarray, real_rows: np.ndarray, comp_failed: np.ndarray, comp_has_failed: np.ndarray,
     nck: tuple, mcu: tuple, drives: tuple, cut: tuple, zmap: tuple, stop_record: bool, all_done_at: np.ndarray,
     nck_cursor: np.ndarray, c_intervals: np.ndarray, c_acc: np.ndarray, c_rot: np.ndarray, c_rot_key: np.ndarray,
+    comp_h: np.ndarray,
 ) -> tuple[int, int, int, int, int, int, int]:
     """:func:`run_chunk`'s loop, on the work space it allocates (compiled without reference counting).
 
@@ -230,6 +234,8 @@ def _run_chunk(
         Each member's run of its last NC plan read (:func:`_nck_step`).
     c_intervals, c_acc, c_rot, c_rot_key : ndarray
         Work space of the path-mode cutting kernel (:func:`fmus_src.cutting.path_kernel.path_work`).
+    comp_h : ndarray, shape (n_comp,)
+        Each component's step ``h / comp_rate[c]``, s.
 
     Returns
     -------
@@ -288,7 +294,7 @@ def _run_chunk(
                             V[dst, b] = V[src, b] * f
                 kind = comp_kind[c]
                 base = comp_base[c]
-                h_i = h / comp_rate[c]
+                h_i = comp_h[c]
                 if kind == KIND_MCU:  # mcu_kernel, member by member on scalars (same operations)
                     k0 = m_next[0]
                     n_alarm = 0
