@@ -634,7 +634,8 @@ def path_work(kmax: int, flutes_max: int) -> tuple[np.ndarray, np.ndarray, np.nd
     kmax : int
         Intervals per station of the table (``alpha.shape[1]``).
     flutes_max : int
-        Largest flute count the rotation cache holds (members with more get their own rotations).
+        Largest flute count the rotation cache holds (:func:`max_flutes` of the members' parameters;
+        :func:`path_step_into` refuses members with more).
 
     Returns
     -------
