@@ -39,9 +39,11 @@ def njit(fn: F) -> F:
     """``numba.njit(cache=True)`` without fastmath (IEEE results equal to numpy's, operation by operation).
 
     Falls back to an uncached compilation when no cache directory is usable,
-    and to the Python function itself when numba is missing.
+    and to the Python function itself when numba is missing. Reference
+    counting is on explicitly, so a function called from an :func:`njit_borrowed`
+    one still allocates (numba would otherwise inherit the caller's setting).
     """
-    return _compile(fn)
+    return _compile(fn, _nrt=True)
 
 
 def njit_inline(fn: F) -> F:
@@ -50,7 +52,23 @@ def njit_inline(fn: F) -> F:
     For small helpers shared by several hot loops, where a call across compiled
     functions would cost more than the work (the floating-point operations are unchanged).
     """
-    return _compile(fn, inline="always")
+    return _compile(fn, inline="always", _nrt=True)
+
+
+def njit_borrowed(fn: F) -> F:
+    """:func:`njit` without numba's reference counting (``_nrt=False``): for kernels that only *borrow* arrays.
+
+    Numba counts references to every array a compiled function receives or
+    views (``NRT_incref`` / ``NRT_decref``: a call and an atomic operation each,
+    on entry and exit of every call and around every view). In a small kernel
+    called many times per step that costs as much as its arithmetic. A
+    function declared with this decorator takes arrays, reads and writes them,
+    makes views of them and calls other compiled functions, but must not
+    allocate an array or return one (numba refuses to compile that without
+    reference counting). Its callers keep the arrays alive. The floating-point
+    operations are unchanged.
+    """
+    return _compile(fn, _nrt=False)
 
 
 def njit_nogil(fn: F) -> F:
@@ -60,4 +78,4 @@ def njit_nogil(fn: F) -> F:
     compiled master loop over blocks of batch members); the compiled
     functions it calls run without the GIL too.
     """
-    return _compile(fn, nogil=True)
+    return _compile(fn, nogil=True, _nrt=True)

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import CncTwinError
-from ..jit import njit
+from ..jit import njit, njit_borrowed
 from .engagement import NearField, tooth_depth
 from .force import chip_thickness, interval_mean_quantities, tooth_quantities
 from .stock import ZMapStock
@@ -96,7 +96,7 @@ H_HEAD, H_COUNT, H_RECORDS = 0, 1, 2
 CHIP_HISTORY_WIDTH = H_RECORDS + 3 * CHIP_HISTORY_STEPS
 
 
-@njit
+@njit_borrowed
 def chord_feed(hist: np.ndarray, dpx: float, dpy: float, h: float, omega: float, flutes: int
                ) -> tuple[float, float]:
     """Feed per tooth of a step: the tool-centre displacement over the last tooth period, ``c(t+h) - c(t+h-T)``.
@@ -151,7 +151,7 @@ def chord_feed(hist: np.ndarray, dpx: float, dpy: float, h: float, omega: float,
     return fx, fy
 
 
-@njit
+@njit_borrowed
 def chord_advance(hist: np.ndarray, h: float, dpx: float, dpy: float, omega: float) -> None:
     """Record a step that was cut (length ``h`` s, move ``dpx, dpy`` m) in a member's history, in place.
 

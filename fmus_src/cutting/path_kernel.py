@@ -45,7 +45,7 @@ import math
 
 import numpy as np
 
-from ..jit import njit, njit_inline
+from ..jit import njit, njit_borrowed, njit_inline
 from ..jit_cache import guard_cache
 from . import kernel
 from .kernel import CHIP_HISTORY_WIDTH, H_COUNT, chord_advance, chord_feed, stalled_cut
@@ -162,7 +162,7 @@ def _pair_lean(
     return -3 if tangent else -2
 
 
-@njit
+@njit_borrowed
 def _pair(
     i: int, j: int, u: float, count: np.ndarray, alpha: np.ndarray, beta: np.ndarray, top: np.ndarray,
     out_a: np.ndarray, out_b: np.ndarray, out_t: np.ndarray,
@@ -195,7 +195,7 @@ def _pair(
                                out_t)
 
 
-@njit
+@njit_borrowed
 def _tangents_and_merge(
     i: int, j: int, u: float, c: int, tangents: bool, extrapolated: bool, alpha: np.ndarray, beta: np.ndarray,
     out_a: np.ndarray, out_b: np.ndarray, out_t: np.ndarray,
@@ -277,7 +277,7 @@ def _station(
     return c
 
 
-@njit
+@njit_borrowed
 def _table_between(
     i: int, u: float, count: np.ndarray, alpha: np.ndarray, beta: np.ndarray, top: np.ndarray,
     out_a: np.ndarray, out_b: np.ndarray, out_t: np.ndarray,
@@ -302,7 +302,7 @@ def _table_between(
     return _station(i, count, alpha, beta, top, out_a, out_b, out_t)
 
 
-@njit
+@njit_borrowed
 def table_at(
     s: float, ds: float, count: np.ndarray, alpha: np.ndarray, beta: np.ndarray, top: np.ndarray,
     out_a: np.ndarray, out_b: np.ndarray, out_t: np.ndarray,
@@ -338,7 +338,7 @@ def table_at(
     return _station(i, count, alpha, beta, top, out_a, out_b, out_t)
 
 
-@njit
+@njit_borrowed
 def locate(
     px: float, py: float, pz: float, seg0: int, s_cur: float, reach: float, verts: np.ndarray, vs: np.ndarray,
 ) -> tuple[int, float, float]:
@@ -379,7 +379,7 @@ def locate(
     return best_seg, best_s, best_d
 
 
-@njit
+@njit_borrowed
 def _depth_at(phi: float, ia: np.ndarray, ib: np.ndarray, it: np.ndarray, cnt: int, bottom: float) -> float:
     """Axial depth at immersion angle ``phi`` in ``[0, 2 pi)`` (0 in air); interval ends inclusive."""
     best = 0.0
@@ -482,7 +482,7 @@ def force_at(
     return fx, fy, dmax, hmax, n_in
 
 
-@njit
+@njit_borrowed
 def blank_member(out: np.ndarray, engaged: np.ndarray, m: int) -> None:
     """Outputs of member ``m`` whose inputs are not finite: NaN (the angle kept), no engaged tooth, state kept.
 
@@ -508,7 +508,7 @@ def drop_history(st: np.ndarray, m: int) -> None:
     st[ST_HISTORY + H_COUNT, m] = 0.0
 
 
-@njit
+@njit_borrowed
 def fail_member(status: np.ndarray, out: np.ndarray, engaged: np.ndarray, m: int, kind: int) -> int:
     """Member ``m`` fails in this step with error ``kind`` (``ERR_*``): status set, outputs blanked; returns 1."""
     status[m] = kind
@@ -626,6 +626,33 @@ def tooth_rotations(flutes: int, pitch: float) -> tuple[np.ndarray, np.ndarray]:
 
 
 @njit
+def path_work(kmax: int, flutes_max: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Work space of :func:`path_step_into`, allocated once by a caller that steps many times.
+
+    Parameters
+    ----------
+    kmax : int
+        Intervals per station of the table (``alpha.shape[1]``).
+    flutes_max : int
+        Largest flute count the rotation cache holds (:func:`max_flutes` of the members' parameters;
+        :func:`path_step_into` refuses members with more).
+
+    Returns
+    -------
+    intervals : ndarray, shape (6, kmax)
+        Two sets of engagement intervals (start, end [rad], top [m]), as :func:`interval_buffers`.
+    acc : ndarray, shape (4,)
+        Substep sums (Fx, Fy, torque, MRR).
+    rot : ndarray, shape (2, flutes_max)
+        ``cos(i pitch)`` and ``sin(i pitch)`` of the flute count ``rot_key[0]`` (:func:`tooth_rotations`).
+    rot_key : ndarray of int64, shape (1,)
+        Flute count ``rot`` holds (-1: none yet).
+    """
+    return (np.empty((6, kmax)), np.zeros(4), np.empty((2, max(flutes_max, 1))),
+            np.full(1, -1, dtype=np.int64))
+
+
+@njit
 def path_step(
     h: float, inp: np.ndarray, par: np.ndarray, st: np.ndarray, out: np.ndarray, engaged: np.ndarray,
     verts: np.ndarray, vs: np.ndarray, ds: float, count: np.ndarray, alpha: np.ndarray, beta: np.ndarray,
@@ -669,12 +696,59 @@ def path_step(
         Number of members that failed in this step (0: all advanced). A member
         with non-finite inputs (failed upstream) is blanked, not counted.
     """
+    intervals, acc, rot, rot_key = path_work(alpha.shape[1], max_flutes(par))
+    return path_step_into(h, inp, par, st, out, engaged, verts, vs, ds, count, alpha, beta, top, z_floor,
+                          reach_margin, tolerance, max_substeps, status, intervals, acc, rot, rot_key)
+
+
+@njit_inline
+def max_flutes(par: np.ndarray) -> int:
+    """Largest flute count ``int(par[PAR_FLUTES, m])`` over the members (at least 1): the rotation cache
+    :func:`path_step_into` needs (``par``: shape (5, B), the parameters of :func:`path_step`)."""
+    n = 1
+    for m in range(par.shape[1]):
+        f = par[PAR_FLUTES, m]
+        if math.isfinite(f) and int(f) > n:
+            n = int(f)
+    return n
+
+
+@njit_borrowed
+def path_step_into(
+    h: float, inp: np.ndarray, par: np.ndarray, st: np.ndarray, out: np.ndarray, engaged: np.ndarray,
+    verts: np.ndarray, vs: np.ndarray, ds: float, count: np.ndarray, alpha: np.ndarray, beta: np.ndarray,
+    top: np.ndarray, z_floor: float, reach_margin: float, tolerance: float, max_substeps: int,
+    status: np.ndarray, intervals: np.ndarray, acc: np.ndarray, rot: np.ndarray, rot_key: np.ndarray,
+) -> int:
+    """:func:`path_step` on the caller's work space (:func:`path_work`): no allocation per call.
+
+    The same floating-point operations as :func:`path_step` (the work space only holds
+    intermediate values, and the cached tooth rotations are those :func:`tooth_rotations` computes).
+
+    Parameters
+    ----------
+    h, inp, par, st, out, engaged, verts, vs, ds, count, alpha, beta, top, z_floor, reach_margin, tolerance, \
+max_substeps, status
+        As :func:`path_step`.
+    intervals : ndarray, shape (6, >= alpha.shape[1])
+        Interval work space, overwritten.
+    acc : ndarray, shape (4,)
+        Substep sums, overwritten.
+    rot, rot_key : ndarray, shapes (2, F), (1,) of int64
+        Tooth rotations of ``rot_key[0]`` flutes (filled here, :func:`tooth_rotations`'s values);
+        ``F >= max_flutes(par)``.
+
+    Returns
+    -------
+    int
+        As :func:`path_step`; -1 (nothing done) when ``F < max_flutes(par)``.
+    """
     batch = inp.shape[1]
-    ia, ib, it, ja, jb, jt = interval_buffers(alpha.shape[1])
-    acc = np.zeros(4)
-    rot_c = np.empty(0)
-    rot_s = np.empty(0)
-    rot_flutes = -1
+    if max_flutes(par) > rot.shape[1]:
+        return -1
+    ia, ib, it, ja, jb, jt = intervals[0], intervals[1], intervals[2], intervals[3], intervals[4], intervals[5]
+    rot_c = rot[0]
+    rot_s = rot[1]
     bad = 0
     for m in range(batch):
         x1, y1, z1 = inp[0, m], inp[1, m], inp[2, m]
@@ -695,9 +769,11 @@ def path_step(
             bad += fail_member(status, out, engaged, m, ERR_SUBSTEPS)  # this member fails; the others go on
             drop_history(st, m)
             continue
-        if flutes != rot_flutes:  # tooth-to-tooth rotations, shared by members with the same flute count
-            rot_c, rot_s = tooth_rotations(flutes, pitch)
-            rot_flutes = flutes
+        if flutes != rot_key[0]:  # tooth-to-tooth rotations (tooth_rotations' values), kept from call to call
+            for i in range(flutes):
+                rot[0, i] = math.cos(i * pitch)
+                rot[1, i] = math.sin(i * pitch)
+            rot_key[0] = flutes
         fxt, fyt = chord_feed(st[ST_HISTORY:, m], ddx, ddy, h, om, flutes)  # the tooth-period chord
         psi = math.atan2(fyt, fxt)
         theta0 = st[ST_THETA, m]
@@ -806,3 +882,4 @@ def path_step(
 
 # the cached step calls kernel.stalled_cut: recompile it when that module changes
 guard_cache(path_step, kernel)
+guard_cache(path_step_into, kernel)

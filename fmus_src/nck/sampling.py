@@ -68,6 +68,35 @@ def find_run(run_key: np.ndarray, g: int) -> int:
 
 
 @njit_inline
+def find_run_from(run_key: np.ndarray, g: int, i: int) -> int:
+    """:func:`find_run` starting from a guess ``i`` (the run of an earlier, nearby sample): the same index.
+
+    When ``run_key[i] <= g`` the search walks forward over at most 8 runs and returns the last ``i``
+    with ``run_key[i] <= g``; otherwise (a guess past ``g``, out of range, or more than 8 runs to walk)
+    it is :func:`find_run`'s binary search. A sample read step by step moves forward a run at a time, so
+    the walk stops after one or two comparisons.
+
+    Parameters
+    ----------
+    run_key : ndarray of int64, shape (R,)
+        Strictly increasing first global sample of each run.
+    g : int
+        Global sample index (``>= run_key[0]``).
+    i : int
+        Guess (any integer).
+    """
+    n = run_key.shape[0]
+    if i < 0 or i >= n or run_key[i] > g:
+        return find_run(run_key, g)
+    for _ in range(8):
+        if i + 1 < n and run_key[i + 1] <= g:
+            i += 1
+        else:
+            return i
+    return find_run(run_key, g)
+
+
+@njit_inline
 def read_member(b: int, k0: int, k1: int, frac: float, position: np.ndarray, offset: np.ndarray,
                 length: np.ndarray, run_key: np.ndarray, run_feed: np.ndarray, run_sref: np.ndarray,
                 run_sact: np.ndarray, run_line: np.ndarray, run_tool: np.ndarray
@@ -87,7 +116,17 @@ def read_member(b: int, k0: int, k1: int, frac: float, position: np.ndarray, off
         At ``k0``.
     """
     g0 = offset[b] + min(k0, length[b])
-    i0 = find_run(run_key, g0)
+    return read_run(b, g0, find_run(run_key, g0), k1, frac, position, offset, length, run_key, run_feed,
+                    run_sref, run_sact, run_line, run_tool)
+
+
+@njit_inline
+def read_run(b: int, g0: int, i0: int, k1: int, frac: float, position: np.ndarray, offset: np.ndarray,
+             length: np.ndarray, run_key: np.ndarray, run_feed: np.ndarray, run_sref: np.ndarray,
+             run_sact: np.ndarray, run_line: np.ndarray, run_tool: np.ndarray
+             ) -> tuple[float, float, float, float, float, float, int, int]:
+    """:func:`read_member` given its global sample ``g0`` (``offset[b] + min(k0, length[b])``) and that
+    sample's run ``i0`` (:func:`find_run`, or :func:`find_run_from` with a cursor); same outputs."""
     px = position[g0, 0]
     py = position[g0, 1]
     pz = position[g0, 2]

@@ -12,7 +12,8 @@ call of the compiled kernel the component itself would call:
   :func:`~fmus_src.servo.control_numba.axis_member` / :func:`~fmus_src.servo.control_numba.axis_alarm`);
 * drive axes: :func:`fmus_src.servo.stick_slip_numba.advance_kernel` or, member by member,
   :func:`fmus_src.servo.exponential_numba.exponential_member` (the drive's ``integrator``);
-* path-mode cutting: :func:`fmus_src.cutting.path_kernel.path_step`;
+* path-mode cutting: :func:`fmus_src.cutting.path_kernel.path_step_into` (``path_step`` on work space allocated
+  once per call of :func:`run_chunk`);
 * Z-map cutting (effect terms off): :func:`fmus_src.cutting.zmap_numba.zmap_component_step`, the whole
   ``CuttingLoad._do_step`` (step kernel, outputs, clocks, path advance and Z-map removal).
 
@@ -34,15 +35,15 @@ from fmus_src.cutting import kernel as cutting_kernel
 from fmus_src.cutting import engagement as cutting_engagement
 from fmus_src.cutting import path_kernel, zmap_numba
 from fmus_src.cutting import stock as cutting_stock
-from fmus_src.jit import njit, njit_nogil
+from fmus_src.jit import njit, njit_borrowed, njit_nogil
 from fmus_src.jit_cache import guard_cache
 from fmus_src.nck import sampling
-from fmus_src.nck.sampling import read_member, sample_position
+from fmus_src.nck.sampling import find_run_from, read_run, sample_position
 from fmus_src.servo import control_numba, exponential_numba, stick_slip, stick_slip_numba
 from fmus_src.servo.control_numba import axis_alarm, axis_member
 from fmus_src.servo.exponential_numba import exponential_member
 from fmus_src.servo.stick_slip_numba import OK, advance_kernel
-from fmus_src.cutting.path_kernel import path_step
+from fmus_src.cutting.path_kernel import max_flutes, path_step_into, path_work
 from fmus_src.cutting.zmap_numba import IO_ROWS, zmap_component_step
 
 #: Component kinds of the compiled loop.
@@ -74,15 +75,24 @@ _OUT_TORQUE = 4 + CUT_OUTPUTS.index("spindle_torque")
 _OUT_MRR = 4 + CUT_OUTPUTS.index("mrr")
 
 
-@njit
+@njit_borrowed
 def _nck_step(kf: float, base: int, V: np.ndarray, n_samples: int, position: np.ndarray, offset: np.ndarray,
               length: np.ndarray, run_key: np.ndarray, run_feed: np.ndarray, run_sref: np.ndarray,
-              run_sact: np.ndarray, run_line: np.ndarray, run_tool: np.ndarray, done_index: np.ndarray) -> None:
-    """``NCKernel._write(kf)`` for every member: :func:`fmus_src.nck.sampling.read_plan`'s reading, into ``V``."""
+              run_sact: np.ndarray, run_line: np.ndarray, run_tool: np.ndarray, done_index: np.ndarray,
+              cursor: np.ndarray) -> None:
+    """``NCKernel._write(kf)`` for every member: :func:`fmus_src.nck.sampling.read_plan`'s reading, into ``V``.
+
+    ``cursor`` (shape (B,), int64) holds each member's run of its previous read: the run of the new
+    sample is searched from there (:func:`fmus_src.nck.sampling.find_run_from`, the same run as the
+    binary search finds) and stored back.
+    """
     k0, k1, frac = sample_position(kf, n_samples)
     for b in range(V.shape[1]):
-        px, py, pz, fd, sr, sa, ln, tl = read_member(b, k0, k1, frac, position, offset, length, run_key, run_feed,
-                                                     run_sref, run_sact, run_line, run_tool)
+        g0 = offset[b] + min(k0, length[b])
+        i0 = find_run_from(run_key, g0, cursor[b])
+        cursor[b] = i0
+        px, py, pz, fd, sr, sa, ln, tl = read_run(b, g0, i0, k1, frac, position, offset, length, run_key, run_feed,
+                                                  run_sref, run_sact, run_line, run_tool)
         V[base, b] = px
         V[base + 1, b] = py
         V[base + 2, b] = pz
@@ -94,7 +104,7 @@ def _nck_step(kf: float, base: int, V: np.ndarray, n_samples: int, position: np.
         V[base + 8, b] = 1.0 if k0 >= done_index[b] else 0.0
 
 
-@njit
+@njit_borrowed
 def _any_new_bad(V: np.ndarray, rows: np.ndarray, lo: np.ndarray, hi: np.ndarray, failed: np.ndarray) -> bool:
     """True when a member not yet failed has a non-finite value on a checked row or one outside its bounds."""
     for i in range(rows.shape[0]):
@@ -111,7 +121,7 @@ def _any_new_bad(V: np.ndarray, rows: np.ndarray, lo: np.ndarray, hi: np.ndarray
     return False
 
 
-@njit
+@njit_borrowed
 def _blank(V: np.ndarray, c: int, rows_ptr: np.ndarray, rows: np.ndarray, comp_failed: np.ndarray) -> None:
     """Real outputs of the failed members of component ``c`` are NaN (``Component._blank_failed_outputs``)."""
     for i in range(rows_ptr[c], rows_ptr[c + 1]):
@@ -185,6 +195,55 @@ def run_chunk(
         schedule. ``EV_FAIL`` returns right after the kernel call (state advanced), before the
         component's own failure handling.
     """
+    c_par = cut[0]
+    c_alpha = cut[7]
+    intervals, acc, rot, rot_key = path_work(c_alpha.shape[1], max_flutes(c_par))
+    cursor = np.zeros(V.shape[1], dtype=np.int64)
+    comp_h = np.empty(comp_rate.shape[0])
+    for c in range(comp_rate.shape[0]):
+        comp_h[c] = h / comp_rate[c]
+    return _run_chunk(k, k_limit, max_steps, t0, h, n_fine, check_every, decimation, V, tick_ptr, tick_comp,
+                      comp_kind, comp_index, comp_rate, comp_base, wire_ptr, wire_src, wire_dst, wire_factor,
+                      check_rows, check_lo, check_hi, stop_rows, stopped_at, failed, probe_rows, probe_factor,
+                      rec_t, rec, n_rec, real_ptr, real_rows, comp_failed, comp_has_failed, nck, mcu, drives, cut,
+                      zmap, stop_record, all_done_at, cursor, intervals, acc, rot, rot_key, comp_h)
+
+
+@njit_borrowed
+def _run_chunk(
+    k: int, k_limit: int, max_steps: int, t0: float, h: float, n_fine: int, check_every: int, decimation: int,
+    V: np.ndarray,
+    tick_ptr: np.ndarray, tick_comp: np.ndarray, comp_kind: np.ndarray, comp_index: np.ndarray,
+    comp_rate: np.ndarray, comp_base: np.ndarray,
+    wire_ptr: np.ndarray, wire_src: np.ndarray, wire_dst: np.ndarray, wire_factor: np.ndarray,
+    check_rows: np.ndarray, check_lo: np.ndarray, check_hi: np.ndarray,
+    stop_rows: np.ndarray, stopped_at: np.ndarray, failed: np.ndarray,
+    probe_rows: np.ndarray, probe_factor: np.ndarray, rec_t: np.ndarray, rec: np.ndarray, n_rec: int,
+    real_ptr: np.ndarray, real_rows: np.ndarray, comp_failed: np.ndarray, comp_has_failed: np.ndarray,
+    nck: tuple, mcu: tuple, drives: tuple, cut: tuple, zmap: tuple, stop_record: bool, all_done_at: np.ndarray,
+    nck_cursor: np.ndarray, c_intervals: np.ndarray, c_acc: np.ndarray, c_rot: np.ndarray, c_rot_key: np.ndarray,
+    comp_h: np.ndarray,
+) -> tuple[int, int, int, int, int, int, int]:
+    """:func:`run_chunk`'s loop, on the work space it allocates (compiled without reference counting).
+
+    Parameters
+    ----------
+    k ... all_done_at
+        As :func:`run_chunk`.
+    nck_cursor : ndarray of int64, shape (B,)
+        Each member's run of its last NC plan read (:func:`_nck_step`).
+    c_intervals, c_acc, c_rot, c_rot_key : ndarray
+        Work space of the path-mode cutting kernel (:func:`fmus_src.cutting.path_kernel.path_work`).
+    comp_h : ndarray, shape (n_comp,)
+        Each component's step ``h / comp_rate[c]``, s.
+
+    Returns
+    -------
+    k, n_rec, event, component, code, tick, item : int
+        As :func:`run_chunk`.
+    """
+
+
     (n_samples, n_pos, n_offset, n_length, n_key, n_feed, n_sref, n_sact, n_line, n_tool, n_done, n_period,
      n_t0) = nck
     (m_gains, m_state, m_width, m_ratio, m_tp, m_tv, m_ticks, m_next, m_inpos, m_limits, m_alarm) = mcu
@@ -235,7 +294,7 @@ def run_chunk(
                             V[dst, b] = V[src, b] * f
                 kind = comp_kind[c]
                 base = comp_base[c]
-                h_i = h / comp_rate[c]
+                h_i = comp_h[c]
                 if kind == KIND_MCU:  # mcu_kernel, member by member on scalars (same operations)
                     k0 = m_next[0]
                     n_alarm = 0
@@ -293,7 +352,7 @@ def run_chunk(
                         V[base + 6, b] = d_pos[i, b]
                 elif kind == KIND_NCK:
                     _nck_step((t_tick + h_i - n_t0) / n_period, base, V, n_samples, n_pos, n_offset, n_length,
-                              n_key, n_feed, n_sref, n_sact, n_line, n_tool, n_done)
+                              n_key, n_feed, n_sref, n_sact, n_line, n_tool, n_done, nck_cursor)
                 elif kind == KIND_ZMAP:  # CuttingLoad._do_step, effect terms off
                     n_bad = zmap_component_step(
                         h_i, V[base:base + n_zmap], z_heights, z_grid, z_cells, z_rho, z_points, z_arc, z_head,
@@ -302,9 +361,9 @@ def run_chunk(
                     if n_bad != 0:  # members needing too many substeps (held, blanked): the component fails them
                         return k, n_rec, EV_FAIL, c, n_bad, j, item
                 else:  # KIND_CUT
-                    n_bad = path_step(h_i, V[base:base + 4], c_par, c_st, V[base + 4:base + 16], c_engaged, c_verts,
-                                      c_vs, c_ds, c_count, c_alpha, c_beta, c_top, c_zfloor, c_margin, c_tol,
-                                      c_maxsub, c_status)
+                    n_bad = path_step_into(h_i, V[base:base + 4], c_par, c_st, V[base + 4:base + 16], c_engaged,
+                                           c_verts, c_vs, c_ds, c_count, c_alpha, c_beta, c_top, c_zfloor, c_margin,
+                                           c_tol, c_maxsub, c_status, c_intervals, c_acc, c_rot, c_rot_key)
                     if n_bad != 0:  # members off the path or with too many substeps: the component fails them
                         return k, n_rec, EV_FAIL, c, n_bad, j, item
                     for b in range(B):  # engaged teeth, and CuttingLoad._finish_effects with the effects off
@@ -363,6 +422,7 @@ def sample(t: float, V: np.ndarray, probe_rows: np.ndarray, probe_factor: np.nda
 
 
 # the cached loop links the kernels' code: recompile it when any of their modules changes
-guard_cache(run_chunk, control_numba, stick_slip, stick_slip_numba, exponential_numba, path_kernel, cutting_kernel,
-            sampling, zmap_numba, cutting_stock, cutting_engagement)
+for _fn in (run_chunk, _run_chunk):
+    guard_cache(_fn, control_numba, stick_slip, stick_slip_numba, exponential_numba, path_kernel, cutting_kernel,
+                sampling, zmap_numba, cutting_stock, cutting_engagement)
 guard_cache(_nck_step, sampling)
