@@ -35,6 +35,7 @@ from fmus_src.servo.replay import COMPILED_OUTPUTS, compiled_samples
 from ..machine import Machine
 from ..twin import drive_parameters, mcu_parameters
 from .errors import IdentificationError
+from .start_state import AxisStart, apply_start, initial_positions
 
 
 @dataclass
@@ -80,6 +81,8 @@ def replay(
     ref_lead: float = 0.0,
     t_start: float | None = None,
     disturbance: Mapping[str, Callable[[np.ndarray], np.ndarray]] | None = None,
+    start: Mapping[str, AxisStart] | None = None,
+    start_at: float | np.ndarray | None = None,
 ) -> ReplayResult:
     """Simulate the servo loops of some axes driven by recorded reference positions.
 
@@ -115,6 +118,12 @@ def replay(
     disturbance : mapping axis -> callable, optional
         ``f(t)`` -> disturbance force on the axis [N] (cutting force on the
         workpiece, ``Fd = +F``), evaluated at the middle of each servo tick.
+    start : mapping axis -> AxisStart, optional
+        The state the recording implies at its start (:func:`.start_state.estimate_start`): an axis that
+        moves there starts at that position, velocity and integrator current (:func:`.start_state.apply_start`)
+        instead of at rest; it overrides ``initial_position``.
+    start_at : float or ndarray, shape (B,), optional
+        Recording time whose ``start`` state the first tick takes, per member (default the first tick).
 
     Returns
     -------
@@ -141,10 +150,11 @@ def replay(
     params.update(dict(mcu_values or {}))
     mcu = MCU("mcu", batch=batch, **params)
     drives: dict[str, DriveAxis] = {}
+    moving = initial_positions(start, t0 if start_at is None else start_at)
     for a in axes:
         dp = drive_parameters(machine, a)
         dp.update(dict((drive_values or {}).get(a, {})))
-        x0 = (initial_position or {}).get(a, ref_ticks[a][0])
+        x0 = moving[a] if a in moving else (initial_position or {}).get(a, ref_ticks[a][0])
         drives[a] = DriveAxis(f"{a}_drive", batch=batch, initial_position=x0, **dp)
         mcu.set(f"{a}_ref", ref_ticks[a][0])
         mcu.set(f"{a}_position", drives[a].values["position"])
@@ -153,11 +163,21 @@ def replay(
         d.setup(t0)
     dist = ({a: np.asarray(fd(tick_t[:-1] + 0.5 * tv), dtype=float) for a, fd in disturbance.items() if a in drives}
             if disturbance else None)
+    if start:
+        before = {a: (refs[a] if callable(refs[a]) else _extrapolated(t_ref, _column(refs[a], 1)[:, 0])) for a in axes}
+        apply_start(mcu, drives, {a: s for a, s in start.items() if a in drives}, t0, before,
+                    {a: f[0] for a, f in dist.items()} if dist else None, start_at)
     # outputs interpolated linearly between the ticks to the requested times (held before the first tick)
     j = np.clip(np.searchsorted(tick_t, t_out, side="right"), 1, n_ticks)
     f = np.maximum((t_out - tick_t[j - 1]) / tv, 0.0)
     out = run_servo_samples(mcu, drives, ref_ticks, t0, tv, n_ticks, j, f, ("position",), dist)
     return ReplayResult(t_out, out["position"], out["current_cmd"], n_ticks)
+
+
+def _extrapolated(t: np.ndarray, x: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
+    """``f(q)``: samples ``x`` at ``t``, linear inside and extrapolated linearly from the first two before them."""
+    slope = (x[1] - x[0]) / (t[1] - t[0]) if t.size > 1 else 0.0
+    return lambda q: np.where(np.asarray(q) < t[0], x[0] + slope * (np.asarray(q) - t[0]), np.interp(q, t, x))
 
 
 def run_servo_ticks(
