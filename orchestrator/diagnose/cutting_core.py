@@ -22,7 +22,8 @@ from .cutting import (PHASE_EPS, CuttingColumns, CuttingData, CuttingModel, cutt
                       prepare_cutting, select_cutting, start_model)
 from .cutting_chatter import ChatterFit, refit_chatter
 from .cutting_library import CUTTING_CHANNELS, CUTTING_EFFECT_PARAMETERS, CUTTING_EVENTS, machine_keys
-from .cutting_locate import ChatterPeak, angle_of, chatter_peaks, force_unexplained, windows_where
+from .cutting_locate import (FORCED_MAX_HZ, ChatterPeak, alias_frequency, angle_of, chatter_search, force_unexplained,
+                             windows_where)
 from .cutting_refit import projector, refit_cutting, refit_droop
 from .cutting_sampling import Resolution, resolution, sinusoid_amplitude, unresolved_effects
 from .cutting_replay import ForceReplay
@@ -154,7 +155,17 @@ def diagnose_cutting(case: Case, recording: Recording, spindle_command: Callable
     unresolved = unresolved_effects(sampling)
     notes = [f"cutting: {sampling[e].text}" for e in unresolved]
     log += notes
-    peaks = chatter_peaks(data) if "chatter" not in unresolved else []
+    peaks: list[ChatterPeak] = []
+    if "chatter" not in unresolved:
+        # the machine file's own forces at the samples: its forced vibration, folded as the recording's is
+        own = data.run([{}])
+        peaks, aliases = chatter_search(data, np.column_stack([own.fx[:, 0], own.fy[:, 0]]))
+    else:
+        aliases = []
+    for a in aliases:  # forced vibration the sampling folded off the spindle-harmonic grid: not chatter
+        note = f"cutting: {a.text(data.flutes)}"
+        log.append(note)
+        notes.append(note)
     for p in peaks:
         where = "also in the air" if p.in_air else "only while cutting"
         log.append(f"cutting: cut {p.cut + 1}: non-harmonic peak {p.frequency:.1f} Hz, {p.amplitude:.2f} N, "
@@ -285,6 +296,17 @@ def diagnose_cutting(case: Case, recording: Recording, spindle_command: Callable
                     round(float(data.t[data.cuts.bounds[p.cut][1] - 1]), 4)] for p in chatter]
         best = max(chatter, key=lambda p: p.snr)
         harmonic = freq / best.spindle_hz
+        folded = ""
+        if math.isfinite(best.spacing) and best.spacing > 0:
+            fs = 1.0 / best.spacing  # sampling frequency, Hz
+            m = np.arange(1, int(FORCED_MAX_HZ / best.spindle_hz) + 1)
+            near = np.abs(alias_frequency(m * best.spindle_hz, best.spacing) - freq)
+            j = int(np.argmin(near))
+            folded = (f", nor a spindle harmonic folded by the {1e3 * best.spacing:.3g} ms sampling (it does not "
+                      f"follow the spindle angle; nearest alias: harmonic {int(m[j])} at "
+                      f"{float(alias_frequency(m[j] * best.spindle_hz, best.spacing)):.1f} Hz)")
+            folded += (f"; the spectrum reaches {0.5 * fs:.0f} Hz (Nyquist), the vibration itself may be at "
+                       f"k x {fs:.1f} Hz +- {freq:.1f} Hz")
         final["chatter"] = {"frequency_Hz": freq}
         mode_text = ""
         try:
@@ -304,7 +326,7 @@ def diagnose_cutting(case: Case, recording: Recording, spindle_command: Callable
             "parameters": {"frequency_Hz": _r(freq)}, "ci90": {"frequency_Hz": [_r(freq - res), _r(freq + res)]},
             "confidence": _r(min(0.999, 1.0 - 1.0 / best.snr), 3),
             "evidence": (f"spectral peak at {freq:.1f} Hz in {len(chatter)} cut(s), {harmonic:.2f} x the spindle "
-                         f"frequency (not a harmonic), {best.amplitude:.1f} N, {best.snr:.0f} x the spectral floor, "
+                         f"frequency (not a harmonic{folded}), {best.amplitude:.1f} N, {best.snr:.0f} x the spectral floor, "
                          f"growing x{best.growth:.2f} within the cut, absent in the air; not replayed sample by "
                          f"sample (regenerative): those cuts are left out of the force fit{mode_text}"),
             "_score": 1e9,
