@@ -33,7 +33,7 @@ import numpy as np
 
 from .geometry import ChainGeometry
 from .profiles import SpeedChange
-from .spans import plan_spans, static_breaks, window_caps
+from .spans import plan_spans, relax_ceilings, split_at_dips, static_breaks, window_caps
 
 
 @dataclass(frozen=True)
@@ -138,14 +138,49 @@ def plan_chain_speeds(geo: ChainGeometry, feed: np.ndarray, sc: SpeedChange, *, 
     breaks = static_breaks(vmax, jl)
     caps, pure = window_caps(geo.length, geo.cum, vmax, jl, breaks, windows, sc)
     starts, ceiling = plan_spans(geo.length, vmax, jl, breaks, caps, pure, sc)
-    m = len(starts) - 1
     cum = geo.cum
+    vs = boundary_speeds(starts, ceiling, jl, caps, cum, sc)
+    refined = split_at_dips(starts, ceiling, vmax, caps, cum, vs, sc)
+    if refined is not None:
+        starts, ceiling = refined
+        vs = boundary_speeds(starts, ceiling, jl, caps, cum, sc)
+    if np.any(ceiling < vmax[starts[:-1]]):  # window-limited spans: ceilings from the speeds they run at
+        starts, ceiling, vs = _settle_ceilings(starts, ceiling, vmax, jl, caps, cum, sc)
+    top = ceiling.tolist()
+    v = np.zeros(n + 1)
+    v[starts] = vs
+    for i in range(len(starts) - 1):  # inner junctions of a span: the speed reachable from both span ends, capped
+        a, e = int(starts[i]), int(starts[i + 1])
+        for k in range(a + 1, e):
+            up, down = sc.reach(vs[i], float(cum[k] - cum[a])), sc.reach(vs[i + 1], float(cum[e] - cum[k]))
+            v[k] = min(top[i], up, down)
+    return ChainSpeeds(v, vmax, corner, starts, ceiling)
+
+
+def boundary_speeds(starts: np.ndarray, ceiling: np.ndarray, junction_limit: np.ndarray, caps: np.ndarray,
+                    cum: np.ndarray, sc: SpeedChange) -> list[float]:
+    """Speed at each span boundary (m/s, m + 1 values, 0 at both chain ends): backward then forward pass.
+
+    Parameters
+    ----------
+    starts : ndarray (m + 1,) of int
+        Span boundaries (:func:`.spans.plan_spans`).
+    ceiling : ndarray (m,)
+        Speed ceiling of each span (m/s).
+    junction_limit, caps : ndarray (n - 1,)
+        Junction limit and window cap of each inner junction (m/s).
+    cum : ndarray (n + 1,)
+        Cumulative block lengths (m).
+    sc : SpeedChange
+        Acc/dec law.
+    """
+    m = len(starts) - 1
     Ls = (cum[starts[1:]] - cum[starts[:-1]]).tolist()
     top = ceiling.tolist()
     # limit at each inner span boundary (the junction after the span's last block): window cap and the
     # ceilings of the spans on both sides included
     inner = (starts[1:-1] - 1).tolist()
-    J = [min(float(jl[k]), float(caps[k]), top[i], top[i + 1]) for i, k in enumerate(inner)]
+    J = [min(float(junction_limit[k]), float(caps[k]), top[i], top[i + 1]) for i, k in enumerate(inner)]
     b = [0.0] * m  # backward pass: b[i] = speed limit at the end of span i
     for i in range(m - 2, -1, -1):
         b[i] = min(J[i], sc.reach(b[i + 1], Ls[i + 1]))
@@ -153,11 +188,44 @@ def plan_chain_speeds(geo: ChainGeometry, feed: np.ndarray, sc: SpeedChange, *, 
     for i in range(m):
         vs[i + 1] = min(b[i], sc.reach(vs[i], Ls[i]))
     vs[m] = 0.0
-    v = np.zeros(n + 1)
-    v[starts] = vs
-    for i in range(m):  # inner junctions of a span: the speed reachable from both span ends, at most its ceiling
-        a, e = int(starts[i]), int(starts[i + 1])
-        for k in range(a + 1, e):
-            up, down = sc.reach(vs[i], float(cum[k] - cum[a])), sc.reach(vs[i + 1], float(cum[e] - cum[k]))
-            v[k] = min(top[i], up, down)
-    return ChainSpeeds(v, vmax, corner, starts, ceiling)
+    return vs
+
+
+def _settle_ceilings(starts: np.ndarray, ceiling: np.ndarray, vmax: np.ndarray, jl: np.ndarray, caps: np.ndarray,
+                     cum: np.ndarray, sc: SpeedChange) -> tuple[np.ndarray, np.ndarray, list[float]]:
+    """Boundary speeds and relaxed ceilings (:func:`.spans.relax_ceilings`) that agree: no span starts or ends
+    above its ceiling.
+
+    The boundary speeds are planned with the block limits as span ceilings first; a span whose relaxed ceiling
+    is below a boundary speed then caps its boundaries at that ceiling. Lower boundary speeds only widen the
+    ramps' reach below each cap, so relaxed ceilings never fall and a second plan settles it.
+
+    Parameters
+    ----------
+    starts : ndarray (m + 1,) of int
+        Span boundaries.
+    ceiling : ndarray (m,)
+        Ceilings from :func:`.spans.plan_spans` / :func:`.spans.split_at_dips` (m/s): the lowest inner caps.
+    vmax : ndarray (n,)
+        Speed limit of each block (m/s).
+    jl, caps : ndarray (n - 1,)
+        Junction limits and window caps (m/s).
+    cum : ndarray (n + 1,)
+        Cumulative block lengths (m).
+    sc : SpeedChange
+        Acc/dec law.
+
+    Returns
+    -------
+    starts, ceiling, speeds
+        Span boundaries (unchanged), relaxed ceilings (m/s) and the speed at each span boundary (m/s).
+    """
+    bound_top = vmax[starts[:-1]].astype(float)  # the ceilings that bound the boundary speeds
+    while True:
+        vs = boundary_speeds(starts, bound_top, jl, caps, cum, sc)
+        relaxed = relax_ceilings(starts, ceiling, vmax, caps, cum, vs, sc)
+        v = np.asarray(vs)
+        over = (v[:-1] > relaxed) | (v[1:] > relaxed)
+        if not over.any():
+            return starts, relaxed, vs
+        bound_top = np.where(over, np.minimum(bound_top, relaxed), bound_top)

@@ -23,13 +23,24 @@ so the speed there is at most the stop speed ``v_k = reach(0, D_k)``: the larges
 trapezoid. Inside block k the remaining window is longer (it shrinks to ``D_k`` at the block end), so ``v_k``
 bounds the whole block. Where ``v_k`` is below the block limit and the window holds no static break, the
 junction is *window-limited*. A run of consecutive window-limited junctions k0..k1 forms one span of the
-blocks k0+1..k1 whose *ceiling* is the lowest ``v_k`` at its inner junctions: the control caps the feed at
-the speed from which it can stop within the window and changes speed across the block ends. For equal
-blocks ``D_k = (W - 1) l`` and the ceiling is the same ``v_w`` all along the run (50 mm of 0.1 mm blocks at
-F6000, W = 40, a = 2 m/s2, tc = 32 ms: D = 3.9 mm, ``v_w`` = 96.9 mm/s). The block k0 before the run joins
-it when it starts at rest or at a span boundary and cannot exceed the ceiling within its own length
-(``reach(v_entry, l_k0)`` at most the ceiling): joining then costs it nothing and spares the ramp a restart.
-The blocks whose window reaches the chain end have no cap (the chain's own stop bounds them).
+blocks k0+1..k1 whose *ceiling* is the lowest ``v_k`` at its inner junctions (:func:`plan_spans`): the
+control caps the feed at the speed from which it can stop within the window and changes speed across the
+block ends. For equal blocks ``D_k = (W - 1) l`` and the ceiling is the same ``v_w`` all along the run
+(50 mm of 0.1 mm blocks at F6000, W = 40, a = 2 m/s2, tc = 32 ms: D = 3.9 mm, ``v_w`` = 96.9 mm/s). The block
+k0 before the run joins it when it starts at rest or at a span boundary and cannot exceed the ceiling within
+its own length (``reach(v_entry, l_k0)`` at most the ceiling): joining then costs it nothing and spares the
+ramp a restart. The blocks whose window reaches the chain end have no cap (the chain's own stop bounds them).
+
+Where the window lengths vary (a cluster of tinier blocks), one ceiling for the whole run would hold the path
+at the cluster's speed all along. Two rules, both exact, keep the ceiling local:
+
+* :func:`split_at_dips`: a span ends at its lowest cap ``c_j`` when its speed profile can reach ``c_j`` there
+  from both span ends; the path then slows to ``c_j`` and speeds up again with zero acceleration at j, which
+  is what a bell-shaped profile does at a speed minimum anyway. Each part is split again by the same rule.
+* :func:`relax_ceilings`: a junction k so near a span end that no ramp of the law from the boundary speed
+  reaches ``v_k`` before it (:meth:`.profiles.SpeedChange.earliest_distance`) is safe at any cruise speed,
+  so it does not lower the ceiling. The boundary speeds are then planned again with the relaxed ceilings
+  until no span starts or ends above its ceiling (:func:`.lookahead._settle_ceilings`).
 
 Inside a span the speed never exceeds its ceiling, which no corner or window inside it restricts further,
 so one speed change may run across its inner junctions. A chain without window-limited junctions is planned
@@ -181,3 +192,115 @@ def _joins_run(k0: int, k1: int, length: np.ndarray, junction_limit: np.ndarray,
     else:
         return False  # block k0 continues a span with a higher ceiling
     return sc.reach(entry, float(length[k0])) <= float(caps[k0:k1].min())
+
+
+def split_at_dips(starts: np.ndarray, ceiling: np.ndarray, vmax: np.ndarray, caps: np.ndarray, cum: np.ndarray,
+                  speeds: Sequence[float], sc: SpeedChange) -> tuple[np.ndarray, np.ndarray] | None:
+    """Split window-limited spans at their lowest cap where the path reaches that cap from both sides.
+
+    A span capped at its lowest window cap ``c_j`` (junction j) holds the path below ``c_j`` everywhere, also
+    where the window is longer. Ending the span at j costs nothing when the speed profile of the span reaches
+    ``c_j`` there from both span ends: the path then runs at ``c_j`` with zero acceleration at j, as a
+    bell-shaped slow-down and speed-up meet at their common speed, and each part takes the lowest cap of its
+    own inner junctions as its ceiling. The parts are split again by the same rule (their ends run at the
+    split caps).
+
+    Parameters
+    ----------
+    starts : ndarray (m + 1,) of int
+        Span boundaries; ceiling : ndarray (m,) their ceilings (m/s) (:func:`plan_spans`).
+    vmax : ndarray (n,)
+        Speed limit of each block (m/s).
+    caps : ndarray (n - 1,)
+        Window cap of each inner junction (m/s) (:func:`window_caps`).
+    cum : ndarray (n + 1,)
+        Cumulative block lengths (m).
+    speeds : sequence of float (m + 1,)
+        Planned speed at each span boundary (m/s): the lower bounds of the entry and exit speeds.
+    sc : SpeedChange
+        Acc/dec law.
+
+    Returns
+    -------
+    (starts, ceiling) or None
+        The refined spans, or None when no span is split.
+    """
+    out_starts: list[int] = []
+    out_ceiling: list[float] = []
+    split = False
+    for i in range(len(starts) - 1):
+        a, e = int(starts[i]), int(starts[i + 1])
+        if e - a < 2 or not ceiling[i] < vmax[a]:
+            out_starts.append(a)
+            out_ceiling.append(float(ceiling[i]))
+            continue
+        pending = [(a, e, float(speeds[i]), float(speeds[i + 1]))]
+        parts: list[tuple[int, float]] = []
+        while pending:
+            lo, hi, v_in, v_out = pending.pop()
+            if hi - lo >= 2:
+                j = lo + int(np.argmin(caps[lo:hi - 1]))  # lowest cap among the inner junctions lo .. hi-2
+                c = float(caps[j])
+                if (sc.reach(v_in, float(cum[j + 1] - cum[lo])) >= c
+                        and sc.reach(v_out, float(cum[hi] - cum[j + 1])) >= c):
+                    pending.append((j + 1, hi, c, v_out))
+                    pending.append((lo, j + 1, v_in, c))
+                    split = True
+                    continue
+                parts.append((lo, min(float(vmax[a]), c)))
+            else:  # one block: capped at its end, where its window is shortest
+                parts.append((lo, min(float(vmax[a]), float(caps[lo])) if lo < len(caps) else float(vmax[a])))
+        for lo, top in parts:
+            out_starts.append(lo)
+            out_ceiling.append(top)
+    if not split:
+        return None
+    out_starts.append(int(starts[-1]))
+    return np.asarray(out_starts, dtype=np.int64), np.asarray(out_ceiling, dtype=float)
+
+
+def relax_ceilings(starts: np.ndarray, ceiling: np.ndarray, vmax: np.ndarray, caps: np.ndarray, cum: np.ndarray,
+                   speeds: Sequence[float], sc: SpeedChange) -> np.ndarray:
+    """Raise each window-limited span's ceiling to the lowest cap its speed ramps could exceed (m/s).
+
+    With its boundary speeds fixed, the path in a span passes an inner junction k on the speed-up from the
+    span start, at cruise, or on the slow-down to the span end. No ramp of the law starting at ``v_start`` is
+    faster than ``caps[k]`` before :meth:`~.profiles.SpeedChange.earliest_distance` ``(v_start, caps[k])``,
+    and likewise backwards from the end; a junction nearer to a span end than that is safe at any cruise
+    speed, so the ceiling need only be the lowest cap of the other inner junctions (and at most the block
+    limit). The boundary speeds stay those planned with the lower ceilings, which are feasible under the
+    higher ones.
+
+    Parameters
+    ----------
+    starts : ndarray (m + 1,) of int
+        Span boundaries; ceiling : ndarray (m,) their ceilings (m/s).
+    vmax : ndarray (n,)
+        Speed limit of each block (m/s).
+    caps : ndarray (n - 1,)
+        Window cap of each inner junction (m/s).
+    cum : ndarray (n + 1,)
+        Cumulative block lengths (m).
+    speeds : sequence of float (m + 1,)
+        Speed at each span boundary (m/s).
+    sc : SpeedChange
+        Acc/dec law.
+
+    Returns
+    -------
+    ndarray (m,)
+        The ceilings; unchanged for spans whose ceiling is their block limit.
+    """
+    out = ceiling.astype(float).copy()
+    for i in range(len(starts) - 1):
+        a, e = int(starts[i]), int(starts[i + 1])
+        if e - a < 2 or not ceiling[i] < vmax[a]:
+            continue
+        top = float(vmax[a])
+        for k in range(a, e - 1):  # inner junction k lies at cum[k + 1]
+            c = float(caps[k])
+            if c < top and float(cum[k + 1] - cum[a]) > sc.earliest_distance(float(speeds[i]), c) \
+                    and float(cum[e] - cum[k + 1]) > sc.earliest_distance(float(speeds[i + 1]), c):
+                top = c
+        out[i] = top
+    return out
