@@ -89,6 +89,24 @@ def test_window_limited_speed_is_the_stop_within_the_window():
     assert sc.reach(0.0, 0.5e-3) == pytest.approx(0.025, rel=1e-12)
 
 
+@pytest.mark.parametrize("v0, v1", [(0.0, 0.01), (0.02, 0.05), (0.0, 0.0969), (0.05, 0.1)])
+def test_earliest_distance_is_the_fastest_ramp(v0, v1):
+    # jerk a/tc up to a, then constant a: v = v0 + j t^2 / 2 (t <= tc), s = v0 t + j t^3 / 6; beyond tc the
+    # speed grows at a from v0 + a tc / 2. Integrated here at 1 us; trapezoid: (v1^2 - v0^2) / (2 a)
+    sc = SpeedChange(A, TC)
+    dt, t, v, s_num = 1e-6, 0.0, v0, 0.0
+    while v < v1:
+        acc = min(A / TC * (t + 0.5 * dt), A)
+        s_num += (v + 0.5 * acc * dt) * dt
+        v += acc * dt
+        t += dt
+    assert sc.earliest_distance(v0, v1) == pytest.approx(s_num, rel=1e-3)
+    assert SpeedChange(A, 0.0).earliest_distance(v0, v1) == pytest.approx((v1 ** 2 - v0 ** 2) / (2 * A), rel=1e-12)
+    assert sc.earliest_distance(v1, v0) == 0.0
+    # no bell ramp of the law from v0 gets to v1 in less: a full change to v1 covers at least this distance
+    assert sc.distance(v0, v1) >= sc.earliest_distance(v0, v1)
+
+
 def test_short_blocks_at_high_feed_run_at_the_window_limited_speed():
     # 50 mm of 0.1 mm blocks at F6000 (0.1 m/s > v_w): one span at v_w instead of a ramp block by block.
     # T = L / v_w + t(v_w) + 16 ms = 0.51582 + 0.08047 + 0.016 = 0.612 s (block by block it was 1.260 s).
@@ -196,6 +214,8 @@ def _assert_same(a, b) -> None:
     _segments(0.1, 50.0, 6000, head="G103 P5\n"),
     "G90 G0 X0 Y0\nG1 X20. F6000\n" + "".join(f"X{20 + 0.1 * k:.1f}\n" for k in range(1, 201))
     + "".join(f"Y{0.07 * k * (1 + (k % 3)) / 2:.3f}\n" for k in range(1, 151)) + "M30\n",
+    "G90 G0 X0 Y0\nG1 F6000\n" + "".join(f"X{x:.2f}\n" for x in np.cumsum([0.1] * 150 + [0.02] * 20 + [0.1] * 150))
+    + "M30\n",
 ])
 def test_compiled_planning_equals_the_reference_bit_for_bit(text):
     kernel = NCKernel(program_text=text, batch=4)
