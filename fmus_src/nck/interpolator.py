@@ -96,7 +96,7 @@ def chain_pieces(geo: ChainGeometry, speeds: ChainSpeeds, sc: SpeedChange) -> Ch
     ChainPieces
     """
     v = speeds.junction.tolist()
-    vmax = speeds.vmax.tolist()
+    top = speeds.ceiling.tolist()
     L = geo.length.tolist()
     cum = geo.cum.tolist()
     starts = speeds.span_start.tolist()
@@ -108,12 +108,12 @@ def chain_pieces(geo: ChainGeometry, speeds: ChainSpeeds, sc: SpeedChange) -> Ch
     block_start = [0.0] * len(L)
     inner: list[int] = []  # blocks that start inside a span: their start time is found on the profile below
     t = 0.0
-    for first, end in zip(starts[:-1], starts[1:]):
+    for first, end, ceiling in zip(starts[:-1], starts[1:], top):
         block_start[first] = t
         inner.extend(range(first + 1, end))
         length = cum[end] - cum[first]
         va, vb = v[first], v[end]
-        vp = sc.peak(va, vb, length, vmax[first])
+        vp = sc.peak(va, vb, length, ceiling)
         up = sc.pieces(va, vp)
         down = sc.pieces(vp, vb)
         cruise = length - sc.distance(va, vp) - sc.distance(vp, vb)

@@ -10,8 +10,10 @@ The tool must always be able to stop at the end of the look-ahead window of
 the junction after each block (:func:`.spans.window_caps`).
 
 The chain is planned over acc/dec spans (:mod:`.spans`): runs of blocks with
-one speed limit and no binding corner or window cap inside, so that one speed
-change of bell-shaped acc/dec may cross block ends as on the control. A
+one speed ceiling and no binding corner inside (the block limit, or for a run
+of short blocks the window-limited speed from which the tool can stop within
+the window), so that one speed change of bell-shaped acc/dec may cross block
+ends as on the control. A
 backward pass from the chain end and a forward pass from its start give the
 speeds at the span boundaries; the chain starts and ends at rest.
 
@@ -31,7 +33,7 @@ import numpy as np
 
 from .geometry import ChainGeometry
 from .profiles import SpeedChange
-from .spans import span_starts, static_breaks, window_caps
+from .spans import plan_spans, relax_ceilings, split_at_dips, static_breaks, window_caps
 
 
 @dataclass(frozen=True)
@@ -50,12 +52,16 @@ class ChainSpeeds:
         First block of each of the m acc/dec spans (:mod:`.spans`), then n: one speed change may cross the
         inner junctions of a span. ``junction`` at a span boundary is planned; inside a span it is the speed
         reachable from both span ends (the speed of trapezoidal acc/dec there).
+    ceiling : ndarray (m,)
+        Speed limit of each span (m/s): the limit of its blocks, or for a span of window-bound blocks the
+        window-limited speed (:func:`.spans.plan_spans`).
     """
 
     junction: np.ndarray
     vmax: np.ndarray
     corner: np.ndarray
     span_start: np.ndarray
+    ceiling: np.ndarray
 
 
 def block_speed_limits(geo: ChainGeometry, feed: np.ndarray, max_cutting_feed: float, arc_accel: float) -> np.ndarray:
@@ -130,14 +136,51 @@ def plan_chain_speeds(geo: ChainGeometry, feed: np.ndarray, sc: SpeedChange, *, 
         if len(windows) != n:
             raise ValueError(f"plan_chain_speeds: {len(windows)} look-ahead windows for {n} blocks")
     breaks = static_breaks(vmax, jl)
-    caps = window_caps(geo.length, geo.cum, vmax, jl, breaks, windows, sc)
-    starts = span_starts(breaks, caps, vmax)
-    m = len(starts) - 1
+    caps, pure = window_caps(geo.length, geo.cum, vmax, jl, breaks, windows, sc)
+    starts, ceiling = plan_spans(geo.length, vmax, jl, breaks, caps, pure, sc)
     cum = geo.cum
+    vs = boundary_speeds(starts, ceiling, jl, caps, cum, sc)
+    refined = split_at_dips(starts, ceiling, vmax, caps, cum, vs, sc)
+    if refined is not None:
+        starts, ceiling = refined
+        vs = boundary_speeds(starts, ceiling, jl, caps, cum, sc)
+    if np.any(ceiling < vmax[starts[:-1]]):  # window-limited spans: ceilings from the speeds they run at
+        starts, ceiling, vs = _settle_ceilings(starts, ceiling, vmax, jl, caps, cum, sc)
+    top = ceiling.tolist()
+    v = np.zeros(n + 1)
+    v[starts] = vs
+    for i in range(len(starts) - 1):  # inner junctions of a span: the speed reachable from both span ends, capped
+        a, e = int(starts[i]), int(starts[i + 1])
+        for k in range(a + 1, e):
+            up, down = sc.reach(vs[i], float(cum[k] - cum[a])), sc.reach(vs[i + 1], float(cum[e] - cum[k]))
+            v[k] = min(top[i], up, down)
+    return ChainSpeeds(v, vmax, corner, starts, ceiling)
+
+
+def boundary_speeds(starts: np.ndarray, ceiling: np.ndarray, junction_limit: np.ndarray, caps: np.ndarray,
+                    cum: np.ndarray, sc: SpeedChange) -> list[float]:
+    """Speed at each span boundary (m/s, m + 1 values, 0 at both chain ends): backward then forward pass.
+
+    Parameters
+    ----------
+    starts : ndarray (m + 1,) of int
+        Span boundaries (:func:`.spans.plan_spans`).
+    ceiling : ndarray (m,)
+        Speed ceiling of each span (m/s).
+    junction_limit, caps : ndarray (n - 1,)
+        Junction limit and window cap of each inner junction (m/s).
+    cum : ndarray (n + 1,)
+        Cumulative block lengths (m).
+    sc : SpeedChange
+        Acc/dec law.
+    """
+    m = len(starts) - 1
     Ls = (cum[starts[1:]] - cum[starts[:-1]]).tolist()
-    # limit at each inner span boundary (the junction after the span's last block), window cap included
+    top = ceiling.tolist()
+    # limit at each inner span boundary (the junction after the span's last block): window cap and the
+    # ceilings of the spans on both sides included
     inner = (starts[1:-1] - 1).tolist()
-    J = [min(float(jl[k]), float(caps[k])) for k in inner]
+    J = [min(float(junction_limit[k]), float(caps[k]), top[i], top[i + 1]) for i, k in enumerate(inner)]
     b = [0.0] * m  # backward pass: b[i] = speed limit at the end of span i
     for i in range(m - 2, -1, -1):
         b[i] = min(J[i], sc.reach(b[i + 1], Ls[i + 1]))
@@ -145,11 +188,44 @@ def plan_chain_speeds(geo: ChainGeometry, feed: np.ndarray, sc: SpeedChange, *, 
     for i in range(m):
         vs[i + 1] = min(b[i], sc.reach(vs[i], Ls[i]))
     vs[m] = 0.0
-    v = np.zeros(n + 1)
-    v[starts] = vs
-    for i in range(m):  # inner junctions of a span: the speed reachable from both span ends, at most the limit
-        a, e = int(starts[i]), int(starts[i + 1])
-        for k in range(a + 1, e):
-            up, down = sc.reach(vs[i], float(cum[k] - cum[a])), sc.reach(vs[i + 1], float(cum[e] - cum[k]))
-            v[k] = min(float(vmax[a]), up, down)
-    return ChainSpeeds(v, vmax, corner, starts)
+    return vs
+
+
+def _settle_ceilings(starts: np.ndarray, ceiling: np.ndarray, vmax: np.ndarray, jl: np.ndarray, caps: np.ndarray,
+                     cum: np.ndarray, sc: SpeedChange) -> tuple[np.ndarray, np.ndarray, list[float]]:
+    """Boundary speeds and relaxed ceilings (:func:`.spans.relax_ceilings`) that agree: no span starts or ends
+    above its ceiling.
+
+    The boundary speeds are planned with the block limits as span ceilings first; a span whose relaxed ceiling
+    is below a boundary speed then caps its boundaries at that ceiling. Lower boundary speeds only widen the
+    ramps' reach below each cap, so relaxed ceilings never fall and a second plan settles it.
+
+    Parameters
+    ----------
+    starts : ndarray (m + 1,) of int
+        Span boundaries.
+    ceiling : ndarray (m,)
+        Ceilings from :func:`.spans.plan_spans` / :func:`.spans.split_at_dips` (m/s): the lowest inner caps.
+    vmax : ndarray (n,)
+        Speed limit of each block (m/s).
+    jl, caps : ndarray (n - 1,)
+        Junction limits and window caps (m/s).
+    cum : ndarray (n + 1,)
+        Cumulative block lengths (m).
+    sc : SpeedChange
+        Acc/dec law.
+
+    Returns
+    -------
+    starts, ceiling, speeds
+        Span boundaries (unchanged), relaxed ceilings (m/s) and the speed at each span boundary (m/s).
+    """
+    bound_top = vmax[starts[:-1]].astype(float)  # the ceilings that bound the boundary speeds
+    while True:
+        vs = boundary_speeds(starts, bound_top, jl, caps, cum, sc)
+        relaxed = relax_ceilings(starts, ceiling, vmax, caps, cum, vs, sc)
+        v = np.asarray(vs)
+        over = (v[:-1] > relaxed) | (v[1:] > relaxed)
+        if not over.any():
+            return starts, relaxed, vs
+        bound_top = np.where(over, np.minimum(bound_top, relaxed), bound_top)

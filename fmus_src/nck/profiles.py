@@ -57,6 +57,29 @@ class SpeedChange:
         """Distance (m) covered while changing speed between ``v1`` and ``v2`` (m/s)."""
         return 0.5 * (v1 + v2) * self.time(v2 - v1)
 
+    def earliest_distance(self, v0: float, v1: float) -> float:
+        """Shortest distance (m) in which any speed change starting at ``v0`` with zero acceleration attains ``v1``.
+
+        The fastest way there raises the acceleration at jerk ``a / tc`` to ``a`` and holds it (no jerk-down
+        phase), so no ramp of this law, wherever it ends, is faster than ``v1`` before this distance.
+
+        Parameters
+        ----------
+        v0, v1 : float
+            Start speed and speed to attain (m/s), ``v1 >= v0 >= 0``; 0 when ``v1 <= v0``.
+        """
+        dv = v1 - v0
+        if dv <= 0.0:
+            return 0.0
+        a, tc = self.a, self.tc
+        if tc == 0.0:
+            return (v1 * v1 - v0 * v0) / (2.0 * a)
+        if dv <= 0.5 * a * tc:  # still in the jerk phase: dv = j t^2 / 2
+            t = math.sqrt(2.0 * dv / self.j)
+            return v0 * t + self.j * t ** 3 / 6.0
+        vj = v0 + 0.5 * a * tc  # end of the jerk phase, then constant acceleration a
+        return v0 * tc + self.j * tc ** 3 / 6.0 + (v1 * v1 - vj * vj) / (2.0 * a)
+
     def reach(self, v: float, length: float) -> float:
         """Highest speed (m/s) reachable from (or that can stop down to) ``v`` within ``length`` (m)."""
         if length <= 0.0:
