@@ -147,7 +147,7 @@ def build(prep: Prepared, base: Model, lead_mm: dict[str, float], vertical: tupl
     dyn = {a: dynamic_columns(variants[a]) for a in prep.axes}
     members = _members(prep.axes, base, dyn)
     sim = simulate(prep.machine, prep.t, prep.commands, members, prep.t_start, twin=prep.twin_commands(),
-                   disturbance=prep.disturbance)
+                   disturbance=prep.disturbance, start=prep.start)
     # a current plateau below the model's limit: saturation candidate (member 0 is the baseline). Its member
     # is replayed on its own: every member of a batched replay is its solo run bit for bit, whatever the rest
     saturation: Model = {}
@@ -167,7 +167,7 @@ def build(prep: Prepared, base: Model, lead_mm: dict[str, float], vertical: tupl
     if saturation:
         extra = simulate(prep.machine, prep.t, prep.commands,
                          [{a: saturation.get(a, {e: dict(p) for e, p in base.get(a, {}).items()}) for a in prep.axes}],
-                         prep.t_start, twin=prep.twin_commands(), disturbance=prep.disturbance)
+                         prep.t_start, twin=prep.twin_commands(), disturbance=prep.disturbance, start=prep.start)
         sim = _with_member(sim, extra, {a: len(dyn[a]) for a in saturation})
     out: dict[str, AxisColumns] = {}
     v = prep.valid

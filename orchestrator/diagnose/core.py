@@ -256,7 +256,7 @@ def _replay_of(prep: Prepared, base: Model) -> Callable[[dict, int], Simulated]:
     """``replay(disturbance, batch)``: the baseline model replayed under per-member loads."""
     def replay(disturbance: dict, batch: int) -> Simulated:
         return simulate(prep.machine, prep.t, prep.commands, [base] * batch, prep.t_start,
-                        twin=prep.twin_commands(), disturbance=disturbance)
+                        twin=prep.twin_commands(), disturbance=disturbance, start=prep.start)
     return replay
 
 
@@ -347,7 +347,8 @@ def _timing_check(prep: Prepared, cols: dict[str, AxisColumns], final: Model, fi
     subsets = [(e,) for e in present] + ([tuple(present)] if len(present) > 1 else [])
     alternatives = [{a: {e: dict(p) for e, p in m.items() if e not in sub + ("servo_scales",)}
                      for a, m in final.items()} for sub in subsets]
-    sim = simulate(prep.machine, prep.t, prep.commands, [final], prep.t_start, twin=twin, disturbance=prep.disturbance)
+    sim = simulate(prep.machine, prep.t, prep.commands, [final], prep.t_start, twin=twin, disturbance=prep.disturbance,
+                   start=prep.start)
     r = residuals(prep, cols, sim, 0, proj)
     cost_with = float(r @ r)
     n = r.size
@@ -357,7 +358,7 @@ def _timing_check(prep: Prepared, cols: dict[str, AxisColumns], final: Model, fi
         phase = tp * k / PHASE_STEPS
         phase = phase - tp if phase > tp / 2 else phase
         s = simulate(prep.machine, prep.t, prep.commands, alternatives, prep.t_start + phase, twin=twin,
-                     disturbance=prep.disturbance)
+                     disturbance=prep.disturbance, start=prep.start)
         for j in range(len(alternatives)):
             rr = residuals(prep, cols, s, j, proj)
             best = min(best, (float(rr @ rr), phase, j))
@@ -386,7 +387,7 @@ def _evaluate_case(name: str, prep: Prepared, base: Model, final: Model, lead: d
         leave_out_held_current(prep.t, cols, base_sim, prep.disturbance, machine=prep.machine,
                                replay=_replay_of(prep, base))
     sim = simulate(prep.machine, prep.t, prep.commands, [base, final], prep.t_start, twin=prep.twin_commands(),
-                   disturbance=prep.disturbance)
+                   disturbance=prep.disturbance, start=prep.start)
     return CaseResult(name, prep, cols, sim, _rms(prep, cols, sim, 0), _rms(prep, cols, sim, 1))
 
 
@@ -560,7 +561,7 @@ def _diagnose_drives(case: Case, prep: Prepared, base_machine: Machine, holdout,
         sim = _repeat(base_sim, 2)
     else:
         sim = simulate(prep.machine, prep.t, prep.commands, members, prep.t_start, twin=twin,
-                       disturbance=prep.disturbance)
+                       disturbance=prep.disturbance, start=prep.start)
     # effects the refit made negligible are dropped (their contribution is below the minimum gain)
     kept = []
     r_final = residuals(prep, cols, sim, 1, proj)
@@ -577,7 +578,7 @@ def _diagnose_drives(case: Case, prep: Prepared, base_machine: Machine, holdout,
         effect_keys = kept
         members = [base, final] + [_without(final, a, e) for a, e in effect_keys]
         sim = simulate(prep.machine, prep.t, prep.commands, members, prep.t_start, twin=twin,
-                       disturbance=prep.disturbance)
+                       disturbance=prep.disturbance, start=prep.start)
     rms_before = _rms(prep, cols, sim, 0)
     rms_after = _rms(prep, cols, sim, 1)
     for a, diff in prep.nc_difference.items():

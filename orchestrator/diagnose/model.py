@@ -13,6 +13,7 @@ from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
+from ..identify.start_state import AxisStart
 from ..machine import Machine
 from ..twin import drive_parameters, mcu_parameters
 from .library import component_values
@@ -74,7 +75,8 @@ class Simulated:
 def simulate(machine: Machine, t: np.ndarray, commands: Mapping[str, np.ndarray],
              members: Sequence[Model], t_start: float | None = None,
              twin: Mapping[str, Callable[[np.ndarray, float], np.ndarray]] | None = None,
-             disturbance: Mapping[str, Callable[[np.ndarray], np.ndarray]] | None = None) -> Simulated:
+             disturbance: Mapping[str, Callable[[np.ndarray], np.ndarray]] | None = None,
+             start: Mapping[str, AxisStart] | None = None) -> Simulated:
     """Replay all axes of ``commands`` for every member model at once.
 
     Parameters
@@ -96,6 +98,9 @@ def simulate(machine: Machine, t: np.ndarray, commands: Mapping[str, np.ndarray]
         comparison is then on positions).
     disturbance : mapping axis -> callable, optional
         Recorded cutting force on the axis, ``f(t)`` [N] (:func:`.replay.run_replay`).
+    start : mapping axis -> AxisStart, optional
+        The state the recording implies at its first sample (:attr:`.prepare.Prepared.start`): every member
+        starts from it, its integrator holding that member's own force balance (:func:`.replay.run_replay`).
     """
     batch = len(members)
     base_mcu = mcu_parameters(machine)
@@ -120,6 +125,6 @@ def simulate(machine: Machine, t: np.ndarray, commands: Mapping[str, np.ndarray]
         drive_values[a] = {k: np.broadcast_to(np.asarray(v, float), (batch,)).copy() for k, v in d.items()}
         mcu_values.update({k: np.broadcast_to(np.asarray(v, float), (batch,)).copy() for k, v in mc.items()})
     run = run_replay(machine, t, cmds, t, batch=batch, mcu_values=mcu_values, drive_values=drive_values,
-                     t_start=t_start, disturbance=disturbance)
+                     t_start=t_start, disturbance=disturbance, start=start)
     fe = {a: (np.asarray(commands[a], float)[:, None] - run.table[a]) * 1e6 for a in commands}
     return Simulated(fe, run.current, run.motor, run.force)

@@ -17,10 +17,9 @@ from .align import (
     consensus_bracket, fill_gaps, offset_bracket_from_lines, refine_offset, refine_offset_by_axes,
     time_offset_from_lines, time_offset_from_signal,
 )
+from ..identify.start_state import AxisStart, estimate_start, start_window
 from .errors import DiagnosisError
 
-#: Samples closer than this to the start of the recording are not compared (replay start-up), s.
-WARM_UP_S = 0.02
 #: Recorded commands within this RMS of the twin's NC kernel (mm) are taken as the same interpolation.
 SAME_COMMANDS_MM = 1e-3
 #: An axis whose command spans less than this is not diagnosed, m.
@@ -52,7 +51,8 @@ class Prepared:
     current : dict axis -> ndarray or None
         Measured current command [A] (NaN where not measured).
     valid : ndarray of bool
-        Samples compared (after the warm-up).
+        Samples compared: from one position-loop period after ``t_start`` on (the first tick of every trial
+        servo phase lies before it; earlier samples would be compared with the state held before that tick).
     line : ndarray
         Source line at each sample (recorded, else the twin's at ``t - offset``).
     nc : Recording
@@ -75,6 +75,10 @@ class Prepared:
     current_scale : dict axis -> float
         Scale error of a current channel found by the diagnosis (a logger artefact); ``current`` is
         already divided by it.
+    start : dict axis -> AxisStart
+        The motion of each axis at the recording's first sample (:func:`.identify.start_state.estimate_start`):
+        the replays start from it, so that a log started while an axis moves (the usual Servo Guide log) is
+        not compared with a replay catching up from rest on the command.
     """
 
     recording: Recording
@@ -97,6 +101,7 @@ class Prepared:
     disturbance: dict | None = None
     forces_source: str = "none"
     current_scale: dict[str, float] = field(default_factory=dict)
+    start: dict[str, AxisStart] = field(default_factory=dict)
 
     def correct_current_scale(self, axis: str, scale: float) -> None:
         """Divide the measured current of ``axis`` by a scale error of its channel (accumulated)."""
@@ -449,7 +454,7 @@ def prepare(case: Case, recording: Recording, machine: Machine, axes: list[str] 
     if not commands:
         raise DiagnosisError(f"{src}: no axis moves (commanded stroke below {MIN_STROKE_M * 1e6:g} µm); "
                              "nothing to diagnose")
-    valid = (t - t[0]) >= WARM_UP_S
+    valid = np.ones(t.shape, dtype=bool)
     if not all(recorded.values()):
         valid &= (t_prog >= nc.t[0]) & (t_prog <= nc.t[-1])
     if "line" in recording and np.isfinite(recording["line"]).any():
@@ -459,10 +464,11 @@ def prepare(case: Case, recording: Recording, machine: Machine, axes: list[str] 
         line = np.asarray(nc["line"], float)[idx]
     tp = float(machine.si("servo")["position_loop_period"])
     t_start = float(offset + tp * np.ceil((t[0] - offset) / tp - 1e-9))
-    valid &= t >= t_start + tp + WARM_UP_S
+    valid &= t >= t_start + tp
     prep = Prepared(recording, machine, t, float(offset), method, list(commands), commands, recorded, fe, cur,
                     valid, line, nc, nc_diff, ref_off, t_start,
-                    disturbance=disturbance if disturbance is not None else recorded_forces(recording))
+                    disturbance=disturbance if disturbance is not None else recorded_forces(recording),
+                    start=starts(recording, list(commands), machine))
     revolution = _coarse_forces(prep.disturbance, case, nc)
     loads = twin_loads(case, machine) if revolution is not None else None
     if loads is not None:
@@ -492,6 +498,23 @@ def prepare(case: Case, recording: Recording, machine: Machine, axes: list[str] 
     return prep
 
 
+def starts(recording: Recording, axes: list[str], machine: Machine) -> dict[str, AxisStart]:
+    """Axis -> its motion at the recording's first sample (:func:`.identify.start_state.estimate_start`).
+
+    A quadratic fit of the recorded positions over one position-loop time constant (shortened while it does
+    not fit within the noise), and the recorded current at rest. Replayed from rest on the command instead,
+    a log cut into a 500 mm/min move starts with the table on the command, 140 µm ahead of where the loop
+    holds it, and catches up over several time constants.
+    """
+    t = np.asarray(recording.t, dtype=float)
+    out = {}
+    for a in axes:
+        current = np.asarray(recording[f"{a}_tcmd_A"], dtype=float) if f"{a}_tcmd_A" in recording else None
+        out[a] = estimate_start(t, np.asarray(recording[f"{a}_mm"], dtype=float) * 1e-3, current,
+                                start_window(machine, a))
+    return out
+
+
 #: Candidate servo-clock phases tried per position-loop period.
 PHASE_STEPS = 8
 #: Relative spread of the phase costs below which the current ripple is taken to say nothing about the phase.
@@ -503,7 +526,7 @@ def _phase_cost(prep: Prepared, t_start: float) -> float:
     from .model import simulate  # local: model imports the replay, which needs nothing from here
 
     sim = simulate(prep.machine, prep.t, prep.commands, [{}], t_start, twin=prep.twin_commands(),
-                   disturbance=prep.disturbance)
+                   disturbance=prep.disturbance, start=prep.start)
     cost = 0.0
     for a in prep.axes:
         ok = prep.valid & np.isfinite(prep.fe[a])

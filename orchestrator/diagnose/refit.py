@@ -191,7 +191,7 @@ def refit(prep: Prepared, cols: dict[str, AxisColumns], start: Model, free: list
         if not free:
             break
         sim = simulate(prep.machine, prep.t, prep.commands, models(theta, True), prep.t_start, twin=twin,
-                       disturbance=prep.disturbance)
+                       disturbance=prep.disturbance, start=prep.start)
         replays += 1
         r0 = residuals(prep, cols, sim, 0, proj)
         cost = float(r0 @ r0)

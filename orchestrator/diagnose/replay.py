@@ -20,6 +20,7 @@ from scipy.interpolate import PchipInterpolator
 from fmus_src.servo import MCU, DriveAxis
 
 from ..identify.closed_loop import run_servo_samples
+from ..identify.start_state import AxisStart, apply_start, initial_positions
 from ..machine import Machine
 from ..twin import drive_parameters, mcu_parameters
 from .errors import DiagnosisError
@@ -64,6 +65,22 @@ def interpolate_command(t: np.ndarray, x: np.ndarray, query: np.ndarray) -> np.n
     return PchipInterpolator(t, x, axis=0, extrapolate=False)(q)
 
 
+def command_before(t: np.ndarray, x: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
+    """``f(q)``: the command at ``q`` (:func:`interpolate_command`), extrapolated linearly before ``t[0]``.
+
+    The reference history of a replay that starts in motion: the position loop's feed-forward differences
+    at the first tick look one and two position-loop periods back, before the recording's first sample,
+    where the command moved on at its start velocity rather than stood still.
+    """
+    x = x if x.ndim == 1 else x[:, 0]
+    slope = (x[1] - x[0]) / (t[1] - t[0]) if t.size > 1 else 0.0
+
+    def f(q: np.ndarray) -> np.ndarray:
+        q = np.asarray(q, dtype=float)
+        return np.where(q < t[0], x[0] + slope * (q - t[0]), interpolate_command(t, x, q))
+    return f
+
+
 def run_replay(
     machine: Machine,
     t_cmd: np.ndarray,
@@ -74,6 +91,7 @@ def run_replay(
     drive_values: Mapping[str, Mapping[str, np.ndarray | float]] | None = None,
     t_start: float | None = None,
     disturbance: Mapping[str, Callable[[np.ndarray], np.ndarray]] | None = None,
+    start: Mapping[str, AxisStart] | None = None,
 ) -> Replay:
     """Simulate MCU + drives of the axes in ``commands`` for ``B`` parameter sets.
 
@@ -98,6 +116,11 @@ def run_replay(
     disturbance : mapping axis -> callable, optional
         ``f(t)`` -> disturbance force on the axis [N] (the recorded cutting force on the workpiece,
         ``Fd = +F``), evaluated at the middle of each servo tick.
+    start : mapping axis -> AxisStart, optional
+        The state the recording implies at its first sample (:func:`.identify.start_state.estimate_start`):
+        an axis that moves there starts at that position and velocity at the first tick, with the velocity
+        loop's integrator holding the current of each member's force balance (its friction, load and mass;
+        :func:`.identify.start_state.apply_start`), instead of at rest on the command. Default: at rest.
 
     Returns
     -------
@@ -119,17 +142,24 @@ def run_replay(
     params.update(dict(mcu_values or {}))
     mcu = MCU("mcu", batch=batch, **params)
     drives: dict[str, DriveAxis] = {}
+    moving = initial_positions(start, t0)
     for a in axes:
         dp = drive_parameters(machine, a)
         dp.update(dict((drive_values or {}).get(a, {})))
-        drives[a] = DriveAxis(f"{a}_drive", batch=batch, initial_position=ref[a][0], **dp)
+        x0 = moving[a] if a in moving else ref[a][0]
+        drives[a] = DriveAxis(f"{a}_drive", batch=batch, initial_position=x0, **dp)
         mcu.set(f"{a}_ref", ref[a][0])
-        mcu.set(f"{a}_position", ref[a][0])
+        mcu.set(f"{a}_position", drives[a].values["position"])
     mcu.setup(t0)
     for d in drives.values():
         d.setup(t0)
     dist = ({a: np.asarray(f(tick_t[:-1] + 0.5 * tv), dtype=float) for a, f in disturbance.items() if a in drives}
             if disturbance else None)
+    if start:
+        before = {a: (commands[a] if callable(commands[a])
+                      else command_before(t_cmd, np.asarray(commands[a], dtype=float))) for a in axes}
+        apply_start(mcu, drives, {a: s for a, s in start.items() if a in drives}, t0, before,
+                    {a: f[0] for a, f in dist.items()} if dist else None)
     j = np.clip(np.searchsorted(tick_t, t_out, side="right"), 1, n_ticks)
     f = np.clip((t_out - tick_t[j - 1]) / tv, 0.0, 1.0)
     out = run_servo_samples(mcu, drives, ref, t0, tv, n_ticks, j, f, ("table_position", "position", "motor_force"),

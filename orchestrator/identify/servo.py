@@ -327,7 +327,10 @@ def _twin_series(d: CaseData, axes: list[str], machine: Machine, explicit: bool)
                                   f"{d.case.program} (commanded stroke below 10 µm)")
     if not moving:
         return None
-    sel = prep.valid.copy()
+    # a member shifted by ``lag`` compares the log at ``t`` with its replay at ``t - lag``, which starts at
+    # ``t_start``: samples before the latest such start (one position-loop period later) would meet a held state
+    tp = float(machine.si("servo")["position_loop_period"])
+    sel = prep.valid & (np.asarray(prep.t, dtype=float) >= prep.t_start + tp + max(map(abs, SHIFT_BOUNDS_MS)) * 1e-3)
     for a in moving:
         sel &= np.isfinite(prep.fe[a]) & np.isfinite(prep.current[a])
     _check_same_program(d, prep, moving, sel)
