@@ -27,15 +27,8 @@ from orchestrator.optimize.context import ProblemContext, classify_lines
 from orchestrator.optimize.reference import _per_revolution_lines
 from orchestrator.simulate import simulate
 from orchestrator.twin import build_twin
+from tests.test_optimize_cases import CASE_TOML
 
-CASE_TOML = """program = "program.nc"
-[stock]
-min = [0.0, 0.0, -2.0]
-max = [4.0, 6.0, 0.0]
-[tool]
-diameter_mm = 6.0
-flutes = 2
-"""
 N_ADAPTIVE = 200
 ADAPTIVE_FIRST = 7  # line of the first of the 200 cutting lines
 
