@@ -464,7 +464,11 @@ def prepare(case: Case, recording: Recording, machine: Machine, axes: list[str] 
         line = np.asarray(nc["line"], float)[idx]
     tp = float(machine.si("servo")["position_loop_period"])
     t_start = float(offset + tp * np.ceil((t[0] - offset) / tp - 1e-9))
-    valid &= t >= t_start + tp
+    # the replay starts from the state the log implies (:func:`starts`); what that estimate and the clock
+    # alignment leave wrong decays with the position loop's time constant 1 / (Pp Spp): the samples of the
+    # first such time constant (of the slowest axis) are not compared
+    settle = max(start_window(machine, a) for a in commands)
+    valid &= t >= t_start + tp + settle
     prep = Prepared(recording, machine, t, float(offset), method, list(commands), commands, recorded, fe, cur,
                     valid, line, nc, nc_diff, ref_off, t_start,
                     disturbance=disturbance if disturbance is not None else recorded_forces(recording),
