@@ -15,6 +15,7 @@ import pytest
 from orchestrator.case import CaseError, load_case
 from orchestrator.recording import Recording, RecordingError
 from orchestrator.validation import validate_case
+from tests.test_diagnose_logger import _x_friction_plus_100_N
 
 CASE = """program = "program.nc"
 recording = "recording.csv"
@@ -161,16 +162,6 @@ def test_logger_artefacts_of_the_file_itself_read_to_the_same_numbers(tmp_path):
 AIR_PROGRAM = "G21 G90 G17\nG0 X0 Y0 Z5.\nG1 X20. Y10. F1500\nX5. Y15. Z0\nG0 X0 Y0 Z5.\nM30\n"
 SERVO_CHANNELS = ("line", "x_ref_mm", "y_ref_mm", "z_ref_mm", "x_mm", "y_mm", "z_mm", "x_tcmd_A", "y_tcmd_A",
                   "z_tcmd_A")
-
-
-def _x_friction_plus_100_N(text: str) -> str:
-    for old, new in (("coulomb_N = { value = 641.6,", "coulomb_N = { value = 741.6,"),
-                     ("coulomb_N = { value = 661.9,", "coulomb_N = { value = 761.9,"),
-                     ("static_N = { value = 775.2,", "static_N = { value = 875.2,"),
-                     ("static_N = { value = 756.8,", "static_N = { value = 856.8,")):
-        assert text.count(old) == 1
-        text = text.replace(old, new)
-    return text
 
 
 @pytest.fixture(scope="module")
