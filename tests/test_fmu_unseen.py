@@ -65,9 +65,10 @@ RESOURCE_Y = 42.5
 def _compile(name: str, out: Path) -> bytes:
     """The shared library of model ``name`` (FMI 2.0 models: its #defines, common2.c, then the model)."""
     text = (SOURCES / f"{name}.c").read_text()
-    if name != "counter3":
+    if name != "counter3":  # the model's leading #defines, the generic slave, then the rest of the model
         lines = text.splitlines(keepends=True)
-        text = "".join(lines[:5]) + (SOURCES / "common2.c").read_text() + "".join(lines[5:])
+        n = next(i for i, line in enumerate(lines) if not line.startswith("#define"))
+        text = "".join(lines[:n]) + (SOURCES / "common2.c").read_text() + "".join(lines[n:])
     source = out / f"{name}.c"
     source.write_text(text)
     library = out / f"{name}.so"
@@ -248,11 +249,37 @@ def test_a_failing_step_names_file_function_status_and_log(fmus, fast_runs, mode
                       fast_runs, strings=True, time_limit=0.01)
     assert not result.success and result.steps == 7
     asynchronous = (" (the FMU runs the step asynchronously; asynchronous steps are not supported: cnctwin's "
-                    "master steps every FMU synchronously and does not wait for fmi2StepFinished)") if mode == 5 else ""
+                    "master steps every FMU synchronously and does not wait for fmi2StepFinished); fmi2CancelStep "
+                    "returned fmi2OK, the step was cancelled") if mode == 5 else ""
+    # FMI 2.0, 4.2.2: the pending step is cancelled before the instance is freed (the fixture logs an error when
+    # an instance with a step in progress is freed, or when fmi2CancelStep comes without a pending step)
+    cancel = " | [fmi2OK] fmi2CancelStep: the step from t = 0.007 is cancelled" if mode == 5 else ""
     assert result.message == (f"simulation failed at t = 0.007000 s: st: fmi2DoStep returned {status}{asynchronous} "
                               f"at t = 0.007000 s (FMU {fmus['stair']}); FMU log: [{status}] injected status {mode} "
-                              "at t = 0.007")
+                              f"at t = 0.007{cancel}")
     np.testing.assert_array_equal(result.recording["st.counter"], [0, 0, 1, 1, 2, 2, 3, 3])
+
+
+@pytest.mark.parametrize("compiled", [False, True])
+def test_a_pending_step_is_cancelled_before_the_instance_is_freed(fmus, compiled):
+    """fmi2CancelStep is the only call after fmi2Pending (then fmi2FreeInstance); a cancel that fails leaves the
+    instance allocated, since its step may still run."""
+    for cancel_status, expected in ((0, "fmi2CancelStep returned fmi2OK, the step was cancelled"),
+                                    (3, "fmi2CancelStep returned fmi2Error: the step may still run, so the "
+                                        "instance is left allocated (not freed)")):
+        system = _one(fmus["stair"], "st", period=0.002, fail_time=0.0035, mode=5, cancel_status=cancel_status)
+        component = system.components["st"]
+        result = Master(system, MasterSettings(step=1e-3, time_limit=0.01, compiled=compiled), ["st.counter"]).run()
+        assert not result.success and result.steps == 3
+        assert expected in result.message
+        logs = list(component.messages)
+        cancelled = "fmi2CancelStep: the step from t = 0.003 is cancelled"
+        # cancelled: freed (the fixture logs in fmi2FreeInstance); a failed cancel: left allocated
+        assert logs[-2:] == ([f"[fmi2OK] {cancelled}", "[fmi2OK] freeing st"] if cancel_status == 0
+                             else ["[fmi2Pending] injected status 5 at t = 0.003", f"[fmi2Error] {cancelled}"])
+        assert component.state == "terminated" and not any("in progress" in line for line in logs)
+        component.close()  # freed already (or left allocated): no further FMI call
+        assert list(component.messages) == logs
 
 
 def test_a_failing_fmi3_step_holds_the_outputs_of_its_last_good_step(fmus, fast_runs):

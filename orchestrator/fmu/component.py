@@ -751,7 +751,28 @@ class FMUComponent:
             # FMI 2.0, 4.2.2: fmi2Pending means the FMU runs the step asynchronously (canRunAsynchronuously)
             what += (" (the FMU runs the step asynchronously; asynchronous steps are not supported: cnctwin's "
                      "master steps every FMU synchronously and does not wait for fmi2StepFinished)")
+            if function == "fmi2DoStep":
+                what += self._cancel_step()
         return self._end(function, what, status)
+
+    def _cancel_step(self) -> str:
+        """``fmi2CancelStep`` after a ``fmi2DoStep`` that returned ``fmi2Pending``; what happened, for the message.
+
+        FMI 2.0, 4.2.2: a step in progress is cancelled with ``fmi2CancelStep``;
+        afterwards only ``fmi2Terminate``, ``fmi2Reset`` and ``fmi2FreeInstance``
+        are allowed (the caller frees the instance). When the cancel itself
+        fails, the step may still be running in the FMU, so the instance is
+        abandoned, not freed (a few kB until the process ends).
+        """
+        try:
+            status = int(self._slave.fmi2CancelStep(self._slave.component))
+        except FMICallException as exc:
+            status = int(exc.status)
+        if status <= 1:
+            return f"; fmi2CancelStep returned {status_name(status)}, the step was cancelled"
+        self._alive[0] = False  # not freed: the asynchronous step may still run
+        return (f"; fmi2CancelStep returned {status_name(status)}: the step may still run, so the instance is "
+                "left allocated (not freed)")
 
     def _end(self, function: str, what: str, status: int | None) -> FMUError:
         """The FMUError for a failed call (``what`` happened in ``function``); frees or abandons the instance."""
@@ -762,9 +783,10 @@ class FMUComponent:
             path=str(self.path), component=self.name, function=function,
             time=None if np.isnan(self.time) else self.time, status=status,
         )
-        if status is not None and status >= 4:
-            # fmi2Fatal / fmi3Fatal: no further FMI call is allowed on any instance (FMI 2.0, 2.1.3;
-            # FMI 3.0, 2.2.3), not even the FreeInstance; the instance is abandoned
+        if status is not None and status >= 4 and not (status == PENDING and not self._v3):
+            # fmi2Fatal / fmi3Fatal (or an illegal status): no further FMI call is allowed on any instance
+            # (FMI 2.0, 2.1.3; FMI 3.0, 2.2.3), not even the FreeInstance; the instance is abandoned. A cancelled
+            # fmi2Pending step is freed (_cancel_step leaves it allocated when the cancel failed)
             self._alive[0] = False
         else:
             self._close()
