@@ -21,7 +21,7 @@ import pytest
 
 from orchestrator import Master, MasterSettings, Probe, System
 from orchestrator.errors import SystemDescriptionError
-from orchestrator.fmu import FMUComponent, FMUError
+from orchestrator.fmu import FMUComponent, FMUError, check_fmu
 from orchestrator.fmu.isolated import IsolatedFMUComponent
 from orchestrator.ssp import build_system, read_ssd, system_to_ssp
 
@@ -280,3 +280,54 @@ def test_ssp_keeps_undeclared_units_and_unit_definitions(make, tmp_path):
     assert [(c.source, c.target, c.factor) for c in rebuilt.connections] == [("s.y", "t.u", 1000.0),
                                                                             ("t.y", "f.u", 1.0)]
     assert rebuilt.component("t").values["c"][0] == pytest.approx(293.15, rel=1e-15)
+
+
+# ----------------------------------------------------------------------------- role mappings into affine units
+HOME_MM = '<Unit name="mm_from_home"><BaseUnit m="1" factor="0.001" offset="0.25"/></Unit>'
+
+
+@pytest.fixture
+def thermal_role(monkeypatch):
+    """A role in K (the twin's roles have no temperature): ``u`` an input, ``y`` an output."""
+    from orchestrator.fmu import roles
+
+    role = roles.Role("thermal", required=(roles._in("u", "K"), roles._out("y", "K")))
+    monkeypatch.setitem(roles.ROLES, "thermal", role)
+    return role
+
+
+def test_a_role_mapping_into_degC_applies_the_offset_both_ways_on_both_loops(make, thermal_role, fast_runs):
+    """Our u = 300 K is the FMU's 26.85 degC; its y = 2 u + 1 = 54.7 degC is our 327.85 K (exact: 2 × 300 - 273.15
+    + 1). The FMU's start values come back in K (u0 = 20 degC: 293.15 K)."""
+    src = make("src", scale_xml(u="K", y="K", u0=300.0))
+    fmu = make("dst", scale_xml(u="degC", y="degC", definitions=DEGC, u0=20.0, k=2.0))
+    component = FMUComponent(fmu, "t", role="thermal")
+    assert component.variable("u").unit == "K" and component.values["u"][0] == pytest.approx(293.15, rel=1e-15)
+
+    def system() -> System:
+        s = System("affine")
+        s.add(FMUComponent(src, "s"))
+        s.add(FMUComponent(fmu, "t", role="thermal", parameters={"c": 1.0}))
+        s.connect("s.y", "t.u")
+        return s
+
+    result, _ = _both(system, ["t.y"], fast_runs, time_limit=0.003)
+    np.testing.assert_allclose(result.recording["t.y"], 2 * 300.0 - 273.15 + 1.0, rtol=1e-14)
+    assert result.recording.units["t.y"] == "K"
+
+
+def test_a_role_mapping_into_an_affine_length_unit(make, fast_runs, monkeypatch):
+    """A position in mm from a home mark 0.25 m out: 0 mm_from_home is 0.25 m; our 0.3 m is 50 mm_from_home; y = u."""
+    from orchestrator.fmu import roles
+
+    monkeypatch.setitem(roles.ROLES, "axis", roles.Role("axis", required=(roles._in("u", "m"), roles._out("y", "m"))))
+    fmu = make("home", scale_xml(u="mm_from_home", y="mm_from_home", definitions=HOME_MM))
+    report = check_fmu(fmu, role="axis")
+    assert [row.status for row in report.role_rows if row.ours in ("u", "y")] == [
+        "ok (converted: x m = 1000 x -250 mm_from_home)"] * 2
+    component = FMUComponent(fmu, "a", role="axis", parameters={"u": 0.3})
+    system = System("axis")
+    system.add(component)
+    result = Master(system, MasterSettings(step=1e-3, time_limit=0.002), ["a.y"]).run()
+    np.testing.assert_allclose(result.recording["a.y"], 0.3, rtol=1e-15)
+    assert FMUComponent(fmu, "b", role="axis").values["u"][0] == 0.25  # its start, 0 mm_from_home

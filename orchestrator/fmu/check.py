@@ -159,9 +159,8 @@ def _role_rows(path: Path, role_name: str, mapping: Mapping[str, str]) -> list[R
             try:
                 factor, offset = conversion(spec.unit, unit, None,
                                             variable_unit_definition(v, definitions, loaded.relative))
-                if offset != 0.0:
-                    status = (f"unit {unit!r} does not fit {spec.unit!r}: the conversion needs an offset; a role "
-                              "maps units by a factor only")
+                if offset != 0.0:  # an affine unit (degC for K): x [spec.unit] = factor x + offset [unit]
+                    status = f"ok (converted: x {spec.unit} = {factor:g} x {offset:+g} {unit})"
                 else:
                     status = "ok" if factor == 1.0 else f"ok (converted: 1 {spec.unit} = {factor:g} {unit})"
             except UnitError as exc:

@@ -355,8 +355,9 @@ class _Binding:
 
     ours: Variable
     theirs: ScalarVariable
-    to_fmu: float  # their value = to_fmu × our value (Real only)
+    to_fmu: float  # their value = to_fmu × our value + offset (Real only)
     native: _Native  # how it is exchanged (FMI type, functions)
+    offset: float = 0.0  # their value at our 0 (an affine unit: degC for our K), Real only
 
 
 class _Block:
@@ -364,7 +365,7 @@ class _Block:
 
     ``args`` are the arguments of the get/set call after the instance:
     ``(vr, nvr, values)`` (FMI 2.0) or ``(vr, nvr, values, nValues)`` (FMI 3.0).
-    Reals are converted with ``to_fmu`` (their value = to_fmu × ours); String
+    Reals are converted with ``to_fmu`` and ``offset`` (their value = to_fmu × ours + offset); String
     values are held in ``values`` as str, the others in arrays of shape (1,).
     """
 
@@ -382,6 +383,10 @@ class _Block:
         self.arrays = [values[name] for name in self.names] if native.ours != "String" else []
         self.to_fmu = np.array([b.to_fmu for b in bindings])
         self.from_fmu = 1.0 / self.to_fmu if n else self.to_fmu
+        self.offset = np.array([b.offset for b in bindings], dtype=float)
+        #: where an offset applies (elsewhere nothing is added, as in the compiled FMU loop: -0.0 stays -0.0)
+        self.shifted = self.offset != 0.0
+        self.affine = bool(self.shifted.any())
 
     def pack(self) -> None:
         """Our values -> the buffer (in the FMU's units)."""
@@ -390,9 +395,12 @@ class _Block:
             for i, arr in enumerate(self.arrays):
                 self.view[i] = arr[0]
             self.view *= self.to_fmu
+            if self.affine:
+                np.add(self.view, self.offset, out=self.view, where=self.shifted)
         elif kind == "Real":
             for i, arr in enumerate(self.arrays):
-                self.buffer[i] = float(arr[0]) * self.to_fmu[i]
+                value = float(arr[0]) * self.to_fmu[i]
+                self.buffer[i] = value + self.offset[i] if self.shifted[i] else value
         elif kind == "String":
             for i, name in enumerate(self.names):
                 self.buffer[i] = str(self.values[name]).encode("utf-8")
@@ -407,12 +415,15 @@ class _Block:
         """The buffer -> our values (in our units)."""
         kind = self.native.ours
         if self.fast:
+            if self.affine:
+                np.subtract(self.view, self.offset, out=self.view, where=self.shifted)
             self.view *= self.from_fmu
             for i, arr in enumerate(self.arrays):
                 arr[0] = self.view[i]
         elif kind == "Real":
             for i, arr in enumerate(self.arrays):
-                arr[0] = float(self.buffer[i]) * self.from_fmu[i]
+                raw = float(self.buffer[i])
+                arr[0] = (raw - self.offset[i] if self.shifted[i] else raw) * self.from_fmu[i]
         elif kind == "String":
             for i, name in enumerate(self.names):
                 self.values[name] = (self.buffer[i] or b"").decode("utf-8")
@@ -600,7 +611,7 @@ class FMUComponent:
             spec = self.role.variable(ours) if self.role else None
             our_unit: str | None = their_unit if type_ == "Real" else "1"
             our_definition = their_definition
-            factor = 1.0
+            factor, offset = 1.0, 0.0
             if spec is not None:
                 if spec.causality != v.causality:
                     problems.append(f"{ours!r} (FMU {v.name!r}) is a {v.causality}, the role needs a {spec.causality}")
@@ -618,11 +629,6 @@ class FMUComponent:
                     except UnitError as exc:
                         problems.append(f"{ours!r} (FMU {v.name!r} [{their_unit}]): {exc}")
                         continue
-                    if offset != 0.0:  # a role variable is exchanged by a factor; connect such a variable instead
-                        problems.append(f"{ours!r} (FMU {v.name!r} [{their_unit}]): converting {spec.unit!r} to "
-                                        f"{their_unit!r} needs an offset ({offset!r}); a role maps units by a "
-                                        "factor only")
-                        continue
             try:
                 start = _start(v, type_)
             except ValueError:
@@ -630,11 +636,11 @@ class FMUComponent:
                     f"{where}: modelDescription.xml: variable {v.name!r}: start={v.start!r} is not a {v.type} "
                     f"value; expected a number", path=str(self.path), component=self.name,
                 ) from None
-            if type_ == "Real" and factor != 1.0:
-                start = start / factor
+            if type_ == "Real" and (factor != 1.0 or offset != 0.0):
+                start = (start - offset) / factor  # their start in our unit
             declared = Variable(ours, v.causality, our_unit, start, v.description or "", type_,  # type: ignore[arg-type]
                                 our_definition)
-            bindings.append(_Binding(declared, v, factor, native))
+            bindings.append(_Binding(declared, v, factor, native, offset))
         if self.role is not None:
             present = {b.ours.name for b in bindings}
             missing = [r.name for r in self.role.required if r.name not in present]

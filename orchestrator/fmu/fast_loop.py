@@ -26,10 +26,12 @@ call and operation for operation, so recordings are bit-identical:
   started), after it *all* Real outputs are read in one ``fmi2GetReal``
   (FMI 3.0: the Float64 ones, ``fmi3SetFloat64`` / ``fmi3GetFloat64``, and
   ``fmi3DoStep`` with ``noSetFMUStatePriorToCurrentPoint = true``);
-* an output value in our units is ``raw × from_fmu``; an input receives
-  ``(source × connection factor + connection offset) × to_fmu``, the offset
-  added only when it is not 0 (units such as ``degC`` → ``K``), as
-  :class:`FMUComponent` and the master's Python loop do.
+* an output value in our units is ``raw × from_fmu`` (``(raw − fmu offset) ×
+  from_fmu`` for a role variable mapped to an affine unit, ``degC`` for our
+  ``K``); an input receives ``(source × connection factor + connection
+  offset) × to_fmu`` (``+ fmu offset``), each offset applied only when it is
+  not 0 (units such as ``degC`` → ``K``), as :class:`FMUComponent` and the
+  master's Python loop do.
 
 Only Real variables can be connected (of an FMI 3.0 FMU: ``Float64``
 variables). Recorded outputs and stop signals of an FMI 2.0 FMU may also be
@@ -174,6 +176,8 @@ typedef struct {
                                      strings (valid until the FMU's next call) copied into other_text */
     void **other_text;            /* String block i: char *[other_n[i]], grown with realloc (cnct_free_text) */
     void **other_cap;             /* String block i: size_t[other_n[i]], bytes allocated for each copy */
+    const double *in_shift;       /* FMU value at our 0 of input i (a role mapping into an affine unit), or 0 */
+    const double *out_shift;      /* the same for output i: our value = (raw - out_shift) * out_from */
 } Loop;
 
 static int copy_texts(char **text, size_t *cap, const char *const *src, size_t n) {
@@ -207,7 +211,10 @@ static int get_outputs(Loop *L, int c) {
     fmi2Status s = L->fmi3[c] ? ((GetFloat64F)L->get_real[c])(L->comp[c], L->out_vr + a, n, L->buffer, n)
                               : ((GetRealF)L->get_real[c])(L->comp[c], L->out_vr + a, n, L->buffer);
     if (s > 1) { L->err[1] = 2; L->err[3] = s; return 1; }
-    for (int i = a; i < b; ++i) L->slots[i] = L->buffer[i - a] * L->out_from[i];
+    for (int i = a; i < b; ++i) {
+        const double raw = L->buffer[i - a];
+        L->slots[i] = (L->out_shift[i] != 0.0 ? raw - L->out_shift[i] : raw) * L->out_from[i];
+    }
     return 0;
 }
 
@@ -270,6 +277,7 @@ int cnct_run(Loop *L, long k0, long n_steps, double t0, double h) {
                         }
                         L->in_last[i] = v;
                         L->buffer[i - a] = v * L->in_to[i];
+                        if (L->in_shift[i] != 0.0) L->buffer[i - a] += L->in_shift[i];
                     }
                     s = set_real(L, c, L->in_vr + a, (size_t)(b - a));
                     if (s > 1) {
@@ -378,6 +386,8 @@ class _Loop(ctypes.Structure):
         ("other_kind", ctypes.POINTER(ctypes.c_int)),
         ("other_text", ctypes.POINTER(ctypes.c_void_p)),
         ("other_cap", ctypes.POINTER(ctypes.c_void_p)),
+        ("in_shift", ctypes.POINTER(ctypes.c_double)),
+        ("out_shift", ctypes.POINTER(ctypes.c_double)),
     ]
 
 
@@ -427,10 +437,11 @@ def _library() -> ctypes.CDLL:
 # ----------------------------------------------------------------------------- instances
 @dataclass
 class _Port:
-    """One Real variable of an instance: value reference and factors to/from our units."""
+    """One Real variable of an instance: value reference, factor and offset to its units from ours."""
 
     vr: int
     to_fmu: float
+    offset: float = 0.0  # FMU value = to_fmu × ours + offset
 
 
 class _Instance:
@@ -463,7 +474,7 @@ class _Instance:
                 if b.native.getter != real_getter:
                     self.discrete.add(b.ours.name)
                     continue
-                port = _Port(int(b.theirs.valueReference), float(b.to_fmu))
+                port = _Port(int(b.theirs.valueReference), float(b.to_fmu), float(b.offset))
                 if b.ours.causality == "input":
                     self.inputs[b.ours.name] = port
                 elif b.ours.causality == "output":
@@ -798,12 +809,13 @@ class FastFMULoop:
             return a
 
         slot_of: dict[str, int] = {}
-        out_start, out_vr, out_from = [0], [], []
+        out_start, out_vr, out_from, out_shift = [0], [], [], []
         for u in self.units:
             for name, port in u.outputs.items():
                 slot_of[f"{u.name}.{name}"] = len(out_vr)
                 out_vr.append(port.vr)
                 out_from.append(1.0 / port.to_fmu)
+                out_shift.append(port.offset)
             out_start.append(len(out_vr))
         n_real = len(out_vr)
         bool_start, bool_vr, int_start, int_vr = [0], [], [0], []
@@ -819,11 +831,13 @@ class FastFMULoop:
             slot_of[ref] = n_real + i
         source_of = {target: (source, factor, offset) for source, target, factor, offset in self.connections}
         in_start, in_vr, in_src, in_factor, in_offset, in_to, in_const = [0], [], [], [], [], [], []
+        in_shift = []
         for u in self.units:
             for name, port in u.inputs.items():
                 ref = f"{u.name}.{name}"
                 in_vr.append(port.vr)
                 in_to.append(port.to_fmu)
+                in_shift.append(port.offset)
                 if ref in source_of:
                     source, factor, offset = source_of[ref]
                     in_src.append(slot_of[source])
@@ -911,6 +925,8 @@ class FastFMULoop:
             other_kind=arr([o[4] for o in others], ctypes.c_int),
             other_text=arr([o[5] for o in others], ctypes.c_void_p),
             other_cap=arr([o[6] for o in others], ctypes.c_void_p),
+            in_shift=arr(in_shift, ctypes.c_double),
+            out_shift=arr(out_shift, ctypes.c_double),
         )
         self._slot_of = slot_of
         return loop, keep
@@ -920,7 +936,7 @@ class FastFMULoop:
         """Value (our units) an unconnected input keeps over the run."""
         if u.owner is not None:
             return float(u.owner.values[name][0])
-        return u.get_real(port.vr) / port.to_fmu
+        return (u.get_real(port.vr) - port.offset) / port.to_fmu
 
     # ------------------------------------------------------------------ run
     def run(self, n_steps: int, h: float, t0: float = 0.0) -> FastLoopResult:
