@@ -221,6 +221,9 @@ class System:
         for existing in self.connections:
             if existing.target == target:
                 raise SystemDescriptionError(f"{target} is already connected to {existing.source}")
+            if self._canonical(existing.target) == self._canonical(target):
+                raise SystemDescriptionError(f"{target} is an alias of {self._canonical(target)} (one FMU variable), "
+                                             f"which {existing.target} already feeds from {existing.source}")
         if (src.unit is None or dst.unit is None) and src.type == "Real":
             log.info("%s: %s [%s] -> %s [%s]: no unit declared on %s; the value is passed unchanged",
                      self.name, source, unit_text(src.unit), target, unit_text(dst.unit),
@@ -229,6 +232,13 @@ class System:
         connection = Connection(source, target, factor, offset)
         self.connections.append(connection)
         return connection
+
+    def _canonical(self, reference: str) -> str:
+        """``"component.input"`` of the input that ``reference`` names: an FMU's input alias names another
+        (``FMUComponent.canonical``); every other reference names itself."""
+        comp, var = split_reference(reference)
+        canonical = getattr(self.component(comp), "canonical", None)
+        return f"{comp}.{canonical(var)}" if canonical is not None else reference
 
     def connect_many(self, pairs: Iterable[tuple[str, str]]) -> None:
         """Connect several ``(source, target)`` pairs."""

@@ -550,6 +550,8 @@ class FMUComponent:
         self.mapping = dict(mapping or {})
         self._bindings = self._bind(md)
         self._by_name = {b.ours.name: b for b in self._bindings}
+        #: input alias -> the first input of its alias set (one value reference and type); they share one value
+        self._input_alias = self._input_aliases()
         self.values: dict[str, np.ndarray | str] = {}
         self._load_start_values()
         self._init_parameters: dict[str, object] = dict(parameters or {})
@@ -561,7 +563,8 @@ class FMUComponent:
                 raise FMUError(f"{self.name}.{key} is an output and cannot be given as a parameter",
                                path=str(self.path), component=self.name)
         self._apply_init_parameters()
-        self._in_blocks = _blocks(self.values, [b for b in self._bindings if b.ours.causality == "input"])
+        self._in_blocks = _blocks(self.values, [b for b in self._bindings if b.ours.causality == "input"
+                                                and b.ours.name not in self._input_alias])
         self._out_blocks = _blocks(self.values, [b for b in self._bindings if b.ours.causality == "output"])
         self._step_flags = fmi3.StepFlags() if self._v3 else None
         self.messages: deque[str] = deque(maxlen=log_capacity)
@@ -667,6 +670,51 @@ class FMUComponent:
                 )
         return bindings
 
+    def _input_aliases(self) -> dict[str, str]:
+        """Inputs that alias an earlier input (same value reference and FMI type) -> that input.
+
+        FMI 3.0 ``<Alias>`` elements (fmpy lists them after every variable,
+        with the variable's value reference, causality and unit) and FMI 2.0
+        variables sharing a value reference. One alias set is one input: the
+        names share one value array, and the FMU gets it once per step (two
+        names written in one call would let a stale one win).
+
+        Raises
+        ------
+        FMUError
+            Two names of one input set converted differently (one mapped to a role unit).
+        """
+        heads: dict[tuple[str, int], _Binding] = {}
+        out: dict[str, str] = {}
+        for b in self._bindings:
+            if b.ours.causality != "input":
+                continue
+            head = heads.setdefault((b.native.setter, int(b.theirs.valueReference)), b)
+            if head is b:
+                continue
+            if (head.to_fmu, head.offset) != (b.to_fmu, b.offset):
+                raise FMUError(
+                    f"{self.path}: inputs {head.ours.name!r} [{head.ours.unit}] and {b.ours.name!r} "
+                    f"[{b.ours.unit}] are aliases (value reference {b.theirs.valueReference}) exchanged in different "
+                    "units; map only one of them to a role name", path=str(self.path), component=self.name)
+            out[b.ours.name] = head.ours.name
+        return out
+
+    def canonical(self, name: str) -> str:
+        """The input that ``name`` is an alias of (see :meth:`_input_aliases`), else ``name`` itself."""
+        return self._input_alias.get(name, name)
+
+    def display_unit(self, name: str) -> str | None:
+        """The FMU's ``displayUnit`` of variable ``name`` (an FMI 3.0 ``<Alias>`` has its own), None if none.
+
+        Values are always exchanged in the variable's ``unit``; the display unit is how the
+        exporting tool shows it (:func:`~orchestrator.fmu.check_fmu` lists it).
+        """
+        binding = self._by_name.get(name)
+        if binding is None:
+            raise no_variable_error(self.name, self.path, name, self._by_name, self.model_description)
+        return getattr(binding.theirs, "displayUnit", None) or None
+
     # ------------------------------------------------------------------ declarations
     def declared_variables(self) -> tuple[Variable, ...]:
         """Exposed variables (our names and units)."""
@@ -686,19 +734,25 @@ class FMUComponent:
             raise no_variable_error(self.name, self.path, name, self._by_name, self.model_description) from None
 
     def names(self, causality: str) -> list[str]:
-        """Names of the exposed variables of one causality, in model-description order."""
-        return [b.ours.name for b in self._bindings if b.ours.causality == causality]
+        """Names of the exposed variables of one causality, in model-description order (an input once: without
+        its aliases, which :meth:`variable` still resolves)."""
+        return [b.ours.name for b in self._bindings if b.ours.causality == causality
+                and b.ours.name not in self._input_alias]
 
     # ------------------------------------------------------------------ values
     def _load_start_values(self) -> None:
         for b in self._bindings:
             var = b.ours
+            if var.name in self._input_alias:
+                continue  # shares the value of its set's first input (below)
             if var.type == "String":
                 self.values[var.name] = str(var.start)
             elif var.name in self.values:
                 self.values[var.name][...] = var.start  # type: ignore[index]
             else:
                 self.values[var.name] = np.full(1, var.start, dtype=_DTYPES[var.type])
+        for alias, head in self._input_alias.items():
+            self.values[alias] = self.values[head]  # the same array (a str for a String input)
 
     def _apply_init_parameters(self) -> None:
         self._explicit = set()
@@ -711,7 +765,9 @@ class FMUComponent:
             if not isinstance(value, str):
                 raise FMUError(f"{self.name}.{var.name}: expected a string, got {type(value).__name__}",
                                path=str(self.path), component=self.name)
-            self.values[var.name] = value
+            head = self._input_alias.get(var.name, var.name)
+            for name in (head, *(a for a, h in self._input_alias.items() if h == head)):
+                self.values[name] = value
             return
         arr = np.asarray(value, dtype=_DTYPES[var.type])
         if arr.size != 1:

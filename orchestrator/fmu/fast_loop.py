@@ -462,6 +462,8 @@ class _Instance:
         self.other_blocks: list[_Block] = []
         #: String block -> (char *[n], size_t[n]): the C loop's copies of its strings (freed with the instance).
         self.texts: dict[int, tuple[ctypes.Array, ctypes.Array]] = {}
+        #: input alias -> the input it names (FMUComponent.canonical): one port, set once per step
+        self.input_alias: dict[str, str] = {}
         if self.owner is not None:
             self.v3 = fmi3.is_fmi3(self.owner.fmi_version)
             self.slave: FMU2Slave | FMU3Slave = obj._slave  # noqa: SLF001 - same package; the instance it drives
@@ -470,7 +472,10 @@ class _Instance:
             self.inputs: dict[str, _Port] = {}
             self.outputs: dict[str, _Port] = {}
             self.discrete: set[str] = set()
+            self.input_alias = dict(obj._input_alias)  # noqa: SLF001
             for b in obj._bindings:  # noqa: SLF001
+                if b.ours.name in self.input_alias:
+                    continue
                 if b.native.getter != real_getter:
                     self.discrete.add(b.ours.name)
                     continue
@@ -716,6 +721,8 @@ class FastFMULoop:
             else:
                 source, target = c.source, c.target
                 factor, offset = float(getattr(c, "factor", 1.0)), float(getattr(c, "offset", 0.0))
+            comp, var = _split(target)
+            target = f"{comp}.{self._unit(target).input_alias.get(var, var)}"  # an alias: the input it names
             if target in seen:
                 raise FMUError(f"FastFMULoop: {target} is connected twice ({seen[target]} and {source})")
             seen[target] = source

@@ -63,7 +63,7 @@ def _worker(conn: Any, path: str, kwargs: dict) -> None:  # pragma: no cover - r
         conn.send(("error", type(exc).__name__, str(exc), _error_fields(exc)))
         return
     variables = comp.declared_variables()
-    conn.send(("ok", variables, _snapshot(comp, [v.name for v in variables])))
+    conn.send(("ok", variables, _snapshot(comp, [v.name for v in variables]), dict(comp._input_alias)))
     outputs = comp.names("output")
     while True:
         try:
@@ -253,7 +253,11 @@ class IsolatedFMUComponent:
                 self.values[var.name][0] = start  # type: ignore[index]
             else:
                 self.values[var.name] = np.full(1, start, dtype=_DTYPES[var.type])
-        self._inputs = [v.name for v in variables if v.causality == "input"]
+        #: input alias -> the input it names (as the worker's FMUComponent); they share one value
+        self._input_alias: dict[str, str] = reply[3]
+        for alias, head in self._input_alias.items():
+            self.values[alias] = self.values[head]
+        self._inputs = [v.name for v in variables if v.causality == "input" and v.name not in self._input_alias]
         self._settable = [v.name for v in variables if v.causality in ("parameter", "input")]
         self.state = "instantiated"
 
@@ -327,8 +331,12 @@ class IsolatedFMUComponent:
             raise no_variable_error(self.name, self.path, name, self._by_name, self._model_description) from None
 
     def names(self, causality: str) -> list[str]:
-        """Names of the exposed variables of one causality."""
-        return [v.name for v in self._variables if v.causality == causality]
+        """Names of the exposed variables of one causality (an input without its aliases)."""
+        return [v.name for v in self._variables if v.causality == causality and v.name not in self._input_alias]
+
+    def canonical(self, name: str) -> str:
+        """The input that ``name`` is an alias of, else ``name`` (``FMUComponent.canonical``)."""
+        return self._input_alias.get(name, name)
 
     # ------------------------------------------------------------------ values
     def set(self, name: str, value: object) -> None:
@@ -344,7 +352,9 @@ class IsolatedFMUComponent:
             if not isinstance(value, str):
                 raise FMUError(f"{self.name}.{name}: expected a string, got {type(value).__name__}",
                                path=str(self.path), component=self.name)
-            self.values[name] = value
+            head = self._input_alias.get(name, name)
+            for each in (head, *(a for a, h in self._input_alias.items() if h == head)):
+                self.values[each] = value
             return
         arr = np.asarray(value, dtype=_DTYPES[var.type])
         if arr.size != 1:
