@@ -30,6 +30,7 @@ and the compiled FMU loop and must agree bit for bit (``_both`` of
 from __future__ import annotations
 
 import math
+import shutil
 import subprocess
 import sys
 import zipfile
@@ -41,6 +42,7 @@ import pytest
 from orchestrator import Master, MasterSettings, Probe, System
 from orchestrator.errors import SystemDescriptionError
 from orchestrator.fmu import FMUComponent, FMUError, check_fmu
+from orchestrator.fmu.isolated import IsolatedFMUComponent
 
 sys.path.insert(0, str(Path(__file__).resolve().parent / "fixtures" / "fmu"))
 import cfmu  # noqa: E402
@@ -188,6 +190,47 @@ def test_model_description_quirks(fmus):
         FMUComponent(fmus["dahlquist"], parameters={"der(x)": 1.0})
     report = check_fmu(fmus["dahlquist"])
     assert report.ok and report.problems == [] and report.smoke_outputs["x"] == pytest.approx(math.exp(-5.0))
+
+
+def _once(text: str) -> str:
+    return text.replace('<CoSimulation modelIdentifier="Stair"',
+                        '<CoSimulation modelIdentifier="Stair" canBeInstantiatedOnlyOncePerProcess="true"')
+
+
+def test_an_fmu_instantiable_once_per_process_gets_one_live_instance(fmus, tmp_path):
+    """canBeInstantiatedOnlyOncePerProcess="true" (Simulink and other code generators keep the state in the
+    library): a second live instance of one file is refused before fmi2Instantiate; after close() a new one may
+    be made; a copy of the file is a library of its own; IsolatedFMUComponent runs one in its own process."""
+    once = _variant(fmus["stair"], tmp_path / "once.fmu", _once)
+    a = FMUComponent(once, "a")
+    with pytest.raises(FMUError, match=r"^b: once.fmu declares canBeInstantiatedOnlyOncePerProcess=\"true\" and its "
+                                       r"instance 'a' is alive in this process; close\(\) that one first, or load "
+                                       r"each instance as orchestrator.fmu.isolated.IsolatedFMUComponent") as caught:
+        FMUComponent(once, "b")
+    assert caught.value.function == "fmi2Instantiate"
+    a.close()
+    b = FMUComponent(once, "b", parameters={"period": 0.002})
+    copy = FMUComponent(shutil.copy(once, tmp_path / "copy.fmu"), "c", parameters={"period": 0.003})
+    isolated = IsolatedFMUComponent(once, "d", parameters={"period": 0.004})
+    system = System("three")
+    for component in (b, copy, isolated):
+        system.add(component)
+    result = Master(system, MasterSettings(step=1e-3, time_limit=0.012), ["b.counter", "c.counter", "d.counter"]).run()
+    assert result.success, result.message
+    assert [result.recording[f"{n}.counter"][-1] for n in "bcd"] == [6, 4, 3]  # 12 ms / 2, 3, 4 ms
+    assert any("canBeInstantiatedOnlyOncePerProcess" in note for note in check_fmu(copy.path).notes)
+
+
+def test_an_fmu_needing_its_tool_says_so_when_it_cannot_be_instantiated(fmus, tmp_path):
+    """needsExecutionTool="true" (a tool-coupling FMU): when fmi2Instantiate returns NULL the error names the tool."""
+    tool = _variant(fmus["stair"], tmp_path / "tool.fmu", lambda s: s.replace(
+        '<CoSimulation modelIdentifier="Stair"', '<CoSimulation modelIdentifier="Stair" needsExecutionTool="true"')
+        .replace('generationTool="hand-written C"', 'generationTool="SomeTool 2024"')
+        .replace("{2b7e15f0-0c0e-4b8e-8d1f-3c2d1e0f9a22}", "{00000000-0000-0000-0000-000000000000}"))
+    with pytest.raises(FMUError, match=r"^st: fmi2Instantiate failed \(FMU .*tool.fmu\); FMU log: \[fmi2Error\] wrong "
+                                       r"type 1 or GUID .*; the FMU declares needsExecutionTool=\"true\": it runs only "
+                                       r"where its tool \(SomeTool 2024\) is installed \(and licensed\)$"):
+        FMUComponent(tool, "st")
 
 
 def test_structured_parameter_name_must_be_mapped(fmus, tmp_path):

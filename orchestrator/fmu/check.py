@@ -295,6 +295,13 @@ def check_fmu(
                 notes.append(f"variable {v.name!r}: unit {v.unit!r} is not known to cnctwin (fmus_src.units) nor "
                              "defined in the FMU's <UnitDefinitions>: it can be connected and recorded in its own "
                              "unit only")
+    cs = md.coSimulation
+    if getattr(cs, "needsExecutionTool", False):
+        notes.append(f"needsExecutionTool=\"true\": the FMU runs only where its tool ({md.generationTool or '?'}) is "
+                     "installed")
+    if getattr(cs, "canBeInstantiatedOnlyOncePerProcess", False):
+        notes.append("canBeInstantiatedOnlyOncePerProcess=\"true\": one live FMUComponent of this file per process; "
+                     "use IsolatedFMUComponent for more")
     rows = _role_rows(loaded.path, role, mapping) if role is not None else []
     smoke_ok, message, outputs = _smoke(loaded.path, mapping, dict(parameters or {}), smoke_steps)
     return FMUCheckReport(

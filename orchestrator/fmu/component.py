@@ -461,6 +461,9 @@ def _free_instance(slave: Any, alive: list[bool], free: bool = True, function: s
             getattr(slave, function)(slave.component)
 
 
+#: The live instance of each FMU with ``canBeInstantiatedOnlyOncePerProcess="true"``, by extracted folder.
+_ONCE_PER_PROCESS: dict[Path, "weakref.ref[FMUComponent]"] = {}
+
 #: Components by the ``componentEnvironment`` key their FMI 2.0 instance logs with (see :func:`_route_fmi2_log`).
 _LOG_TARGETS: weakref.WeakValueDictionary[int, "FMUComponent"] = weakref.WeakValueDictionary()
 _LOG_KEYS = itertools.count(1)
@@ -867,6 +870,7 @@ class FMUComponent:
 
     def _instantiate(self) -> None:
         md = self.model_description
+        self._claim_once_per_process()
         self._log_key = next(_LOG_KEYS)
         _LOG_TARGETS[self._log_key] = self
         if self._v3:
@@ -878,6 +882,33 @@ class FMUComponent:
         frees = not tool.startswith(NO_FREE_TOOLS)
         self._finalizer = weakref.finalize(self, _free_instance, self._slave, self._alive, frees,
                                            f"{self._prefix}FreeInstance")
+
+    def _claim_once_per_process(self) -> None:
+        """Refuse a second live instance of an FMU with ``canBeInstantiatedOnlyOncePerProcess="true"``.
+
+        Such an FMU keeps its state in the shared library (Simulink and other
+        code generators), so a second instance in one loaded copy would share
+        or corrupt the first's. Instances made from one file share one loaded
+        library (the file is extracted once); a copy of the file is another
+        library.
+
+        Raises
+        ------
+        FMUError
+            Another instance of the same extracted FMU is alive (not freed).
+        """
+        if not getattr(self.model_description.coSimulation, "canBeInstantiatedOnlyOncePerProcess", False):
+            return
+        holder = _ONCE_PER_PROCESS.get(self._fmu.unzip_dir)
+        other = holder() if holder is not None else None
+        if other is not None and other is not self and getattr(other, "_alive", [False])[0]:
+            raise FMUError(
+                f"{self.name}: {self.path.name} declares canBeInstantiatedOnlyOncePerProcess=\"true\" and its instance "
+                f"{other.name!r} is alive in this process; close() that one first, or load each instance as "
+                "orchestrator.fmu.isolated.IsolatedFMUComponent (one worker process each)",
+                path=str(self.path), component=self.name, function=f"{self._prefix}Instantiate"
+                + ("CoSimulation" if self._v3 else ""))
+        _ONCE_PER_PROCESS[self._fmu.unzip_dir] = weakref.ref(self)
 
     def _check_binary(self) -> None:
         """Refuse a binary that is not a complete shared library before it is loaded (a truncated one would
@@ -892,6 +923,10 @@ class FMUComponent:
     def _instantiate_failed(self) -> FMUError:
         detail = "; FMU log: " + " | ".join(self.messages) if self.messages else ""
         function = "fmi3InstantiateCoSimulation" if self._v3 else "fmi2Instantiate"
+        md = self.model_description
+        if getattr(md.coSimulation, "needsExecutionTool", False):
+            detail += (f"; the FMU declares needsExecutionTool=\"true\": it runs only where its tool "
+                       f"({md.generationTool or 'generationTool not given'}) is installed (and licensed)")
         return FMUError(f"{self.name}: {function} failed (FMU {self.path}){detail}",
                         path=str(self.path), component=self.name, function=function)
 
