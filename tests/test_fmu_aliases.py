@@ -172,3 +172,51 @@ def test_check_fmu_lists_aliases_with_their_display_units(make):
     assert "u_alias" in text and "[alias of u]  [displayed in mm]" in text
     # fmpy 0.3 wants the alias y_mm among the initial unknowns (it lists aliases as variables): noted, not a problem
     assert report.problems == [] and any("<Alias> name(s) ['y_mm']" in note for note in report.notes)
+
+
+def test_cli_check_fmu_and_an_ssd_wired_to_an_alias(make, tmp_path, capsys):
+    """The path users take: ``cnctwin check-fmu`` lists the aliases; ``cnctwin simulate --system`` runs an SSD
+    whose connection ends at an alias (t.y = 2 × 0.5 + 0.25 with k set through its alias ``gain``)."""
+    from orchestrator.cli import main
+    from orchestrator.recording import Recording
+
+    fmu = make("scale3")
+    assert main(["check-fmu", str(fmu)]) == 0
+    text = capsys.readouterr().out
+    assert "model Scale3, FMI 3.0" in text and "verdict: OK" in text
+    assert any(line.split()[:1] == ["u_alias"] and line.endswith("[alias of u]  [displayed in mm]")
+               for line in text.splitlines())
+    ssd = tmp_path / "alias.ssd"
+    ssd.write_text(f"""<?xml version="1.0" encoding="UTF-8"?>
+<ssd:SystemStructureDescription xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription"
+    xmlns:ssv="http://ssp-standard.org/SSP1/SystemStructureParameterValues" version="1.0" name="alias">
+  <ssd:System name="alias">
+    <ssd:Elements>
+      <ssd:Component name="s" type="application/x-fmu-sharedlibrary" source="{fmu}">
+        <ssd:ParameterBindings><ssd:ParameterBinding><ssd:ParameterValues>
+          <ssv:ParameterSet version="1.0" name="p"><ssv:Parameters>
+            <ssv:Parameter name="u"><ssv:Real value="500" unit="mm"/></ssv:Parameter>
+          </ssv:Parameters></ssv:ParameterSet>
+        </ssd:ParameterValues></ssd:ParameterBinding></ssd:ParameterBindings>
+      </ssd:Component>
+      <ssd:Component name="t" type="application/x-fmu-sharedlibrary" source="{fmu}">
+        <ssd:ParameterBindings><ssd:ParameterBinding><ssd:ParameterValues>
+          <ssv:ParameterSet version="1.0" name="p"><ssv:Parameters>
+            <ssv:Parameter name="gain"><ssv:Real value="2"/></ssv:Parameter>
+            <ssv:Parameter name="c"><ssv:Real value="0.25" unit="m"/></ssv:Parameter>
+          </ssv:Parameters></ssv:ParameterSet>
+        </ssd:ParameterValues></ssd:ParameterBinding></ssd:ParameterBindings>
+      </ssd:Component>
+    </ssd:Elements>
+    <ssd:Connections>
+      <ssd:Connection startElement="s" startConnector="y" endElement="t" endConnector="u_alias"/>
+    </ssd:Connections>
+  </ssd:System>
+  <ssd:DefaultExperiment startTime="0" stopTime="0.01"/>
+</ssd:SystemStructureDescription>
+""")
+    out = tmp_path / "out"
+    assert main(["simulate", "--system", str(ssd), "--out", str(out)]) == 0
+    recording = Recording.read_csv(out / "recording.csv")
+    np.testing.assert_array_equal(recording["t.y"], 1.25)
+    np.testing.assert_array_equal(recording["t.sets_u"], 1.0 + np.arange(len(recording["t_s"])))
