@@ -817,7 +817,7 @@ class FMUComponent:
             what += (" (the FMU runs the step asynchronously; asynchronous steps are not supported: cnctwin's "
                      "master steps every FMU synchronously and does not wait for fmi2StepFinished)")
             if function == "fmi2DoStep":
-                what += self._cancel_step()
+                return self._end(function, what, status, self._cancel_step())
         return self._end(function, what, status)
 
     def _cancel_step(self) -> str:
@@ -834,15 +834,16 @@ class FMUComponent:
         except FMICallException as exc:
             status = int(exc.status)
         if status <= 1:
-            return f"; fmi2CancelStep returned {status_name(status)}, the step was cancelled"
+            return f"fmi2CancelStep returned {status_name(status)}, the step was cancelled"
         self._alive[0] = False  # not freed: the asynchronous step may still run
-        return (f"; fmi2CancelStep returned {status_name(status)}: the step may still run, so the instance is "
+        return (f"fmi2CancelStep returned {status_name(status)}: the step may still run, so the instance is "
                 "left allocated (not freed)")
 
-    def _end(self, function: str, what: str, status: int | None) -> FMUError:
-        """The FMUError for a failed call (``what`` happened in ``function``); frees or abandons the instance."""
+    def _end(self, function: str, what: str, status: int | None, then: str = "") -> FMUError:
+        """The FMUError for a failed call (``what`` happened in ``function``, ``then`` what the master did about
+        it); frees or abandons the instance."""
         at = "" if np.isnan(self.time) else f" at t = {self.time:.6f} s"
-        detail = "; FMU log: " + " | ".join(self.messages) if self.messages else ""
+        detail = (f"; {then}" if then else "") + ("; FMU log: " + " | ".join(self.messages) if self.messages else "")
         error = FMUError(
             f"{self.name}: {function} {what}{at} (FMU {self.path}){detail}",
             path=str(self.path), component=self.name, function=function,
