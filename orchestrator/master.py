@@ -75,10 +75,14 @@ def probe_conversion(system: System, probe: Probe) -> tuple[float, float]:
         The channel unit cannot be converted from the variable's.
     """
     comp, var = split_reference(probe.reference)
-    declared = system.component(comp).variable(var)
+    component = system.component(comp)
+    declared = component.variable(var)
     if probe.unit is None or probe.unit == declared.unit:
         return 1.0, 0.0
-    channel = Variable(declared.name, "input", probe.unit)
+    # a unit the component defines itself (an FMU's <Unit> or <DisplayUnit>, e.g. degF) converts with that definition
+    defined = getattr(component, "unit_definition", None)
+    channel = Variable(declared.name, "input", probe.unit,
+                       unit_definition=defined(probe.unit) if defined is not None else None)
     return unit_conversion(declared, channel, f"probe {probe.channel!r}: {probe.reference} "
                                               f"[{unit_text(declared.unit)}] -> [{probe.unit}]")
 

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from orchestrator import Master, MasterSettings, System
+from orchestrator import Master, MasterSettings, Probe, System
 from orchestrator.errors import SystemDescriptionError
 from orchestrator.fmu import FMUComponent, FMUError, check_fmu
 from orchestrator.fmu.isolated import IsolatedFMUComponent
@@ -220,3 +220,20 @@ def test_cli_check_fmu_and_an_ssd_wired_to_an_alias(make, tmp_path, capsys):
     recording = Recording.read_csv(out / "recording.csv")
     np.testing.assert_array_equal(recording["t.y"], 1.25)
     np.testing.assert_array_equal(recording["t.sets_u"], 1.0 + np.arange(len(recording["t_s"])))
+
+
+def test_display_units_convert_probes_except_an_inverse_one(make):
+    """FMI 3.0 display units of m: ``in`` (factor 1/0.0254) records y = 0.125 m as 4.921... in; one with
+    ``inverse="true"`` (display = 1 / (factor x value)) is not a linear map, so a probe in it is refused."""
+    xml = scale3_xml().replace('<DisplayUnit name="mm" factor="1000"/>',
+                               '<DisplayUnit name="mm" factor="1000"/><DisplayUnit name="in" factor="39.37007874015748"/>'
+                               '<DisplayUnit name="per_m" factor="1" inverse="true"/>')
+    fmu = make("inverse", xml)
+    system = System("display")
+    t = FMUComponent(fmu, "t")
+    system.add(t)
+    assert t.unit_definition("per_m") is None and t.unit_definition("in").factor == pytest.approx(0.0254, rel=1e-15)
+    result = Master(system, MasterSettings(step=1e-3, time_limit=0.001), [Probe("y_in", "t.y", "in")]).run()
+    np.testing.assert_allclose(result.recording["y_in"], 0.125 / 0.0254, rtol=1e-14)
+    with pytest.raises(SystemDescriptionError, match=r"unknown unit 'per_m'"):
+        Master(system, MasterSettings(step=1e-3, time_limit=0.001), [Probe("y_inv", "t.y", "per_m")])

@@ -331,3 +331,27 @@ def test_a_role_mapping_into_an_affine_length_unit(make, fast_runs, monkeypatch)
     result = Master(system, MasterSettings(step=1e-3, time_limit=0.002), ["a.y"]).run()
     np.testing.assert_allclose(result.recording["a.y"], 0.3, rtol=1e-15)
     assert FMUComponent(fmu, "b", role="axis").values["u"][0] == 0.25  # its start, 0 mm_from_home
+
+
+# ----------------------------------------------------------------------------- display units
+FAHRENHEIT = '<Unit name="K"><BaseUnit K="1"/><DisplayUnit name="degF" factor="1.8" offset="-459.67"/></Unit>'
+
+
+def test_a_probe_in_a_display_unit_the_fmu_defines_on_both_loops(make, fast_runs):
+    """<DisplayUnit name="degF" factor="1.8" offset="-459.67"> of K: 300 K records as 1.8 × 300 - 459.67 = 80.33 degF;
+    a display unit is a unit for probes only (values are exchanged in the variable's unit)."""
+    fmu = make("fahrenheit", scale_xml(u="K", y="K", definitions=FAHRENHEIT, u0=300.0))
+
+    def system() -> System:
+        s = System("display")
+        s.add(FMUComponent(fmu, "s"))
+        return s
+
+    result, _ = _both(system, ["s.y", Probe("s_F", "s.y", "degF")], fast_runs, time_limit=0.002)
+    np.testing.assert_array_equal(result.recording["s.y"], 300.0)
+    np.testing.assert_allclose(result.recording["s_F"], 80.33, rtol=1e-13)
+    assert result.recording.units["s_F"] == "degF"
+    isolated = System("isolated")
+    isolated.add(IsolatedFMUComponent(fmu, "s"))
+    result = Master(isolated, MasterSettings(step=1e-3, time_limit=0.001), [Probe("s_F", "s.y", "degF")]).run()
+    np.testing.assert_allclose(result.recording["s_F"], 80.33, rtol=1e-13)

@@ -170,7 +170,7 @@ def _role_rows(path: Path, role_name: str, mapping: Mapping[str, str]) -> list[R
     role = get_role(role_name)
     loaded = load_fmu(path)
     md = loaded.model_description
-    definitions = unit_definitions(md, str(loaded.path))
+    definitions = unit_definitions(md, str(loaded.path), loaded.inverse_display_units)
     fmu_vars = {v.name: v for v in md.modelVariables}
     rows = []
     required = {v.name for v in role.required}
@@ -283,7 +283,7 @@ def check_fmu(
     notes: list[str] = []
     problems = _without_alias_artifacts(list(validate_fmu(str(loaded.path))),
                                         {v.name for v in variables if v.alias_of is not None}, notes)
-    definitions = unit_definitions(md, str(loaded.path))
+    definitions = unit_definitions(md, str(loaded.path), loaded.inverse_display_units)
     for v in variables:
         if v.unit is not None and our_type(v.type) == "Real" and not known(v.unit):
             if v.unit in definitions:

@@ -35,6 +35,7 @@ import atexit
 import ctypes
 import itertools
 import logging
+import math
 import shutil
 import tempfile
 import weakref
@@ -139,6 +140,8 @@ class LoadedFMU:
     #: names of the variables with ``relativeQuantity="true"`` (read here: fmpy 0.3 tests the attribute with
     #: ``in`` on the element, which looks at its children, and never sets it for a variable)
     relative: frozenset[str] = frozenset()
+    #: names of the ``<DisplayUnit inverse="true">`` of FMI 3.0 (not parsed by fmpy 0.3): not a linear map
+    inverse_display_units: frozenset[str] = frozenset()
 
 
 def load_fmu(path: str | Path) -> LoadedFMU:
@@ -215,7 +218,9 @@ def load_fmu(path: str | Path) -> LoadedFMU:
         with zipfile.ZipFile(path) as zf:
             zf.extractall(folder)
         _EXTRACTED[key] = folder
-    return LoadedFMU(path, md, folder, _relative_quantities(root))
+    inverse = frozenset(d.get("name", "") for d in root.iterfind("UnitDefinitions/Unit/DisplayUnit")
+                        if d.get("inverse") in ("true", "1"))
+    return LoadedFMU(path, md, folder, _relative_quantities(root), inverse)
 
 
 def _relative_quantities(root: ET.Element) -> frozenset[str]:
@@ -236,11 +241,15 @@ def fmu_unit(variable: ScalarVariable) -> str | None:
     return getattr(declared, "unit", None) or None
 
 
-def unit_definitions(md: ModelDescription, source: str) -> dict[str, UnitDefinition]:
+def unit_definitions(md: ModelDescription, source: str,
+                     inverse: frozenset[str] = frozenset()) -> dict[str, UnitDefinition]:
     """The ``<UnitDefinitions>`` of a model description that define a ``<BaseUnit>``, by unit name.
 
     A ``<Unit>`` without ``<BaseUnit>`` (allowed by FMI 2.0 and 3.0) defines
-    nothing to convert with and is left out.
+    nothing to convert with and is left out. Its ``<DisplayUnit>`` elements
+    are definitions too (FMI 2.0 and 3.0: value_display = factor × value_unit
+    + offset), so a probe can record in an FMU's display unit (``degF`` of a
+    variable in ``K``); a unit of the same name wins over a display unit.
 
     Parameters
     ----------
@@ -248,6 +257,8 @@ def unit_definitions(md: ModelDescription, source: str) -> dict[str, UnitDefinit
         fmpy's model description (FMI 2.0 or 3.0).
     source : str
         The FMU, for messages.
+    inverse : frozenset of str
+        Display units with FMI 3.0 ``inverse="true"`` (not a linear map; left out).
 
     Raises
     ------
@@ -255,6 +266,7 @@ def unit_definitions(md: ModelDescription, source: str) -> dict[str, UnitDefinit
         A definition that is not usable (a zero or non-finite factor, an unknown base unit).
     """
     out: dict[str, UnitDefinition] = {}
+    displays: dict[str, UnitDefinition] = {}
     for u in md.unitDefinitions or []:
         base = u.baseUnit
         if base is None or not u.name:
@@ -268,6 +280,20 @@ def unit_definitions(md: ModelDescription, source: str) -> dict[str, UnitDefinit
         problem = disagreement(out[u.name])
         if problem is not None:
             log.warning("%s: %s", source, problem)
+        unit = out[u.name]
+        for d in getattr(u, "displayUnits", None) or []:
+            if not d.name or d.name in inverse or d.name in displays:
+                continue
+            factor, offset = float(d.factor), float(d.offset)
+            if not (math.isfinite(factor) and factor != 0.0 and math.isfinite(offset)):
+                raise FMUError(f"{source}: modelDescription.xml <UnitDefinitions>: display unit {d.name!r} of "
+                               f"{u.name!r}: factor {factor!r} and offset {offset!r} must be finite and the factor "
+                               "non-zero", path=source)
+            # value_unit = (value_display - offset) / factor, value_SI = unit.factor x value_unit + unit.offset
+            displays[d.name] = UnitDefinition(d.name, unit.exponents, unit.factor / factor,
+                                              unit.offset - unit.factor * offset / factor, source)
+    for name, definition in displays.items():
+        out.setdefault(name, definition)
     return out
 
 
@@ -596,7 +622,8 @@ class FMUComponent:
             reverse[theirs] = ours
         bindings: list[_Binding] = []
         problems: list[str] = []
-        definitions = unit_definitions(md, where)
+        definitions = unit_definitions(md, where, self._fmu.inverse_display_units)
+        self._unit_definitions = definitions
         for v in md.modelVariables:
             if v.causality not in ("parameter", "input", "output"):
                 continue
@@ -702,6 +729,11 @@ class FMUComponent:
                     "units; map only one of them to a role name", path=str(self.path), component=self.name)
             out[b.ours.name] = head.ours.name
         return out
+
+    def unit_definition(self, symbol: str) -> UnitDefinition | None:
+        """How the FMU defines unit ``symbol`` (a ``<Unit>`` or a ``<DisplayUnit>`` of its ``<UnitDefinitions>``),
+        None when it does not; a probe in such a unit converts with it (:func:`orchestrator.master.probe_conversion`)."""
+        return self._unit_definitions.get(symbol)
 
     def canonical(self, name: str) -> str:
         """The input that ``name`` is an alias of (see :meth:`_input_aliases`), else ``name`` itself."""

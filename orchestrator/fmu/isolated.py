@@ -37,8 +37,9 @@ from typing import Any, Mapping
 import numpy as np
 
 from fmus_src.component import Variable
+from fmus_src.units import UnitDefinition
 
-from .component import _DTYPES, FMUComponent, load_fmu, no_variable_error
+from .component import _DTYPES, FMUComponent, load_fmu, no_variable_error, unit_definitions
 from .errors import FMUError
 
 #: Seconds to wait for the worker to start and load the FMU.
@@ -208,6 +209,8 @@ class IsolatedFMUComponent:
         self.path = loaded.path
         self.fmi_version = loaded.model_description.fmiVersion
         self._model_description = loaded.model_description
+        self._unit_definitions = unit_definitions(loaded.model_description, str(loaded.path),
+                                                  loaded.inverse_display_units)
         self._prefix = "fmi3" if self.fmi_version.startswith("3.") else "fmi2"
         self.name = name or loaded.model_description.coSimulation.modelIdentifier
         if batch != 1:
@@ -333,6 +336,10 @@ class IsolatedFMUComponent:
     def names(self, causality: str) -> list[str]:
         """Names of the exposed variables of one causality (an input without its aliases)."""
         return [v.name for v in self._variables if v.causality == causality and v.name not in self._input_alias]
+
+    def unit_definition(self, symbol: str) -> UnitDefinition | None:
+        """How the FMU defines unit ``symbol`` (``FMUComponent.unit_definition``), None when it does not."""
+        return self._unit_definitions.get(symbol)
 
     def canonical(self, name: str) -> str:
         """The input that ``name`` is an alias of, else ``name`` (``FMUComponent.canonical``)."""
