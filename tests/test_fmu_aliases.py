@@ -237,3 +237,29 @@ def test_display_units_convert_probes_except_an_inverse_one(make):
     np.testing.assert_allclose(result.recording["y_in"], 0.125 / 0.0254, rtol=1e-14)
     with pytest.raises(SystemDescriptionError, match=r"unknown unit 'per_m'"):
         Master(system, MasterSettings(step=1e-3, time_limit=0.001), [Probe("y_inv", "t.y", "per_m")])
+
+
+def test_bare_fmu3_slaves_wired_to_an_alias_in_the_compiled_loop(make):
+    """FastFMULoop with fmpy FMU3Slave objects (no FMUComponent): an <Alias> of an input names that input's port,
+    written once per step (sets_u grows by 1 a step), and a second connection into it is refused."""
+    from orchestrator.fmu import fmi3
+    from orchestrator.fmu.component import load_fmu
+    from orchestrator.fmu.fast_loop import FastFMULoop
+
+    loaded = load_fmu(make("scale3"))
+    slaves, keep = {}, []
+    for name, u in (("s", 0.5), ("t", 0.0)):
+        slave, *callbacks = fmi3.instantiate_co_simulation("Scale3", TOKEN, loaded.unzip_dir, name, lambda *a: None)
+        slave.fmi3EnterInitializationMode(slave.component, False, 0.0, 0.0, False, 0.0)
+        slave.setFloat64([1], [u])
+        slave.fmi3ExitInitializationMode(slave.component)
+        slaves[name] = slave
+        keep.append(callbacks)
+    with pytest.raises(FMUError, match=r"FastFMULoop: t.u is connected twice \(s.y and s.sets_u\)"):
+        FastFMULoop(slaves, [("s.y", "t.u_alias"), ("s.sets_u", "t.u")])
+    result = FastFMULoop(slaves, [("s.y", "t.u_alias")], record=["t.y", "t.sets_u"]).run(4, 1e-3)
+    np.testing.assert_array_equal(result["t.y"][1:], 0.5)
+    np.testing.assert_array_equal(result["t.sets_u"], [1.0, 2.0, 3.0, 4.0, 5.0])  # 1: the set before initialising
+    for slave in slaves.values():
+        slave.fmi3Terminate(slave.component)
+        slave.fmi3FreeInstance(slave.component)

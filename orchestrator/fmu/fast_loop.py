@@ -506,6 +506,9 @@ class _Instance:
             for v in md.modelVariables:
                 if v.causality not in ("input", "output"):
                     continue
+                if v.causality == "input" and getattr(v, "alias", None) is not None:
+                    self.input_alias[v.name] = v.alias.name  # an FMI 3.0 <Alias>: the input it names
+                    continue
                 if v.type != real:
                     self.discrete.add(v.name)
                     if (not self.v3 and v.causality == "output"
