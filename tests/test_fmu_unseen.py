@@ -192,6 +192,15 @@ def test_model_description_quirks(fmus):
     assert report.ok and report.problems == [] and report.smoke_outputs["x"] == pytest.approx(math.exp(-5.0))
 
 
+def test_an_isolated_fmu_cancels_its_pending_step_in_the_worker(fmus):
+    system = System("isolated")
+    system.add(IsolatedFMUComponent(fmus["stair"], "st", parameters={"period": 0.002, "fail_time": 0.0035, "mode": 5}))
+    result = Master(system, MasterSettings(step=1e-3, time_limit=0.01), ["st.counter"]).run()
+    assert not result.success and result.steps == 3
+    assert ("fmi2DoStep returned fmi2Pending" in result.message
+            and "; fmi2CancelStep returned fmi2OK, the step was cancelled; FMU log:" in result.message)
+
+
 def _once(text: str) -> str:
     return text.replace('<CoSimulation modelIdentifier="Stair"',
                         '<CoSimulation modelIdentifier="Stair" canBeInstantiatedOnlyOncePerProcess="true"')
