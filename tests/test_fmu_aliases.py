@@ -263,3 +263,23 @@ def test_bare_fmu3_slaves_wired_to_an_alias_in_the_compiled_loop(make):
     for slave in slaves.values():
         slave.fmi3Terminate(slave.component)
         slave.fmi3FreeInstance(slave.component)
+
+
+def test_a_parameter_set_through_an_alias_survives_an_ssp_round_trip(make, tmp_path):
+    """k = 2 given as its alias ``gain``: every name of the set holds 2, so the SSV written from the system binds
+    k and gain to 2 alike, and the system read back runs with k = 2 (t.y = 2 × 0.125 m start of u)."""
+    from orchestrator.ssp import build_system, read_ssd, system_to_ssp
+
+    fmu = make("scale3")
+    t = FMUComponent(fmu, "t", parameters={"gain": 2.0})
+    assert t.values["k"][0] == 2.0 and t.values["gain"] is t.values["k"] and t.canonical("gain") == "k"
+    system = System("ssp")
+    system.add(t)
+    system_to_ssp(system, tmp_path / "a.ssd", tmp_path / "a.ssv", fmu_sources={"t": str(fmu)})
+    rebuilt, _ = build_system(read_ssd(tmp_path / "a.ssd"), native=False)
+    result = Master(rebuilt, MasterSettings(step=1e-3, time_limit=0.002), ["t.y"]).run()
+    assert result.success, result.message
+    np.testing.assert_array_equal(result.recording["t.y"], 0.25)
+    with pytest.raises(FMUError, match=r"^t: \['gain', 'k'\] are aliases \(value reference 3\) and were given "
+                                       r"different values; give one$"):
+        FMUComponent(fmu, "t", parameters={"k": 1.0, "gain": 2.0})

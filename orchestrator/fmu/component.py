@@ -579,8 +579,10 @@ class FMUComponent:
         self.mapping = dict(mapping or {})
         self._bindings = self._bind(md)
         self._by_name = {b.ours.name: b for b in self._bindings}
-        #: input alias -> the first input of its alias set (one value reference and type); they share one value
-        self._input_alias = self._input_aliases()
+        #: alias -> the variable its name set shares one value with (inputs and parameters; see _alias_sets)
+        self._alias_of = self._alias_sets()
+        #: the inputs among them: one input, written once per step, connected under any of its names
+        self._input_alias = {a: h for a, h in self._alias_of.items() if self._by_name[a].ours.causality == "input"}
         self.values: dict[str, np.ndarray | str] = {}
         self._load_start_values()
         self._init_parameters: dict[str, object] = dict(parameters or {})
@@ -700,34 +702,42 @@ class FMUComponent:
                 )
         return bindings
 
-    def _input_aliases(self) -> dict[str, str]:
-        """Inputs that alias an earlier input (same value reference and FMI type) -> that input.
+    def _alias_sets(self) -> dict[str, str]:
+        """Inputs and parameters that alias another (same causality, value reference and FMI type) -> that one.
 
         FMI 3.0 ``<Alias>`` elements (fmpy lists them after every variable,
-        with the variable's value reference, causality and unit) and FMI 2.0
-        variables sharing a value reference. One alias set is one input: the
-        names share one value array, and the FMU gets it once per step (two
-        names written in one call would let a stale one win).
+        with the variable's value reference, causality, unit and start) and
+        FMI 2.0 variables sharing a value reference (where one of them carries
+        the start). The names of one set share one value array, that of the
+        set's variable with a ``start`` (else its first): setting any name sets
+        them all, and an input is written once per step (two names written in
+        one call would let a stale one win). A parameter alias that converts
+        differently (one name mapped to a role unit) keeps a value of its own.
 
         Raises
         ------
         FMUError
-            Two names of one input set converted differently (one mapped to a role unit).
+            Two names of one input converted differently (one mapped to a role unit).
         """
-        heads: dict[tuple[str, int], _Binding] = {}
-        out: dict[str, str] = {}
+        sets: dict[tuple[str, str, int], list[_Binding]] = {}
         for b in self._bindings:
-            if b.ours.causality != "input":
-                continue
-            head = heads.setdefault((b.native.setter, int(b.theirs.valueReference)), b)
-            if head is b:
-                continue
-            if (head.to_fmu, head.offset) != (b.to_fmu, b.offset):
-                raise FMUError(
-                    f"{self.path}: inputs {head.ours.name!r} [{head.ours.unit}] and {b.ours.name!r} "
-                    f"[{b.ours.unit}] are aliases (value reference {b.theirs.valueReference}) exchanged in different "
-                    "units; map only one of them to a role name", path=str(self.path), component=self.name)
-            out[b.ours.name] = head.ours.name
+            if b.ours.causality in ("input", "parameter") and b.theirs.variability != "constant":
+                sets.setdefault((b.ours.causality, b.native.setter, int(b.theirs.valueReference)), []).append(b)
+        out: dict[str, str] = {}
+        for group in sets.values():
+            head = next((b for b in group if b.theirs.start is not None), group[0])
+            for b in group:
+                if b is head:
+                    continue
+                if (head.to_fmu, head.offset) != (b.to_fmu, b.offset):
+                    if b.ours.causality == "input":
+                        raise FMUError(
+                            f"{self.path}: inputs {head.ours.name!r} [{head.ours.unit}] and {b.ours.name!r} "
+                            f"[{b.ours.unit}] are aliases (value reference {b.theirs.valueReference}) exchanged in "
+                            "different units; map only one of them to a role name", path=str(self.path),
+                            component=self.name)
+                    continue
+                out[b.ours.name] = head.ours.name
         return out
 
     def unit_definition(self, symbol: str) -> UnitDefinition | None:
@@ -736,8 +746,8 @@ class FMUComponent:
         return self._unit_definitions.get(symbol)
 
     def canonical(self, name: str) -> str:
-        """The input that ``name`` is an alias of (see :meth:`_input_aliases`), else ``name`` itself."""
-        return self._input_alias.get(name, name)
+        """The variable whose value ``name`` shares (an alias; see :meth:`_alias_sets`), else ``name`` itself."""
+        return self._alias_of.get(name, name)
 
     def display_unit(self, name: str) -> str | None:
         """The FMU's ``displayUnit`` of variable ``name`` (an FMI 3.0 ``<Alias>`` has its own), None if none.
@@ -778,19 +788,34 @@ class FMUComponent:
     def _load_start_values(self) -> None:
         for b in self._bindings:
             var = b.ours
-            if var.name in self._input_alias:
-                continue  # shares the value of its set's first input (below)
+            if var.name in self._alias_of:
+                continue  # shares the value of its set's variable (below)
             if var.type == "String":
                 self.values[var.name] = str(var.start)
             elif var.name in self.values:
                 self.values[var.name][...] = var.start  # type: ignore[index]
             else:
                 self.values[var.name] = np.full(1, var.start, dtype=_DTYPES[var.type])
-        for alias, head in self._input_alias.items():
-            self.values[alias] = self.values[head]  # the same array (a str for a String input)
+        for alias, head in self._alias_of.items():
+            self.values[alias] = self.values[head]  # the same array (a str for a String variable)
 
     def _apply_init_parameters(self) -> None:
+        """Store the constructor's parameters (and inputs); two names of one alias set must agree.
+
+        Raises
+        ------
+        FMUError
+            Two aliases given different values.
+        """
         self._explicit = set()
+        given: dict[str, dict[str, object]] = {}
+        for key, value in self._init_parameters.items():
+            given.setdefault(self.canonical(key), {})[key] = value
+        for names in given.values():
+            if len(names) > 1 and len({str(np.asarray(v).tolist()) for v in names.values()}) > 1:
+                vr = self._by_name[next(iter(names))].theirs.valueReference
+                raise FMUError(f"{self.name}: {sorted(names)} are aliases (value reference {vr}) and were given "
+                               "different values; give one", path=str(self.path), component=self.name)
         for key, value in self._init_parameters.items():
             self._store(self.variable(key), value)
             self._explicit.add(key)
@@ -800,8 +825,8 @@ class FMUComponent:
             if not isinstance(value, str):
                 raise FMUError(f"{self.name}.{var.name}: expected a string, got {type(value).__name__}",
                                path=str(self.path), component=self.name)
-            head = self._input_alias.get(var.name, var.name)
-            for name in (head, *(a for a, h in self._input_alias.items() if h == head)):
+            head = self.canonical(var.name)
+            for name in (head, *(a for a, h in self._alias_of.items() if h == head)):
                 self.values[name] = value
             return
         arr = np.asarray(value, dtype=_DTYPES[var.type])

@@ -64,7 +64,7 @@ def _worker(conn: Any, path: str, kwargs: dict) -> None:  # pragma: no cover - r
         conn.send(("error", type(exc).__name__, str(exc), _error_fields(exc)))
         return
     variables = comp.declared_variables()
-    conn.send(("ok", variables, _snapshot(comp, [v.name for v in variables]), dict(comp._input_alias)))
+    conn.send(("ok", variables, _snapshot(comp, [v.name for v in variables]), dict(comp._alias_of)))
     outputs = comp.names("output")
     while True:
         try:
@@ -256,9 +256,10 @@ class IsolatedFMUComponent:
                 self.values[var.name][0] = start  # type: ignore[index]
             else:
                 self.values[var.name] = np.full(1, start, dtype=_DTYPES[var.type])
-        #: input alias -> the input it names (as the worker's FMUComponent); they share one value
-        self._input_alias: dict[str, str] = reply[3]
-        for alias, head in self._input_alias.items():
+        #: alias -> the variable whose value it shares (as the worker's FMUComponent); the inputs among them
+        self._alias_of: dict[str, str] = reply[3]
+        self._input_alias = {a: h for a, h in self._alias_of.items() if self._by_name[a].causality == "input"}
+        for alias, head in self._alias_of.items():
             self.values[alias] = self.values[head]
         self._inputs = [v.name for v in variables if v.causality == "input" and v.name not in self._input_alias]
         self._settable = [v.name for v in variables if v.causality in ("parameter", "input")]
@@ -342,8 +343,8 @@ class IsolatedFMUComponent:
         return self._unit_definitions.get(symbol)
 
     def canonical(self, name: str) -> str:
-        """The input that ``name`` is an alias of, else ``name`` (``FMUComponent.canonical``)."""
-        return self._input_alias.get(name, name)
+        """The variable whose value ``name`` shares, else ``name`` (``FMUComponent.canonical``)."""
+        return self._alias_of.get(name, name)
 
     # ------------------------------------------------------------------ values
     def set(self, name: str, value: object) -> None:
@@ -359,8 +360,8 @@ class IsolatedFMUComponent:
             if not isinstance(value, str):
                 raise FMUError(f"{self.name}.{name}: expected a string, got {type(value).__name__}",
                                path=str(self.path), component=self.name)
-            head = self._input_alias.get(name, name)
-            for each in (head, *(a for a, h in self._input_alias.items() if h == head)):
+            head = self.canonical(name)
+            for each in (head, *(a for a, h in self._alias_of.items() if h == head)):
                 self.values[each] = value
             return
         arr = np.asarray(value, dtype=_DTYPES[var.type])
