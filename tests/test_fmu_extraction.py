@@ -64,3 +64,25 @@ def test_forked_child_does_not_remove_the_parents_folder(archive: Path, tmp_path
     assert (folder / "modelDescription.xml").is_file()
     extraction.remove_extracted()
     assert not folder.exists()
+
+
+def _extract_in_worker(archive: str) -> str:
+    return str(extraction.extract_fmu(Path(archive), "Stand_in"))
+
+
+@pytest.mark.parametrize("method", ["fork", "spawn"])
+def test_pool_worker_removes_its_folder_when_the_pool_closes(archive: Path, tmp_path: Path, method: str,
+                                                              monkeypatch: pytest.MonkeyPatch) -> None:
+    import multiprocessing
+
+    if method not in multiprocessing.get_all_start_methods():
+        pytest.skip(f"no {method} start method here")
+    monkeypatch.setenv("TMPDIR", str(tmp_path))
+    monkeypatch.setenv("PYTHONPATH", str(ROOT))
+    monkeypatch.setattr(extraction.tempfile, "tempdir", str(tmp_path))
+    with multiprocessing.get_context(method).Pool(1) as pool:
+        folder = Path(pool.apply(_extract_in_worker, (str(archive),)))
+        assert (folder / "modelDescription.xml").is_file()
+        pool.close()
+        pool.join()
+    assert not folder.exists()

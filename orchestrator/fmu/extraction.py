@@ -33,6 +33,7 @@ _OWNED = re.compile(r"^cnctwin_p(?P<pid>\d+)_")
 
 _extracted: dict[tuple[str, int, int], Path] = {}
 _swept = False
+_finalizer_pid: int | None = None
 
 
 def extract_fmu(path: Path, identifier: str) -> Path:
@@ -50,7 +51,7 @@ def extract_fmu(path: Path, identifier: str) -> Path:
     Path
         The folder; the same one for every later call with an unchanged file.
     """
-    global _swept
+    global _swept, _finalizer_pid
     stat = path.stat()
     key = (str(path), stat.st_mtime_ns, stat.st_size)
     folder = _extracted.get(key)
@@ -59,6 +60,9 @@ def extract_fmu(path: Path, identifier: str) -> Path:
     if not _swept:
         _swept = True
         sweep_stale_extractions()
+    if _finalizer_pid != os.getpid():  # a forked child starts with multiprocessing's finalizers cleared
+        _finalizer_pid = os.getpid()
+        multiprocessing.util.Finalize(None, remove_extracted, exitpriority=10)
     folder = Path(tempfile.mkdtemp(prefix=f"{_PREFIX}{os.getpid()}_{_safe(identifier)}_"))
     with zipfile.ZipFile(path) as zf:
         zf.extractall(folder)
@@ -140,4 +144,3 @@ def _safe(identifier: str) -> str:
 
 
 atexit.register(remove_extracted)
-multiprocessing.util.Finalize(None, remove_extracted, exitpriority=10)
