@@ -31,13 +31,10 @@ messages.
 """
 from __future__ import annotations
 
-import atexit
 import ctypes
 import itertools
 import logging
 import math
-import shutil
-import tempfile
 import weakref
 import xml.etree.ElementTree as ET
 import zipfile
@@ -59,6 +56,7 @@ from fmus_src.component import Variable
 from fmus_src.units import UnitDefinition, UnitError, conversion, disagreement
 
 from .binary_check import shared_library_problem
+from .extraction import extract_fmu
 from .errors import FMUError, status_name
 from .roles import Role, get_role
 
@@ -116,19 +114,6 @@ def _native(variable: ScalarVariable, version: str) -> _Native | None:
     """How ``variable`` is exchanged, None for a type the twin does not exchange (FMI 3.0 Binary, Clock)."""
     table = _NATIVE_FMI3 if fmi3.is_fmi3(version) else _NATIVE_FMI2
     return table.get(variable.type)
-
-# ----------------------------------------------------------------------------- archive handling
-_EXTRACTED: dict[tuple[str, int, int], Path] = {}
-
-
-def _cleanup_extracted() -> None:
-    for folder in _EXTRACTED.values():
-        shutil.rmtree(folder, ignore_errors=True)
-    _EXTRACTED.clear()
-
-
-atexit.register(_cleanup_extracted)
-
 
 @dataclass(frozen=True)
 class LoadedFMU:
@@ -210,17 +195,9 @@ def load_fmu(path: str | Path) -> LoadedFMU:
         md = read_model_description(str(path), validate=False)
     except Exception as exc:  # fmpy raises a plain Exception for an illegal description (e.g. a causality)
         raise FMUError(f"{path}: cannot read modelDescription.xml ({exc})", path=str(path)) from None
-    stat = path.stat()
-    key = (str(path), stat.st_mtime_ns, stat.st_size)
-    folder = _EXTRACTED.get(key)
-    if folder is None or not folder.is_dir():
-        folder = Path(tempfile.mkdtemp(prefix=f"cnctwin_{identifier}_"))
-        with zipfile.ZipFile(path) as zf:
-            zf.extractall(folder)
-        _EXTRACTED[key] = folder
     inverse = frozenset(d.get("name", "") for d in root.iterfind("UnitDefinitions/Unit/DisplayUnit")
                         if d.get("inverse") in ("true", "1"))
-    return LoadedFMU(path, md, folder, _relative_quantities(root), inverse)
+    return LoadedFMU(path, md, extract_fmu(path, identifier), _relative_quantities(root), inverse)
 
 
 def _relative_quantities(root: ET.Element) -> frozenset[str]:
