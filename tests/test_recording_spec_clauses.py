@@ -34,7 +34,7 @@ def _read(tmp_path, text: str, name: str = "recording.csv") -> Recording:
 
 
 # ----------------------------------------------------------------------------- "First row: column names.
-#                                                                                Every column is optional except t_s"
+#                                                             Every column is optional except t_s"
 def test_t_s_alone_is_a_recording(tmp_path):
     rec = _read(tmp_path, "t_s\n0.5\n0.75\n")
     assert rec.channels == ["t_s"]
@@ -75,8 +75,8 @@ def test_empty_cells_in_every_contract_column_whole_empty_columns_and_first_and_
     assert rec.file_lines.of(np.arange(n)).tolist() == [2, 3, 4, 5, 6, 7]
 
 
-# ----------------------------------------------------------------------------- "Extra columns are allowed and must be
-#                                                                                ignored by readers that do not know them"
+# ----------------------------------------------------------------------------- "Extra columns are allowed and
+#                                                             must be ignored by readers that do not know them"
 def test_extra_number_columns_are_kept_through_a_rewrite_and_text_ones_are_not(tmp_path):
     rec = _read(tmp_path, "t_s,spindle_load_pct,x_mm,operator\n0,12.5,1,ann\n0.001,13,2,bob\n")
     assert rec.channels == ["t_s", "spindle_load_pct", "x_mm"]
@@ -86,8 +86,8 @@ def test_extra_number_columns_are_kept_through_a_rewrite_and_text_ones_are_not(t
     np.testing.assert_array_equal(back["x_mm"], [1.0, 2.0])
 
 
-# ----------------------------------------------------------------------------- "Sampling may be uneven, start at any
-#                                                                                time, and be shifted against the program"
+# ----------------------------------------------------------------------------- "Sampling may be uneven, start at
+#                                                             any time, and be shifted against the program start"
 @pytest.mark.parametrize("start", [-3.25, 1e5, 1.7643e9])
 def test_a_logger_clock_anywhere_reads_exactly_and_survives_a_rewrite(tmp_path, start):
     """A logger clock of 1e5 s, or Unix time (1.7643e9 s), at 1 ms and then 0.5 ms steps. Written back with
@@ -135,8 +135,8 @@ def test_identification_and_diagnosis_read_a_foreign_export_as_the_reader_does(t
         load_recording(case)
 
 
-# ----------------------------------------------------------------------------- case.toml: "a clear error naming the
-#                                                                                file, the line and the field"
+# ----------------------------------------------------------------------------- case.toml: "a clear error naming
+#                                                             the file, the line and the field"
 @pytest.mark.parametrize("change, line, message", [
     (("flutes = 2\n", ""), 8, r"\[tool\] needs 'flutes' \(the number of teeth\); without a \[tool\] table the case "
                               r"uses 6 mm, 2 flutes"),

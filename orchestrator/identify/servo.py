@@ -280,7 +280,8 @@ class _Aligned:
         return self._result
 
 
-#: Samples within this fraction of a position-loop period of the controller's ticks are on its tick grid.
+#: Samples within this fraction of a position-loop period of the controller's ticks are on its tick grid (when
+#: the alignment took the ticks from the recorded commands; from the current ripple it resolves 1/8 period).
 ON_GRID_FRACTION = 0.02
 
 
@@ -292,9 +293,11 @@ def _controller_tick(d: CaseData, machine: Machine, aligned: _Aligned) -> float 
     fall between the controller's ticks (a clock of its own, a 0.25 ms phase) then gave Svi +15 % and Svp
     -4 % at twice the noise residual. The tick grid is the diagnosis's alignment with the twin's run
     (``Prepared.t_start``: to well below a microsecond on the twin's own logs). None (start on the first
-    sample, as before) for a log on that grid, or one that cannot be aligned.
+    sample, as before) for a log on that grid (to :data:`ON_GRID_FRACTION` of a period, or to the 1/8 period
+    the current ripple resolves when the commands differ from the twin's), or one that cannot be aligned.
     """
-    from ..diagnose.errors import DiagnosisError
+    from ..diagnose.errors import DiagnosisError  # local: the diagnosis imports the identification's replay
+    from ..diagnose.prepare import PHASE_STEPS
 
     try:
         prep = aligned()
@@ -304,7 +307,8 @@ def _controller_tick(d: CaseData, machine: Machine, aligned: _Aligned) -> float 
     tp = float(machine.si("servo")["position_loop_period"])
     t = np.asarray(d.recording.t, dtype=float)
     ticks = (t - prep.t_start) / tp
-    if np.max(np.abs(ticks - np.round(ticks))) <= ON_GRID_FRACTION:
+    tolerance = ON_GRID_FRACTION if prep.phase_from_commands else 1.0 / PHASE_STEPS
+    if np.max(np.abs(ticks - np.round(ticks))) <= tolerance:
         return None
     return float(prep.t_start - tp * np.ceil((prep.t_start - t[0]) / tp - 1e-9))
 
