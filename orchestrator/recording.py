@@ -68,7 +68,7 @@ def _rounded_time_hint(t: np.ndarray) -> str:
         return ""
     grid = float(positive.min())
     exponent = round(math.log10(grid))
-    if abs(grid / 10.0 ** exponent - 1.0) > 1e-6:
+    if abs(grid / 10.0 ** exponent - 1.0) > 1e-3:  # 1e-3: Unix-time clocks carry steps to 2.4e-7 s
         return ""
     return (f"; t_s is written to {10.0 ** exponent:g} s: does the logger sample faster than that? write t_s "
             "with more decimals")

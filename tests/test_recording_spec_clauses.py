@@ -103,13 +103,16 @@ def test_a_logger_clock_anywhere_reads_exactly_and_survives_a_rewrite(tmp_path, 
 
 
 # ----------------------------------------------------------------------------- "Rows are in increasing t_s"
-def test_times_rounded_coarser_than_the_sampling_are_named_with_the_cause(tmp_path):
+@pytest.mark.parametrize("clock", ["", "1764300000"])
+def test_times_rounded_coarser_than_the_sampling_are_named_with_the_cause(tmp_path, clock):
     """A 0.5 ms logger writing t_s with 3 decimals repeats every other time: the error names the line and the
-    grid the times are written on."""
-    with pytest.raises(RecordingError, match=r"recording\.csv:4: t_s repeats \(0\.001 then 0\.001\); rows must be "
-                                             r"in strictly increasing time; t_s is written to 0\.001 s: does the "
-                                             r"logger sample faster than that\? write t_s with more decimals$"):
-        _read(tmp_path, "t_s,x_mm\n0.000,0\n0.001,0\n0.001,0\n0.002,0\n")
+    grid the times are written on (also on a Unix-time clock, whose steps carry 2.4e-7 s of rounding)."""
+    t = [f"{clock or 0}.00{k}" for k in (0, 1, 1, 2)]
+    with pytest.raises(RecordingError, match=rf"recording\.csv:4: t_s repeats \({float(t[1])!r} then "
+                                             rf"{float(t[2])!r}\); rows must be in strictly increasing time; t_s is "
+                                             r"written to 0\.001 s: does the logger sample faster than that\? write "
+                                             r"t_s with more decimals$"):
+        _read(tmp_path, "t_s,x_mm\n" + "".join(f"{v},0\n" for v in t))
     with pytest.raises(RecordingError, match=r"recording\.csv:3: t_s repeats \(0\.0 then 0\.0\); rows must be in "
                                              r"strictly increasing time$"):   # no grid to name: no hint
         _read(tmp_path, "t_s,x_mm\n0,0\n0,0\n")

@@ -136,7 +136,7 @@ def _offset_s(x: float) -> float:
     Seven significant digits of a logger clock in Unix time (1.7e9 s) are 1000 s: the offset came out as
     1764300000.0 for 1764300003.209287.
     """
-    return max(_r(x, 7), round(float(x), 6), key=lambda v: -abs(v - float(x)))
+    return min(_r(x, 7), round(float(x), 6), key=lambda v: abs(v - float(x)))  # the nearer of the two
 
 
 def as_case(item: str | Path | Case) -> Case:
