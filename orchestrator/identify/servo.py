@@ -54,6 +54,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from ..case import Case
+from ..errors import CncTwinError
 from ..machine import Machine, load_machine
 from .closed_loop import replay
 from .common import fitted_machine, provenance, write_outputs
@@ -258,8 +259,8 @@ def _prepare(data: Sequence[CaseData], axes: Sequence[str] | None,
 class _Aligned:
     """The diagnosis's alignment of a log with recorded commands with the twin's run, computed once when asked.
 
-    Calling it gives the :class:`orchestrator.diagnose.prepare.Prepared` alignment, or raises its
-    :class:`~orchestrator.diagnose.errors.DiagnosisError` (every call, the same one).
+    Calling it gives the :class:`orchestrator.diagnose.prepare.Prepared` alignment, or raises the project error
+    it raised (:class:`~orchestrator.diagnose.errors.DiagnosisError`, ...; every call, the same one).
     """
 
     def __init__(self, d: CaseData, machine: Machine, axes: list[str]) -> None:
@@ -267,13 +268,12 @@ class _Aligned:
         self._result: object = None
 
     def __call__(self):
-        from ..diagnose.errors import DiagnosisError
         from ..diagnose.prepare import prepare as align_with_twin
 
         if self._result is None:
             try:
                 self._result = align_with_twin(self.d.case, self.d.recording, self.machine, axes=self.axes)
-            except DiagnosisError as exc:
+            except CncTwinError as exc:
                 self._result = exc
         if isinstance(self._result, Exception):
             raise self._result
@@ -296,12 +296,11 @@ def _controller_tick(d: CaseData, machine: Machine, aligned: _Aligned) -> float 
     sample, as before) for a log on that grid (to :data:`ON_GRID_FRACTION` of a period, or to the 1/8 period
     the current ripple resolves when the commands differ from the twin's), or one that cannot be aligned.
     """
-    from ..diagnose.errors import DiagnosisError  # local: the diagnosis imports the identification's replay
-    from ..diagnose.prepare import PHASE_STEPS
+    from ..diagnose.prepare import PHASE_STEPS  # local: the diagnosis imports the identification's replay
 
     try:
         prep = aligned()
-    except DiagnosisError as exc:
+    except CncTwinError as exc:  # any project error of the alignment: replay as before, on the first sample
         _log.info("%s: replay ticks start on the first sample (not aligned with the twin: %s)", d.source, exc)
         return None
     tp = float(machine.si("servo")["position_loop_period"])
