@@ -95,7 +95,7 @@ class _Series:
     source: str = "recorded"
     cmd: dict[str, np.ndarray] = field(default_factory=dict)   # m at t (twin commands)
     between: dict | None = None       # axis -> f(q) [m]: a coarse recorded reference at the servo ticks
-    t_start: float | None = None
+    t_start: float | None = None     # first servo tick [s]: the controller's grid (None: the first sample)
     disturbance: dict | None = None
     offset: float = 0.0               # logger clock minus program clock, s
     offset_method: str = ""
