@@ -210,9 +210,18 @@ def load_case(path: str | Path, machine_override: str | Path | None = None) -> C
             raise CaseError(
                 f"{toml_path}:{_line_of(text, 'tool', 'flutes')}: [tool] flutes must be a whole number 1..24, got {flutes!r}"
             )
+        for key in ("diameter_mm", "flutes"):  # a [tool] table states the cutter: a key left out is not guessed
+            if key not in t:
+                raise CaseError(f"{toml_path}:{_line_of(text, 'tool', None)}: [tool] needs {key!r} "
+                                f"({'the cutter diameter in mm' if key == 'diameter_mm' else 'the number of teeth'}); "
+                                f"without a [tool] table the case uses {Tool.diameter_mm:g} mm, {Tool.flutes} flutes")
         tool = Tool(float(diameter), int(flutes))
 
     machine_ref: str | Path = "default"
+    if "machine" in raw and "parameters" not in raw["machine"]:
+        raise CaseError(f"{toml_path}:{_line_of(text, 'machine', None) or _find_top_key(text, 'machine')}: [machine] "
+                        "needs 'parameters' (a set shipped in models/machines, e.g. \"default\", or a path to a "
+                        "machine .toml file relative to the case folder)")
     if "machine" in raw and "parameters" in raw["machine"]:
         machine_ref = raw["machine"]["parameters"]
         if not isinstance(machine_ref, str):

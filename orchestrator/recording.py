@@ -11,6 +11,7 @@ recording.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Iterable, Mapping
@@ -52,6 +53,25 @@ def _unit_map(names: Iterable[str], units: Mapping[str, str | None] | None) -> d
     given = units or {}
     return {name: None if name in given and given[name] is None else (given.get(name) or unit_of_column(name))
             for name in names}
+
+
+def _rounded_time_hint(t: np.ndarray) -> str:
+    """Why ``t`` [s] repeats when its times are written on a decimal grid coarser than the sampling.
+
+    A logger sampling every 0.5 ms that writes ``t_s`` with 3 decimals repeats every other time; the hint
+    names the grid (the smallest step between different times, when it is a power of ten) and asks for more
+    decimals. Empty when the times are not on such a grid.
+    """
+    steps = np.diff(t)
+    positive = steps[steps > 0]
+    if not positive.size:
+        return ""
+    grid = float(positive.min())
+    exponent = round(math.log10(grid))
+    if abs(grid / 10.0 ** exponent - 1.0) > 1e-3:  # 1e-3: Unix-time clocks carry steps to 2.4e-7 s
+        return ""
+    return (f"; t_s is written to {10.0 ** exponent:g} s: does the logger sample faster than that? write t_s "
+            "with more decimals")
 
 
 @dataclass
@@ -296,7 +316,8 @@ class Recording:
                 k = int(np.flatnonzero(steps <= 0)[0]) + 1
                 what = "repeats" if steps[k - 1] == 0 else "goes back"
                 raise RecordingError(
-                    f"{path}:{int(table.lines[k])}: t_s {what} ({float(t[k - 1])!r} then {float(t[k])!r}); rows must be in strictly increasing time"
+                    f"{path}:{int(table.lines[k])}: t_s {what} ({float(t[k - 1])!r} then {float(t[k])!r}); rows "
+                    f"must be in strictly increasing time{_rounded_time_hint(t) if what == 'repeats' else ''}"
                 )
         order = [it] + [j for j in range(len(header)) if j != it and j not in ignored]
         channels = {header[j]: values[:, j] for j in order}

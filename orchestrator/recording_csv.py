@@ -16,8 +16,9 @@ the same files and give the same numbers (``float`` of the cell: correctly round
 
 Writing
 -------
-Rows are formatted with ``%.12g`` per cell (``line`` truncated to an integer) in chunks and streamed into the
-temporary file of :func:`orchestrator.atomic.atomic_writer`, so nothing half-written ever has the target's name.
+Rows are formatted with ``%.12g`` per cell (``t_s`` to 1 µs also beyond 1e6 s; ``line`` truncated to an integer) in
+chunks and streamed into the temporary file of :func:`orchestrator.atomic.atomic_writer`, so nothing half-written
+ever has the target's name.
 """
 from __future__ import annotations
 
@@ -431,10 +432,30 @@ class _ChunkParser:
         return values, np.array([lineno for lineno, _ in body], dtype=np.int64)
 
 
+#: Significant digits of a written cell.
+DIGITS = 12
+#: Finest time step ``t_s`` keeps when written, s: a logger clock of 1.7e9 s (Unix time) needs 16 digits.
+TIME_RESOLUTION_S = 1e-6
+
+
+def time_digits(t: np.ndarray) -> int:
+    """Significant digits that write every time of ``t`` [s] to :data:`TIME_RESOLUTION_S` or finer (12 to 17).
+
+    ``%.12g`` keeps 1 µs up to 1e6 s; a logger clock beyond that (Unix time, 1.7e9 s) would come back in steps
+    of 10 ms, and 1 ms samples would repeat.
+    """
+    finite = np.abs(np.asarray(t, dtype=float))
+    finite = finite[np.isfinite(finite)]
+    top = float(finite.max()) if finite.size else 0.0
+    if top < 1.0:
+        return DIGITS
+    return int(min(17, max(DIGITS, math.floor(math.log10(top)) + 1 - round(math.log10(TIME_RESOLUTION_S)))))
+
+
 def _text_chunks(names: Sequence[str], columns: Sequence[np.ndarray], integer: Iterable[str]) -> Iterator[str]:
     """The CSV text of the columns in chunks of about CHUNK_BYTES characters, the header first."""
     integer = set(integer)
-    fmt = ",".join(["%.12g"] * len(names))
+    fmt = ",".join(f"%.{time_digits(c) if name == 't_s' else DIGITS}g" for name, c in zip(names, columns))
     yield ",".join(names) + "\n"
     n = len(columns[0]) if len(columns) else 0
     rows_per_chunk = max(1, CHUNK_BYTES // (14 * max(1, len(names))))
@@ -457,7 +478,8 @@ def write_table(path: Path, names: Sequence[str], columns: Sequence[np.ndarray],
     names : sequence of str
         Column names, ``t_s`` first.
     columns : sequence of ndarray (n,)
-        Values, ``%.12g``; NaN is written as an empty cell.
+        Values, ``%.12g`` (``t_s``: more digits beyond 1e6 s, see :func:`time_digits`); NaN is written as an
+        empty cell.
     integer : iterable of str
         Columns written as integers (truncated, as ``int()`` does).
     """

@@ -88,7 +88,8 @@ def _at(recording: Recording, k: int, column: str, time: bool = True) -> str:
     ``"file.csv:412: column 'x_mm' (t_s = 5.03)"`` for a recording read from a file (its 1-based line, blank
     lines counted), ``"<memory>: column 'x_mm', row 4 (t_s = 5.03)"`` for one built in memory.
     """
-    when = f" (t_s = {float(recording.t[k]):.6g})" if time else ""
+    # to 1 µs, whatever the clock: 6 significant digits named a Unix-time logger's every row "1.7643e+09"
+    when = f" (t_s = {round(float(recording.t[k]), 6):.16g})" if time else ""
     if recording.file_lines is not None:
         return f"{recording.where(k)}: column {column!r}{when}"
     return f"{recording.source}: column {column!r}, row {k + 1}{when}"

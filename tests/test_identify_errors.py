@@ -93,13 +93,22 @@ def test_non_monotonic_time(tmp_path):
         identify_friction([tmp_path])
 
 
-def test_nan_in_a_needed_column(tmp_path):
+def test_an_empty_cell_in_a_needed_column_leaves_its_row_out_and_says_so(tmp_path):
+    """recording.md: an empty cell is "not measured at this sample". The whole log was refused for one; now
+    that row is left out (the rest is unevenly sampled, which the contract allows) and the report names it."""
     ch = reciprocating()
     ch["x_tcmd_A"][100] = np.nan  # an empty cell in the CSV
     folder = make_case(tmp_path, ch)
-    with pytest.raises(IdentificationError, match=r"recording\.csv:102: column 'x_tcmd_A' has 1 empty or NaN "
-                                                  r"cell.*line\(s\) \[102\]"):  # row 100 = file line 102
-        identify_friction([folder])
+    fit = identify_friction([folder])
+    assert fit.params_["x"]["positive"].coulomb == pytest.approx(641.6, rel=1e-3)
+    assert fit.params_["x"]["positive"].static == pytest.approx(775.2, rel=1e-3)
+    assert fit.notes_ == [f"{folder / 'recording.csv'}:102: 1 of 9800 row(s) without x_tcmd_A (empty: not measured) "
+                          "left out of friction identification of axis x (first at line(s) [102])"]  # row 100
+    ch["x_tcmd_A"][2:] = np.nan  # 2 rows with a current: nothing to fit
+    with pytest.raises(IdentificationError, match=r"recording\.csv: friction identification of axis x needs "
+                                                  r"\['t_s', 'x_mm', 'x_tcmd_A'\] measured together in at least 3 "
+                                                  r"rows; 2 of the 9800 rows"):
+        identify_friction([make_case(tmp_path, ch)])
 
 
 def test_missing_recording_file(tmp_path):

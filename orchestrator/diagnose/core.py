@@ -130,6 +130,15 @@ def _r(x: float, digits: int = 6) -> float:
     return float(f"{x:.{digits}g}")
 
 
+def _offset_s(x: float) -> float:
+    """A logger offset for the report [s]: 7 significant digits, and never coarser than 1 µs.
+
+    Seven significant digits of a logger clock in Unix time (1.7e9 s) are 1000 s: the offset came out as
+    1764300000.0 for 1764300003.209287.
+    """
+    return min(_r(x, 7), round(float(x), 6), key=lambda v: abs(v - float(x)))  # the nearer of the two
+
+
 def as_case(item: str | Path | Case) -> Case:
     """A :class:`Case` from a folder, a ``case.toml`` path or a Case."""
     return item if isinstance(item, Case) else load_case(item)
@@ -489,7 +498,7 @@ def diagnose(
     if drives:
         d = _diagnose_drives(case, prep, base_machine, holdout, vertical, refit_scales, say, log)
     else:
-        d = Diagnosis({"time_offset_s": _r(prep.offset, 7), "channels": {}}, [], [], {}, {},
+        d = Diagnosis({"time_offset_s": _offset_s(prep.offset), "channels": {}}, [], [], {}, {},
                       base_machine.with_values("machine", name=f"{base_machine.name}-diagnosed"), {}, log=log,
                       case_name=Path(case.folder).name)
     if do_cut:
@@ -665,7 +674,7 @@ def _alignment(prep: Prepared, cols: dict[str, AxisColumns], art: dict[str, dict
             scale = prep.current_scale.get(a, 1.0)
             channels[f"{a}_tcmd_A"] = {"scale": _r(scale, 6),
                                        "offset": _r(art[a].get(f"{a}_tcmd_A offset", 0.0) * scale, 6)}
-    return {"time_offset_s": _r(offset, 7), "channels": channels}
+    return {"time_offset_s": _offset_s(offset), "channels": channels}
 
 
 def extended_machine(base: Machine, model: Model, case: Case) -> tuple[Machine, dict[str, str]]:

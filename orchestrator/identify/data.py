@@ -126,6 +126,53 @@ def check_columns(recording: Recording, columns: Sequence[str], purpose: str) ->
             )
 
 
+def measured_rows(recording: Recording, columns: Sequence[str], purpose: str) -> tuple[Recording, str | None]:
+    """The rows in which every one of ``columns`` was measured (recording.md: an empty cell is "not measured").
+
+    A logger whose channels start or stop a sample apart, or that drops a sample now and then, leaves empty
+    cells; the fits that need these columns together at every sample (friction, servo) use the other rows,
+    sampled unevenly, instead of refusing the whole log. What is left out is said, never silent.
+
+    Parameters
+    ----------
+    recording : Recording
+        Single-member recording.
+    columns : sequence of str
+        Columns needed together (they must exist; see :func:`check_columns`).
+    purpose : str
+        What for, for the note.
+
+    Returns
+    -------
+    recording : Recording
+        ``recording`` itself when every row has every column, else its measured rows (file lines kept).
+    note : str or None
+        ``"file:line: N row(s) ... left out ..."`` naming the columns and the first lines, or None.
+
+    Raises
+    ------
+    IdentificationError
+        Fewer than 3 rows have every column, or a column is missing.
+    """
+    missing = [c for c in columns if c not in recording]
+    if missing:
+        raise IdentificationError(
+            f"{recording.source}: {purpose} needs column(s) {missing}; the recording has {recording.channels}")
+    have = np.ones(len(recording), dtype=bool)
+    for c in columns:
+        have &= np.isfinite(np.asarray(recording[c], dtype=float))
+    if have.all():
+        return recording, None
+    if have.sum() < 3:
+        raise IdentificationError(
+            f"{recording.source}: {purpose} needs {list(columns)} measured together in at least 3 rows; "
+            f"{int(have.sum())} of the {len(recording)} rows have them all (an empty cell is 'not measured')")
+    empty = [c for c in columns if not np.isfinite(np.asarray(recording[c], dtype=float)).all()]
+    note = (f"{_first(recording, ~have)}: {int((~have).sum())} of {len(recording)} row(s) without "
+            f"{' / '.join(empty)} (empty: not measured) left out of {purpose} ({_places(recording, ~have)})")
+    return recording.take(have), note
+
+
 def _first(recording: Recording, mask: np.ndarray) -> str:
     """``"file:line"`` (or ``"source, row k"``) of the first True entry of ``mask``."""
     return recording.where(int(np.flatnonzero(mask)[0]))

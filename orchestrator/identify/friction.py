@@ -8,6 +8,7 @@ per axis and direction and fitted with :func:`.stribeck.fit_stribeck`.
 """
 from __future__ import annotations
 
+import logging
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -18,11 +19,13 @@ import numpy as np
 from ..case import Case
 from ..machine import Machine
 from .common import fitted_machine, provenance, write_outputs
-from .data import CaseData, axes_in, check_columns, force_per_amp, load_inputs
+from .data import CaseData, axes_in, check_columns, force_per_amp, load_inputs, measured_rows
 from .errors import IdentificationError
 from .journal import Journal
 from .segments import Segment, SegmentSettings, find_segments, require_segments
 from .stribeck import StribeckFit, fit_stribeck
+
+_log = logging.getLogger(__name__)
 
 DIRECTIONS = {1: "positive", -1: "negative"}
 
@@ -46,6 +49,9 @@ class FrictionFit:
     wall_time_ : float
         Seconds for the whole identification.
     cases : list of str
+    notes_ : list of str
+        Rows left out because a needed cell was empty (not measured), per case and axis
+        (``report.json`` -> ``notes``).
     """
 
     params_: dict[str, dict[str, StribeckFit]]
@@ -55,6 +61,7 @@ class FrictionFit:
     method: str
     wall_time_: float
     cases: list[str] = field(default_factory=list)
+    notes_: list[str] = field(default_factory=list)
 
     def points(self, axis: str, direction: str) -> tuple[np.ndarray, np.ndarray]:
         """Stribeck points ``(speed [m/s], force [N])`` (magnitudes) of one axis and direction."""
@@ -69,6 +76,7 @@ class FrictionFit:
             "method": self.method,
             "cases": self.cases,
             "wall_time_s": self.wall_time_,
+            "notes": self.notes_,
             "axes": {
                 a: {d: {
                     "coulomb_N": f.coulomb, "static_N": f.static, "stribeck_velocity_m_per_s": f.stribeck_velocity,
@@ -91,9 +99,14 @@ class FrictionFit:
         return files
 
 
-def collect_segments(data: Sequence[CaseData], axes: Sequence[str] | None,
-                     settings: SegmentSettings) -> tuple[list[str], list[Segment]]:
-    """Constant-velocity windows of the requested (or all recorded) axes of every case."""
+def collect_segments(data: Sequence[CaseData], axes: Sequence[str] | None, settings: SegmentSettings,
+                     notes: list[str] | None = None) -> tuple[list[str], list[Segment]]:
+    """Constant-velocity windows of the requested (or all recorded) axes of every case.
+
+    Rows without a needed cell (not measured) are left out, each case and axis adding a line to ``notes``
+    (:func:`.data.measured_rows`).
+    """
+    notes = [] if notes is None else notes
     segments: list[Segment] = []
     wanted: list[str] = []
     for d in data:
@@ -107,8 +120,13 @@ def collect_segments(data: Sequence[CaseData], axes: Sequence[str] | None,
             )
         for a in use:
             cols = ["t_s", f"{a}_mm", f"{a}_tcmd_A"]
-            check_columns(rec, cols, f"friction identification of axis {a}")
-            found = find_segments(rec, a, force_per_amp(d.case, a), settings)
+            purpose = f"friction identification of axis {a}"
+            rows, note = measured_rows(rec, cols, purpose)
+            if note is not None:
+                _log.warning("%s", note)
+                notes.append(note)
+            check_columns(rows, cols, purpose)
+            found = find_segments(rows, a, force_per_amp(d.case, a), settings)
             if axes or found:
                 segments += found
                 if a not in wanted:
@@ -164,7 +182,8 @@ def identify_friction(
     settings = settings or SegmentSettings()
     data = load_inputs(cases)
     journal = journal or Journal()
-    wanted, segments = collect_segments(data, axes, settings)
+    notes: list[str] = []
+    wanted, segments = collect_segments(data, axes, settings, notes)
     params: dict[str, dict[str, StribeckFit]] = {}
     for a in wanted:
         params[a] = {}
@@ -184,7 +203,7 @@ def identify_friction(
         } for a, dirs in params.items() for d, f in dirs.items()
     }
     machine, extra = fitted_machine(data[0].case.machine, updates, source, "friction")
-    return FrictionFit(params, segments, machine, extra, method, time.perf_counter() - start, names)
+    return FrictionFit(params, segments, machine, extra, method, time.perf_counter() - start, names, notes)
 
 
 class FrictionIdentifier:

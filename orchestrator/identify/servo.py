@@ -54,10 +54,11 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from ..case import Case
+from ..errors import CncTwinError
 from ..machine import Machine, load_machine
 from .closed_loop import replay
 from .common import fitted_machine, provenance, write_outputs
-from .data import CaseData, check_columns, load_inputs
+from .data import CaseData, check_columns, load_inputs, measured_rows
 from .errors import IdentificationError
 from .ga import paper_objective, run_ga_lockstep
 from .journal import Journal
@@ -94,7 +95,7 @@ class _Series:
     source: str = "recorded"
     cmd: dict[str, np.ndarray] = field(default_factory=dict)   # m at t (twin commands)
     between: dict | None = None       # axis -> f(q) [m]: a coarse recorded reference at the servo ticks
-    t_start: float | None = None
+    t_start: float | None = None     # first servo tick [s]: the controller's grid (None: the first sample)
     disturbance: dict | None = None
     offset: float = 0.0               # logger clock minus program clock, s
     offset_method: str = ""
@@ -146,6 +147,8 @@ class ServoFit:
         joint fit, and how the offset was found).
     excluded_ : list of str
         Logger glitches left out of the fit, ``"file:line axis channel"`` (see :func:`_screen_glitches`).
+    notes_ : list of str
+        Rows left out because a needed cell was empty (not measured), per case (``report.json`` -> ``notes``).
     """
 
     scales_: dict[str, dict[str, float]]
@@ -162,12 +165,13 @@ class ServoFit:
     traces_: list[dict] = field(default_factory=list, repr=False)
     commands_: dict[str, str] = field(default_factory=dict)
     excluded_: list[str] = field(default_factory=list)
+    notes_: list[str] = field(default_factory=list)
 
     def report(self) -> dict:
         """JSON-ready report (``commands``: per case where the commands came from)."""
         return {
             "kind": "servo", "method": self.method, "cases": self.cases, "wall_time_s": self.wall_time_,
-            "commands": self.commands_, "excluded_samples": self.excluded_,
+            "commands": self.commands_, "excluded_samples": self.excluded_, "notes": self.notes_,
             "iterations": self.iterations_, "batched_simulations": self.simulations_,
             "axes": {a: {**self.scales_[a], "fitness_J": self.fitness_[a],
                          "residual_rms_following_error_um": self.rms_[a]["following_error_um"],
@@ -193,7 +197,8 @@ def _has(recording, name: str) -> bool:
 
 
 def _prepare(data: Sequence[CaseData], axes: Sequence[str] | None,
-             machine: Machine) -> tuple[list[_Series], list[str]]:
+             machine: Machine, notes: list[str] | None = None) -> tuple[list[_Series], list[str]]:
+    """The series to replay; rows without a needed cell (not measured) are left out, noted in ``notes``."""
     series, used = [], []
     for d in data:
         rec = d.recording
@@ -206,6 +211,14 @@ def _prepare(data: Sequence[CaseData], axes: Sequence[str] | None,
                 f"{d.source}: servo identification needs '<axis>_mm' and '<axis>_tcmd_A' of at least one axis "
                 f"(with '<axis>_ref_mm' when the log has the commands); the recording has {rec.channels}"
             )
+        needed = [c for a in want for c in ((f"{a}_ref_mm",) if a in present else ()) + (f"{a}_mm", f"{a}_tcmd_A")
+                  if c in rec]
+        rec, note = measured_rows(rec, ["t_s", *needed], f"servo identification of axis {', '.join(want)}")
+        if note is not None:
+            _log.warning("%s", note)
+            if notes is not None:
+                notes.append(note)
+            d.recording = rec
         moving, from_twin = [], []
         for a in want:
             if a in logged:
@@ -220,15 +233,16 @@ def _prepare(data: Sequence[CaseData], axes: Sequence[str] | None,
                 raise IdentificationError(f"{d.source}: axis {a} does not move (reference range below 1 µm)")
         if moving:
             t = np.asarray(rec.t, dtype=float)
-            load, forces = _cutting_load(d, machine, moving)
+            aligned = _Aligned(d, machine, moving)
+            load, forces = _cutting_load(d, machine, moving, aligned)
             series.append(_Series(
                 d, t,
                 {a: np.asarray(rec[f"{a}_ref_mm"]) * 1e-3 for a in moving},
                 {a: float(rec[f"{a}_mm"][0]) * 1e-3 for a in moving},
                 {a: np.asarray(rec.following_error_um(a), dtype=float) for a in moving},
                 {a: np.asarray(rec[f"{a}_tcmd_A"], dtype=float) for a in moving},
-                disturbance=load, forces=forces, between=_between_samples(d, machine, moving),
-                start=_starts(d, moving, machine),
+                disturbance=load, forces=forces, between=_between_samples(d, machine, moving, aligned),
+                start=_starts(d, moving, machine), t_start=_controller_tick(d, machine, aligned),
             ))
         twin = _twin_series(d, from_twin, machine, explicit=bool(axes)) if from_twin else None
         if twin is not None:
@@ -242,7 +256,64 @@ def _prepare(data: Sequence[CaseData], axes: Sequence[str] | None,
     return series, used
 
 
-def _cutting_load(d: CaseData, machine: Machine, axes: list[str]) -> tuple[dict | None, str]:
+class _Aligned:
+    """The diagnosis's alignment of a log with recorded commands with the twin's run, computed once when asked.
+
+    Calling it gives the :class:`orchestrator.diagnose.prepare.Prepared` alignment, or raises the project error
+    it raised (:class:`~orchestrator.diagnose.errors.DiagnosisError`, ...; every call, the same one).
+    """
+
+    def __init__(self, d: CaseData, machine: Machine, axes: list[str]) -> None:
+        self.d, self.machine, self.axes = d, machine, list(axes)
+        self._result: object = None
+
+    def __call__(self):
+        from ..diagnose.prepare import prepare as align_with_twin
+
+        if self._result is None:
+            try:
+                self._result = align_with_twin(self.d.case, self.d.recording, self.machine, axes=self.axes)
+            except CncTwinError as exc:
+                self._result = exc
+        if isinstance(self._result, Exception):
+            raise self._result
+        return self._result
+
+
+#: Samples within this fraction of a position-loop period of the controller's ticks are on its tick grid (when
+#: the alignment took the ticks from the recorded commands; from the current ripple it resolves 1/8 period).
+ON_GRID_FRACTION = 0.02
+
+
+def _controller_tick(d: CaseData, machine: Machine, aligned: _Aligned) -> float | None:
+    """The controller's last position-loop tick at or before a log's first sample [s, logger clock], or None.
+
+    The replay's position loop ticks every ``Tp`` from its first tick; started on the log's first sample, it
+    samples the command and the feedback in the logger's phase, not the controller's. A logger whose samples
+    fall between the controller's ticks (a clock of its own, a 0.25 ms phase) then gave Svi +15 % and Svp
+    -4 % at twice the noise residual. The tick grid is the diagnosis's alignment with the twin's run
+    (``Prepared.t_start``: to well below a microsecond on the twin's own logs). None (start on the first
+    sample, as before) for a log on that grid (to :data:`ON_GRID_FRACTION` of a period, or to the 1/8 period
+    the current ripple resolves when the commands differ from the twin's), or one that cannot be aligned.
+    """
+    from ..diagnose.prepare import PHASE_STEPS  # local: the diagnosis imports the identification's replay
+
+    try:
+        prep = aligned()
+    except CncTwinError as exc:  # any project error of the alignment: replay as before, on the first sample
+        _log.info("%s: replay ticks start on the first sample (not aligned with the twin: %s)", d.source, exc)
+        return None
+    tp = float(machine.si("servo")["position_loop_period"])
+    t = np.asarray(d.recording.t, dtype=float)
+    ticks = (t - prep.t_start) / tp
+    tolerance = ON_GRID_FRACTION if prep.phase_from_commands else 1.0 / PHASE_STEPS
+    if np.max(np.abs(ticks - np.round(ticks))) <= tolerance:
+        return None
+    return float(prep.t_start - tp * np.ceil((prep.t_start - t[0]) / tp - 1e-9))
+
+
+def _cutting_load(d: CaseData, machine: Machine, axes: list[str],
+                  aligned: _Aligned | None = None) -> tuple[dict | None, str]:
     """The cutting force the drives of a log with recorded commands carried: ``({axis: f(t)}, source)``.
 
     A log taken while cutting holds the cutting load in its currents (a 2 mm slot in A6061: about 1 A on the
@@ -257,13 +328,13 @@ def _cutting_load(d: CaseData, machine: Machine, axes: list[str]) -> tuple[dict 
     """
     from ..diagnose.errors import DiagnosisError  # local: only cutting logs need the diagnosis's alignment
     from ..diagnose.prepare import predicted_forces, recorded_forces
-    from ..diagnose.prepare import prepare as align_with_twin
 
     recorded = recorded_forces(d.recording)
     if d.case.stock is None:
         return recorded, "none" if recorded is None else "recorded"
+    aligned = aligned or _Aligned(d, machine, axes)
     try:  # with a stock: recorded forces too coarse for the tooth load are corrected on the twin's (see prepare)
-        prep = align_with_twin(d.case, d.recording, machine, axes=list(axes))
+        prep = aligned()
     except DiagnosisError as exc:
         if recorded is not None:
             return recorded, "recorded"
@@ -277,7 +348,8 @@ def _cutting_load(d: CaseData, machine: Machine, axes: list[str]) -> tuple[dict 
     return prep.disturbance, prep.forces_source
 
 
-def _between_samples(d: CaseData, machine: Machine, axes: list[str]) -> dict | None:
+def _between_samples(d: CaseData, machine: Machine, axes: list[str],
+                     aligned: _Aligned | None = None) -> dict | None:
     """Recorded commands sampled more coarsely than the interpolation, at any time: ``{axis: f(q)}`` [m], or None.
 
     Interpolated between the logger's samples, such a command loses the shape of every acceleration: the twin's
@@ -288,7 +360,6 @@ def _between_samples(d: CaseData, machine: Machine, axes: list[str]) -> dict | N
     (nothing to carry), or when the log cannot be aligned with the twin's run (the samples are interpolated).
     """
     from ..diagnose.errors import DiagnosisError  # local: only coarse logs need the diagnosis's alignment
-    from ..diagnose.prepare import prepare as align_with_twin
 
     t = np.asarray(d.recording.t, dtype=float)
     period = float(machine.si("nck")["interpolation_period"])
@@ -297,7 +368,7 @@ def _between_samples(d: CaseData, machine: Machine, axes: list[str]) -> dict | N
     if not gaps or max(gaps) <= 1.5 * period:
         return None
     try:
-        prep = align_with_twin(d.case, d.recording, machine, axes=list(axes))
+        prep = (aligned or _Aligned(d, machine, axes))()
     except DiagnosisError as exc:
         _log.info("%s: recorded commands interpolated between samples (not aligned with the twin: %s)", d.source, exc)
         return None
@@ -385,11 +456,16 @@ def _check_same_program(d: CaseData, prep, axes: list[str], sel: np.ndarray) -> 
             )
 
 
-def _sample(grid: np.ndarray, values: np.ndarray, q: np.ndarray) -> np.ndarray:
-    """Linear interpolation of ``values`` (m, B) on the uniform ``grid`` (m,) at ``q`` (n, B), held outside."""
-    step = grid[1] - grid[0]
-    k = np.clip(np.floor((q - grid[0]) / step).astype(int), 0, grid.size - 2)
-    f = np.clip((q - grid[k]) / step, 0.0, 1.0)
+def _sample(start: float, step: float, values: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """Linear interpolation of ``values`` (m, B) on the grid ``start + step k`` [s] at ``q`` (n, B), held outside.
+
+    The grid's step is given, not taken from two grid times: on a logger clock of 1.7e9 s (Unix time) those
+    are 2.4e-7 s apart from ``step`` (0.1 % of a 0.25 ms tick), and 40 000 ticks on the samples were 40 ticks
+    off (Spp 1.02, Svp 1.49 for 0.9, 1.2).
+    """
+    x = (q - start) / step
+    k = np.clip(np.floor(x).astype(int), 0, values.shape[0] - 2)
+    f = np.clip(x - k, 0.0, 1.0)
     return np.take_along_axis(values, k, 0) * (1.0 - f) + np.take_along_axis(values, k + 1, 0) * f
 
 
@@ -407,7 +483,7 @@ def _simulate(machine: Machine, series: _Series, scales: dict[str, np.ndarray],
     if series.source == "recorded":
         refs = {a: (series.between or {}).get(a, r) for a, r in series.ref.items()}
         run = replay(machine, series.t, refs, batch=batch, mcu_values=mcu, initial_position=series.x0,
-                     disturbance=series.disturbance, start=series.start)
+                     t_start=series.t_start, disturbance=series.disturbance, start=series.start)
         e = {a: (series.ref[a][:, None] - run.position[a]) * 1e6 for a in series.ref}
         return e, run.current
     tv = float(machine.si("servo")["velocity_loop_period"])
@@ -419,13 +495,13 @@ def _simulate(machine: Machine, series: _Series, scales: dict[str, np.ndarray],
                  t_out=grid, t_start=series.t_start, disturbance=series.disturbance, start=series.start,
                  start_at=series.t_start + lag)
     q = series.t[:, None] - lag[None, :]
-    e = {a: (series.cmd[a][:, None] - _sample(grid, run.position[a], q)) * 1e6 for a in series.ref}
+    e = {a: (series.cmd[a][:, None] - _sample(series.t_start, tv, run.position[a], q)) * 1e6 for a in series.ref}
     cur = run.current
     if smooth:
         width = max(int(round(float(machine.si("servo")["position_loop_period"]) / tv)), 1)
         kernel = np.ones(width) / width
         cur = {a: np.apply_along_axis(np.convolve, 0, c, kernel, "same") for a, c in cur.items()}
-    return e, {a: _sample(grid, cur[a], q) for a in series.ref}
+    return e, {a: _sample(series.t_start, tv, cur[a], q) for a in series.ref}
 
 
 def _initial_spp(machine: Machine, series: list[_Series], axis: str) -> float:
@@ -489,7 +565,8 @@ def identify_servo(
     data = load_inputs(cases)
     base = machine if isinstance(machine, Machine) else (
         load_machine(machine) if machine is not None else data[0].case.machine)
-    series, used = _prepare(data, axes, base)
+    notes: list[str] = []
+    series, used = _prepare(data, axes, base, notes)
     w: dict[str, tuple[float, float]] = {}
     for a in used:
         e_all = np.concatenate([s.e[a] for s in series if a in s.e])
@@ -574,6 +651,7 @@ def identify_servo(
     return ServoFit(
         {a: dict(zip(SYMBOLS, map(float, scales[a]))) for a in used}, fitness, rms, w, iterations,
         counter["sims"], fitted, extra, method, time.perf_counter() - start, names, traces, commands, glitches,
+        notes,
     )
 
 
