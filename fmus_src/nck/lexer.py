@@ -52,6 +52,9 @@ class Word:
         The number.
     start, end : int
         Column span ``[start, end)`` of the whole word in the source line.
+    variable : bool
+        The value came from a Custom Macro B variable or expression (``X#24``): a real value, never a count of
+        least input increments (:mod:`.decimal_input`).
     """
 
     letter: str
@@ -59,6 +62,7 @@ class Word:
     value: float
     start: int
     end: int
+    variable: bool = False
 
     @property
     def has_point(self) -> bool:

@@ -28,11 +28,15 @@ from typing import Sequence
 
 from ..codes import LETTERS
 from ..errors import GCodeError
-from ..lexer import LexedLine, LexError
+from ..lexer import LexedLine, LexError, Word
 from ..modal import ModalState
 from ..settings import INCH
 from ..subprograms import MAX_CALLED_LINES
 from .calls import MAX_MACRO_NESTING, MacroCall, read_macro_call
+
+#: Letters of a G65 block read as integers (not affected by decimal point input): G, P (program), L (count), and
+#: the addresses H D M S T whose arguments FANUC passes as written.
+INTEGER_ARGUMENTS = "GPLHDMST"
 from .expressions import condition, evaluate, node_text, round_half_away, variable_number
 from .loop_slice import loop_slice
 from .loops import MAX_SEQUENCE, ProgramIndex, index_program, main_program_last
@@ -175,6 +179,7 @@ class MacroRuntime:
                 return lexed
         ctx = LineContext(self.store, self.file, number, self.lines[number - 1].strip())
         if parsed is None:
+            self._check_arguments(lexed.words, ctx)
             return read_macro_call([(w.letter, w.value, w.letter + w.text) for w in lexed.words], ctx.fail)
         s = parsed.statement
         if isinstance(s, NCBlock):
@@ -199,8 +204,22 @@ class MacroRuntime:
             return None
         return Jump(index.do_end[here] + 1)
 
+    def _check_arguments(self, words: Sequence[Word], ctx: LineContext) -> None:
+        """Under decimal point input DPI = 0 (:mod:`..decimal_input`), a G65 argument written without a decimal
+        point at an address that takes one is an error: FANUC passes it in least input increments of that
+        address, which the twin does not model for arguments."""
+        if self.st.settings.decimal_input != "increment":
+            return
+        for w in words:
+            if w.letter not in INTEGER_ARGUMENTS and not w.has_point:
+                shown = w.letter + w.text
+                raise ctx.fail(shown, f"G65 argument {shown} without a decimal point under decimal point input "
+                               "\"increment\" (FANUC No. 3401#0 DPI = 0: passed in least input increments, not "
+                               "modelled for arguments)", f"the argument with a decimal point ({w.letter}{w.text}.)")
+
     def _block(self, parsed: MacroLine, s: NCBlock, ctx: LineContext) -> MacroCall | LexedLine:
         if parsed.is_call:
+            self._check_arguments(parsed.static.words, ctx)
             items: list[tuple[str, float | None, str]] = [(w.letter, w.value, w.letter + w.text)
                                                           for w in parsed.static.words]
             for piece in s.values:
