@@ -19,6 +19,8 @@ Conventions
   :mod:`.loop_slice`) are as in the pass before, and only the loop's own lines ran in between.
 * ``#3000 = n (MESSAGE)`` stops the program with a :class:`~..errors.GCodeError` naming the line, n and the
   message (FANUC macro alarm 3000 + n).
+* ``#3006 = n (MESSAGE)`` (stop with message, as hand-written programs ask the operator to turn the part over)
+  is a program stop: the line runs as the block ``M0`` (the axes come to rest, no operator wait is added).
 """
 from __future__ import annotations
 
@@ -28,11 +30,14 @@ from typing import Sequence
 
 from ..codes import LETTERS
 from ..errors import GCodeError
-from ..lexer import LexedLine, LexError, Word
+from ..lexer import LexedLine, LexError, Word, lex_line
 from ..modal import ModalState
 from ..settings import INCH
 from ..subprograms import MAX_CALLED_LINES
 from .calls import MAX_MACRO_NESTING, MacroCall, read_macro_call
+
+#: FANUC system variable of the stop with message (the program stops as at M00 and shows the message).
+STOP_WITH_MESSAGE = 3006
 
 #: Letters of a G65 block read as integers (not affected by decimal point input): G, P (program), L (count), and
 #: the addresses H D M S T whose arguments FANUC passes as written.
@@ -185,11 +190,10 @@ class MacroRuntime:
         if isinstance(s, NCBlock):
             return self._block(parsed, s, ctx)
         if isinstance(s, Assign):
-            self._assign(s, ctx, parsed)
-            return None
+            return self._assign(s, ctx, parsed)
         if isinstance(s, IfThen):
             if condition(s.condition, ctx, node_text(s.condition)):
-                self._assign(s.assign, ctx, parsed)
+                return self._assign(s.assign, ctx, parsed)
             return None
         if isinstance(s, Goto):
             if s.condition is None or condition(s.condition, ctx, node_text(s.condition)):
@@ -250,7 +254,8 @@ class MacroRuntime:
                 raise ctx.fail("G" + w.text, f"G{w.text} from a variable", f"G{w.text} written as a number")
         return lexed
 
-    def _assign(self, s: Assign, ctx: LineContext, parsed: MacroLine) -> None:
+    def _assign(self, s: Assign, ctx: LineContext, parsed: MacroLine) -> LexedLine | None:
+        """Run an assignment; ``#3006 = n (MESSAGE)`` is a program stop: the block ``M0`` to execute."""
         n = variable_number(s.target, ctx)
         v = evaluate(s.value, ctx)
         if isinstance(v, bool):
@@ -260,7 +265,10 @@ class MacroRuntime:
             shown = "vacant" if v is None else f"{v:g}"
             raise ctx.fail("#3000", f"macro alarm #3000 = {shown}: {parsed.comment or '(no message)'}",
                            "a program that does not raise its alarm (the program stopped it on purpose)")
+        if n == STOP_WITH_MESSAGE:  # FANUC: the program stops as at M00 and shows the message; cycle start resumes
+            return LexedLine(lex_line("M0").words, False, parsed.block_delete, parsed.text)
         self.store.write(n, v, s.target.text, ctx.fail)
+        return None
 
     def _goto(self, number: int, s: Goto, ctx: LineContext, stack: Sequence) -> Jump:
         v = evaluate(s.target, ctx)
