@@ -6,6 +6,9 @@ lengths); ``do_step(t, h)`` reads the planned samples at ``t + h`` with
 :func:`.sampling.read_plan` (linear interpolation between interpolation
 periods for Real outputs when ``t + h`` is not on the grid).
 
+Before planning, the interpreted path is checked against the stored stroke limits of the axes whose
+``<a>_stroke_check`` is on (:mod:`.stroke`; the machine file's ``[axis.<a>] stroke_min_mm/stroke_max_mm``).
+
 The program comes from the String parameter ``program_file`` or, in Python,
 from the ``program_text`` keyword of the constructor / :meth:`NCKernel.set_program_text`
 (text wins when both are given).
@@ -23,13 +26,13 @@ from .cycles import CycleMachine
 from .decimal_input import DECIMAL_INPUTS
 from .errors import NCParameterError
 from .interpreter import interpret
+from .lexer import split_lines, without_dos_eof
 from .m_aliases import DEFAULT_M_CODES, format_m_codes, parse_m_codes
 from .overrides import apply_overrides
 from .params import NCParams
 from .planner import BatchPlan, Schedule, build_schedule, plan_batch
 from .sampling import read_plan
 from .settings import DEFAULT_REFERENCE, TOOL_CHANGE_RETRACTS, InterpreterSettings
-from .lexer import split_lines, without_dos_eof
 from .source import read_program
 from .stroke import StrokeLimits, check_stroke
 
