@@ -322,3 +322,12 @@ def test_every_program_plans_on_the_default_machine_inside_its_travel(text):
     kernel = NCKernel(program_text=text, **{**nck_parameters(load_machine("default")), "z_initial": 0.05})
     kernel.setup(0.0)
     assert kernel.duration_[0] > 0.0
+
+
+def test_iso_colon_program_numbers_are_o_numbers():
+    # FANUC ISO code: ":2000" is the program number O2000, so M98 P2000 finds the subprogram written ":2000"
+    text = "%\n:1000 (MAIN)\nG90 G0 X1.\nM98 P2000\nM30\n:2000\nG1 X2. F100\nM99\n%\n"
+    with_o = text.replace(":1000", "O1000").replace(":2000", "O2000")
+    assert interpret(text, "colon.nc").blocks == interpret(with_o, "o.nc").blocks
+    ends = [round(b.end[0] / MM, 6) for b in interpret(text).blocks if isinstance(b, (Rapid, Linear))]
+    assert ends == [1.0, 2.0]
