@@ -119,11 +119,19 @@ def check_stroke(blocks: Sequence[Block], initial: Vec3, limits: StrokeLimits, f
     """
     if not limits.active:
         return
-    _check_point(initial, 0, limits, file, "", "the machine position before the program")
+    lo = [-math.inf if p is None else p[0] - STROKE_TOLERANCE for p in limits.axes]
+    hi = [math.inf if p is None else p[1] + STROKE_TOLERANCE for p in limits.axes]
+
+    def outside(p: Vec3) -> bool:
+        return not (lo[0] <= p[0] <= hi[0] and lo[1] <= p[1] <= hi[1] and lo[2] <= p[2] <= hi[2])
+
+    if outside(initial):
+        _alarm(initial, 0, limits, file, "", "the machine position before the program")
     for block in blocks:
         for point in _points(block):
-            text = lines[block.line - 1].strip() if 0 < block.line <= len(lines) else ""
-            _check_point(point, block.line, limits, file, text, _what(block))
+            if outside(point):  # the message only for the first point beyond a limit
+                text = lines[block.line - 1].strip() if 0 < block.line <= len(lines) else ""
+                _alarm(point, block.line, limits, file, text, _what(block))
 
 
 def _what(block: Block) -> str:
@@ -134,7 +142,8 @@ def _what(block: Block) -> str:
     return "the feed move"
 
 
-def _check_point(point: Vec3, line: int, limits: StrokeLimits, file: str, text: str, what: str) -> None:
+def _alarm(point: Vec3, line: int, limits: StrokeLimits, file: str, text: str, what: str) -> None:
+    """Raise the alarm of the first axis of ``point`` beyond its limit (nothing when none is)."""
     for axis, (letter, pair) in enumerate(zip(_AXES, limits.axes)):
         if pair is None:
             continue
