@@ -26,8 +26,10 @@ from typing import Any
 import numpy as np
 
 from fmus_src.nck.cycles import BORING_SHIFTS
+from fmus_src.nck.decimal_input import DECIMAL_INPUTS
 from fmus_src.nck.m_aliases import ALIAS_TARGETS, alias_problem
 from fmus_src.nck.params import FILTER_KINDS
+from fmus_src.nck.settings import TOOL_CHANGE_RETRACTS
 from fmus_src.units import UnitError, split_unit_suffix, to_si
 
 from .errors import CncTwinError
@@ -42,8 +44,10 @@ _AXIS_KEYS = {
     "position_gain_per_s", "velocity_p_gain_A_per_m_per_s", "velocity_i_gain_A_per_m",
     "position_scale", "velocity_p_scale", "velocity_i_scale",
     "velocity_feedforward", "acceleration_feedforward",
-    "excess_error_in_motion_mm", "excess_error_at_stop_mm",
+    "excess_error_in_motion_mm", "excess_error_at_stop_mm", "stroke_min_mm", "stroke_max_mm",
 }
+#: The stored stroke limits of an axis (FANUC No. 1321 / No. 1320), machine coordinates; optional, both or none.
+STROKE_KEYS = ("stroke_min_mm", "stroke_max_mm")
 _FRICTION_KEYS = {"coulomb_N", "static_N", "stribeck_velocity_m_per_s", "viscous_Ns_per_m"}
 #: Effects the twin leaves out in the paper's baseline (all 0 = off); written by `cnctwin diagnose`.
 _EFFECT_KEYS = {
@@ -72,7 +76,8 @@ SCHEMA: dict[str, set[str]] = {
         "in_position_width_mm", "tool_change_time_s",
         "reference_x_mm", "reference_y_mm", "reference_z_mm", "g73_retract_mm", "g83_clearance_mm",
         *(f"reference{n}_{a}_mm" for n in (2, 3, 4) for a in AXES),
-        "rigid_tapping_time_constant_ms", "rigid_tapping_mode", "boring_shift",
+        "rigid_tapping_time_constant_ms", "rigid_tapping_mode", "boring_shift", "decimal_point_input",
+        "tool_change_retract",
     },
     "spindle": {"max_speed_rpm", "ramp_rpm_per_s", "speed_arrival_tolerance_percent", "power_kW"},
     "servo": {"position_loop_period_ms", "velocity_loop_period_ms"},
@@ -97,7 +102,9 @@ OPTIONAL_SECTIONS: set[str] = {"machine", "material.*", *(f"axis.{a}.effects" fo
 OPTIONAL_KEYS: dict[str, set[str]] = {
     "nck": {"reference_x_mm", "reference_y_mm", "reference_z_mm", "g73_retract_mm", "g83_clearance_mm",
             *(f"reference{n}_{a}_mm" for n in (2, 3, 4) for a in AXES),
-            "rigid_tapping_time_constant_ms", "rigid_tapping_mode", "boring_shift"},
+            "rigid_tapping_time_constant_ms", "rigid_tapping_mode", "boring_shift", "decimal_point_input",
+            "tool_change_retract"},
+    **{f"axis.{a}": set(STROKE_KEYS) for a in AXES},
 }
 
 
@@ -125,6 +132,8 @@ TEXT_VALUES: dict[tuple[str, str], tuple[str, ...] | None] = {
     ("nck", "rapid_filter"): FILTER_KINDS,
     ("nck", "rigid_tapping_mode"): ("M29", "always"),
     ("nck", "boring_shift"): tuple(sorted(BORING_SHIFTS)),
+    ("nck", "decimal_point_input"): DECIMAL_INPUTS,
+    ("nck", "tool_change_retract"): TOOL_CHANGE_RETRACTS,
 }
 #: Range of the numeric values (file units) that the components accept (any other key: any finite number),
 #: by section kind and key: (test, what is expected). Checked at load so that the error names the file and line.
@@ -268,6 +277,19 @@ class Machine:
         when the file has no such section)."""
         table = self.values.get("nck", {}).get("m_codes", {})
         return {int(code): tuple(means) for code, means in table.items()}
+
+    def stroke_limits(self) -> dict[str, tuple[float, float]]:
+        """The stored stroke limits of the axes that have them: axis letter -> (minimum, maximum), m.
+
+        ``[axis.<a>] stroke_min_mm`` / ``stroke_max_mm`` (FANUC No. 1321 / No. 1320, machine coordinates); an axis
+        without them is left out (not checked).
+        """
+        out: dict[str, tuple[float, float]] = {}
+        for a in AXES:
+            sec = self.si(f"axis.{a}")
+            if "stroke_min" in sec and "stroke_max" in sec:
+                out[a] = (float(sec["stroke_min"]), float(sec["stroke_max"]))
+        return out
 
     def materials(self) -> list[str]:
         """Names of the materials defined in the file."""
@@ -420,12 +442,39 @@ def _check_relations(path: Path, text: str, values: dict[str, Any]) -> None:
                 f"Stribeck friction of [axis.{a}.friction.*] (static - coulomb over stribeck_velocity) needs drive "
                 f"substeps of {cap:.3g} s; expected a moving mass and friction that allow at least "
                 f"{MIN_DRIVE_STEP_S:g} s (a larger mass_kg or stribeck_velocity_m_per_s)")
+    _check_strokes(path, text, values)
     effects = values.get("cutting", {}).get("effects", {})
     if effects.get("chatter_frequency_Hz", 0.0) > 0.0 and not effects.get("chatter_stiffness_N_per_um", 0.0) > 0.0:
         raise MachineFileError(
             f"{path}:{_line_of(text, 'cutting.effects', 'chatter_stiffness_N_per_um')}: [cutting.effects] "
             f"chatter_frequency_Hz = {effects['chatter_frequency_Hz']!r} needs chatter_stiffness_N_per_um > 0 "
             f"(the modal stiffness of the chatter mode), got {effects.get('chatter_stiffness_N_per_um', 0.0)!r}")
+
+
+def _check_strokes(path: Path, text: str, values: dict[str, Any]) -> None:
+    """Stroke limits: both or none per axis, minimum < maximum, every reference position (G28/G30) inside."""
+    nck = values.get("nck", {})
+    for a in AXES:
+        axis = values.get("axis", {}).get(a, {})
+        given = [k for k in STROKE_KEYS if k in axis]
+        if not given:
+            continue
+        where = f"{path}:{_line_of(text, f'axis.{a}', given[0])}: [axis.{a}]"
+        if len(given) == 1:
+            missing = next(k for k in STROKE_KEYS if k not in axis)
+            raise MachineFileError(f"{where} {given[0]} without {missing}; expected both stored stroke limits "
+                                   "(FANUC No. 1321 and No. 1320) or neither (no stroke check)")
+        lo, hi = float(axis["stroke_min_mm"]), float(axis["stroke_max_mm"])
+        if not lo < hi:
+            raise MachineFileError(f"{where} stroke_min_mm = {lo!r} must be less than stroke_max_mm = {hi!r}")
+        for n in ("", "2", "3", "4"):
+            key = f"reference{n}_{a}_mm"
+            ref = nck.get(key, nck.get(f"reference_{a}_mm"))
+            if ref is not None and not lo <= float(ref) <= hi:
+                raise MachineFileError(
+                    f"{path}:{_line_of(text, 'nck', key if key in nck else f'reference_{a}_mm')}: [nck] {key} = "
+                    f"{float(ref)!r} is outside the stroke limits of [axis.{a}] [{lo!r}, {hi!r}] mm; expected a "
+                    "reference position inside the travel (a reference return there would be an overtravel)")
 
 
 def resolve_machine_path(name_or_path: str | Path, relative_to: Path | None = None) -> Path:

@@ -83,7 +83,8 @@ def nck_parameters(machine: Machine) -> dict[str, object]:
     """NC kernel parameters (SI) from a machine file.
 
     A 2nd/3rd/4th reference position (G30) the file leaves out is its 1st one (``reference_*_mm``). The M-code
-    aliases of ``[nck.m_codes]`` become the String parameter ``m_codes`` (none in the file: no aliases).
+    aliases of ``[nck.m_codes]`` become the String parameter ``m_codes`` (none in the file: no aliases). The stroke
+    limits of ``[axis.<a>]`` switch on the stored stroke check of that axis (:func:`stroke_parameters`).
     """
     params: dict[str, object] = dict(machine.si("nck"))
     for n in (2, 3, 4):
@@ -94,7 +95,19 @@ def nck_parameters(machine: Machine) -> dict[str, object]:
     for a in AXES:
         params[f"{a}_rapid_feed"] = machine.si(f"axis.{a}")["rapid_feed"]
     params["m_codes"] = format_m_codes(machine.m_codes())  # [nck.m_codes]; none in the file: no aliases
+    params.update(stroke_parameters(machine))
     return _declared(NCKernel, params)
+
+
+def stroke_parameters(machine: Machine) -> dict[str, object]:
+    """The NC kernel's stored stroke check parameters from ``[axis.<a>] stroke_min_mm/stroke_max_mm`` (SI).
+
+    An axis without limits in the file keeps ``<a>_stroke_check`` off (not checked).
+    """
+    params: dict[str, object] = {}
+    for a, (lo, hi) in machine.stroke_limits().items():
+        params.update({f"{a}_stroke_check": True, f"{a}_stroke_min": lo, f"{a}_stroke_max": hi})
+    return params
 
 
 def mcu_parameters(machine: Machine) -> dict[str, object]:

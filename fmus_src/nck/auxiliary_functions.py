@@ -7,7 +7,8 @@ Conventions
 * M19 (spindle orientation, as posts write it before a tool change or a boring tool's retract): the spindle
   stops as with M5 and stays stopped until M3/M4; the orientation itself (a fraction of a revolution at the
   orientation speed, well under the ramp-down time) is not modelled.
-* T selects a tool (0..:data:`.input_ranges.MAX_TOOL`), M6 changes to the selected one.
+* T selects a tool (0..:data:`.input_ranges.MAX_TOOL`), M6 changes to the selected one, after the Z retract to
+  the tool-change position when the machine has one (:func:`.machine_moves.tool_change_retract`).
 * M7/M8 switch the coolant on, M9 off.
 * Order within a block: tool change, spindle, coolant (then the modes and the motion of the block).
 """
@@ -17,6 +18,7 @@ from .blocks import Block, Coolant, SpindleSpeed, SpindleStop, ToolChange
 from .codes import MWords, ValueWords
 from .errors import ErrorFactory
 from .input_ranges import MAX_TOOL
+from .machine_moves import tool_change_retract
 from .modal import ModalState
 from .settings import RPM
 
@@ -48,6 +50,7 @@ def auxiliary_blocks(st: ModalState, ms: MWords, vals: ValueWords, line: int, er
     if "tool change" in ms:
         if st.tool_selected is None:
             raise err("M6", "M6 with no tool selected", "a T word on this or an earlier block")
+        tool_change_retract(st, line, err, out)  # Z to the tool-change position first (machine setting)
         out.append(ToolChange(line, st.tool_selected))
     if "spindle" in ms:
         code = ms["spindle"][0]

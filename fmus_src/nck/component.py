@@ -6,6 +6,9 @@ lengths); ``do_step(t, h)`` reads the planned samples at ``t + h`` with
 :func:`.sampling.read_plan` (linear interpolation between interpolation
 periods for Real outputs when ``t + h`` is not on the grid).
 
+Before planning, the interpreted path is checked against the stored stroke limits of the axes whose
+``<a>_stroke_check`` is on (:mod:`.stroke`; the machine file's ``[axis.<a>] stroke_min_mm/stroke_max_mm``).
+
 The program comes from the String parameter ``program_file`` or, in Python,
 from the ``program_text`` keyword of the constructor / :meth:`NCKernel.set_program_text`
 (text wins when both are given).
@@ -20,15 +23,18 @@ import numpy as np
 from ..component import Component, ComponentError, Variable
 from .blocks import Block, Program
 from .cycles import CycleMachine
+from .decimal_input import DECIMAL_INPUTS
 from .errors import NCParameterError
 from .interpreter import interpret
+from .lexer import split_lines, without_dos_eof
 from .m_aliases import DEFAULT_M_CODES, format_m_codes, parse_m_codes
 from .overrides import apply_overrides
 from .params import NCParams
 from .planner import BatchPlan, Schedule, build_schedule, plan_batch
 from .sampling import read_plan
-from .settings import DEFAULT_REFERENCE, InterpreterSettings
+from .settings import DEFAULT_REFERENCE, TOOL_CHANGE_RETRACTS, InterpreterSettings
 from .source import read_program
+from .stroke import StrokeLimits, check_stroke
 
 #: Number of tool length offset parameters ``tool_length_1 .. tool_length_N`` (H1..HN).
 N_TOOL_LENGTHS = 20
@@ -99,7 +105,22 @@ def _variables() -> tuple[Variable, ...]:
                       "String"))
     v.append(Variable("rigid_tapping_time_constant", p, "s", _D.rigid_tapping_time_constant,
                       "rigid-tapping linear acc/dec time to the maximum spindle speed (FANUC No. 5261)"))
+    v.append(Variable("decimal_point_input", p, "1", "calculator",
+                      "FANUC No. 3401#0 DPI: a number without a decimal point is in mm/inch (calculator, DPI = 1) "
+                      "or in least input increments, X10 = 0.010 mm (increment, DPI = 0)", "String"))
+    v.append(Variable("tool_change_retract", p, "1", "off",
+                      "M6 first moves Z at rapid to the 1st (G28) or 2nd (G30) reference position Z; off: M6 is "
+                      "tool_change_time alone", "String"))
     v.append(Variable("block_delete", p, "1", False, "block delete switch: skip blocks starting with /", "Boolean"))
+    for a in "xyz":
+        v.append(Variable(f"{a}_stroke_check", p, "1", False,
+                          f"stored stroke check 1 of {a.upper()}: the planned path must stay within "
+                          f"{a}_stroke_min..{a}_stroke_max (FANUC No. 1320/1321); off: {a.upper()} is not checked",
+                          "Boolean"))
+        v.append(Variable(f"{a}_stroke_min", p, "m", 0.0,
+                          f"{a.upper()} - stroke limit, machine coordinates (FANUC No. 1321; with {a}_stroke_check)"))
+        v.append(Variable(f"{a}_stroke_max", p, "m", 0.0,
+                          f"{a.upper()} + stroke limit, machine coordinates (FANUC No. 1320; with {a}_stroke_check)"))
     v.append(Variable("m_codes", p, "1", format_m_codes(DEFAULT_M_CODES),
                       "machine builder's M codes: alias=standard codes;... (machine file [nck.m_codes])", "String"))
     o = "output"
@@ -122,6 +143,21 @@ def _rigid_always(mode: str, name: str) -> bool:
     if mode not in ("M29", "always"):
         raise NCParameterError(f"{name}.rigid_tapping_mode must be 'M29' or 'always', got {mode!r}")
     return mode == "always"
+
+
+def _decimal_input(mode: str, name: str) -> str:
+    """``decimal_point_input`` checked: "calculator" (FANUC No. 3401#0 DPI = 1) or "increment" (DPI = 0)."""
+    if mode not in DECIMAL_INPUTS:
+        raise NCParameterError(f"{name}.decimal_point_input must be one of {list(DECIMAL_INPUTS)}, got {mode!r}")
+    return mode
+
+
+def _tool_change_retract(mode: str, name: str) -> str:
+    """``tool_change_retract`` checked: "off", "G28" or "G30" (:func:`.machine_moves.tool_change_retract`)."""
+    if mode not in TOOL_CHANGE_RETRACTS:
+        raise NCParameterError(f"{name}.tool_change_retract must be one of {list(TOOL_CHANGE_RETRACTS)}, "
+                               f"got {mode!r}")
+    return mode
 
 
 class NCKernel(Component):
@@ -197,6 +233,21 @@ class NCKernel(Component):
             raise NCParameterError(f"{self.name}.{name} must be the same for all batch members, got {arr.tolist()}")
         return float(arr[0])
 
+    def stroke_limits(self) -> StrokeLimits:
+        """The stored stroke limits of the parameters ``{x,y,z}_stroke_check/_min/_max`` (m, machine coordinates)."""
+        pairs = {}
+        for a in "xyz":
+            flags = np.asarray(self.values[f"{a}_stroke_check"])
+            if not np.all(flags == flags[0]):
+                raise NCParameterError(f"{self.name}.{a}_stroke_check must be the same for all batch members, "
+                                       f"got {flags.tolist()}")
+            if bool(flags[0]):
+                pairs[a] = (self._uniform(f"{a}_stroke_min"), self._uniform(f"{a}_stroke_max"))
+        try:
+            return StrokeLimits(**pairs)
+        except NCParameterError as exc:
+            raise NCParameterError(f"{self.name}: {exc}") from None
+
     def _read_program(self) -> tuple[str, str]:
         if self._text is not None:
             return self._text, self._text_file
@@ -248,6 +299,8 @@ class NCKernel(Component):
                                 _rigid_always(str(self.values["rigid_tapping_mode"]), self.name),
                                 str(self.values["boring_shift"])),
             m_codes=parse_m_codes(str(self.values["m_codes"]), f"{self.name}.m_codes"),
+            decimal_input=_decimal_input(str(self.values["decimal_point_input"]), self.name),
+            tool_change_retract=_tool_change_retract(str(self.values["tool_change_retract"]), self.name),
         )
         for n in (1, 2, 3, 4):
             if not all(np.isfinite(settings.reference_position(n))):
@@ -255,6 +308,8 @@ class NCKernel(Component):
                 raise NCParameterError(f"{self.name}: {name}_x/y/z must be finite, "
                                        f"got {settings.reference_position(n)}")
         self.program_: Program = interpret(text, file, settings)
+        check_stroke(self.program_.blocks, settings.initial, self.stroke_limits(), file,
+                     split_lines(without_dos_eof(text)))
         blocks: tuple[Block, ...]
         blocks, feeds, speeds = apply_overrides(self.program_, self.batch, self._feed_over, self._spindle_over,
                                                 self._per_rev_over)

@@ -74,6 +74,7 @@ from .compensation import RADIUS_ZERO, check_compensation_move, cutter_compensat
 from .coordinate_shifts import SHIFT_CODES, coordinate_shift
 from .corners import check_no_open_corner, close_corner, corner_word, open_corner
 from .cycle_mode import canned_cycle_block
+from .decimal_input import decimal_input_words
 from .dwell import dwell_block
 from .errors import GCodeError
 from .feed import read_feed_words
@@ -282,6 +283,9 @@ def _block(st: ModalState, words: tuple[Word, ...], line: int, text: str, file: 
             block_buffering(st, gs["block buffering"][1], words, err)  # Haas G103: the look-ahead window
         close_corner(st, out, begin, line, text, file)  # no move after a ,C/,R block: error
         return None
+    if st.settings.decimal_input == "increment":  # FANUC No. 3401#0 DPI = 0: X10 is 0.010 mm (see .decimal_input)
+        inch = gs["units"][0] == 20 if "units" in gs else st.scale == INCH
+        vals = decimal_input_words(vals, gs, inch, st.plane, st.xf.polar, st.cycle is not None, st.per_rev, err)
     corner = corner_word(vals, err)  # ,C / ,R: optional chamfer / corner R (see .corners)
     moved = False
     call, ret = subprogram_words(gs, ms, vals, err)

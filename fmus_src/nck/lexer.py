@@ -7,6 +7,8 @@ Rules (FANUC milling dialect):
 * A line starting with ``%`` is a tape start/end marker; the rest of the line (``%O1000``, ``% (comment)``,
   as some posts and DNC senders write it) is not read.
 * A ``/`` as first non-blank character marks a block-delete block.
+* A ``:`` as first non-blank character (after a ``/``) is the ISO program number address, read as ``O``
+  (FANUC: ``:1000`` is ``O1000``; messages show it as ``O1000``).
 * A word is a letter (either case) followed by a number; blanks between the
   letter and the number are allowed. Numbers: optional sign, digits with an
   optional decimal point (``10``, ``10.``, ``-.5``).
@@ -52,6 +54,9 @@ class Word:
         The number.
     start, end : int
         Column span ``[start, end)`` of the whole word in the source line.
+    variable : bool
+        The value came from a Custom Macro B variable or expression (``X#24``): a real value, never a count of
+        least input increments (:mod:`.decimal_input`).
     """
 
     letter: str
@@ -59,6 +64,7 @@ class Word:
     value: float
     start: int
     end: int
+    variable: bool = False
 
     @property
     def has_point(self) -> bool:
@@ -142,6 +148,10 @@ def lex_line(raw: str) -> LexedLine:
         block_delete = True
         col = len(code) - len(stripped)
         code = code[:col] + " " + code[col + 1 :]
+    stripped = code.lstrip()
+    if stripped.startswith(":"):  # ISO program number ":1000" = O1000 (FANUC), same column
+        col = len(code) - len(stripped)
+        code = code[:col] + "O" + code[col + 1 :]
     code, words = _comma_words(code)
     for m in _TOKEN.finditer(code):
         letter = m.group(1)

@@ -24,11 +24,19 @@ Conventions
   offset or tool length (the tool-length vector is left out as after G28).
   FANUC ignores G53 under G91; the twin rejects it (G90 required) so that a
   program cannot silently do something else than it reads.
+* M6 Z retract (:func:`tool_change_retract`, :attr:`InterpreterSettings.tool_change_retract`): on a vertical
+  machining center the tool change first moves Z to the tool-change position at rapid, as the builder's M6
+  macro does with ``G91 G28 Z0`` or ``G91 G30 Z0``: "G28" goes to the 1st reference Z, "G30" to the 2nd
+  (No. 1241); "off" (the default) models M6 as the tool change time alone. Only Z moves, straight up from
+  where the tool is, without work offset or tool length (the tool-length vector is left out as after G28).
+  Under a programmable transform, in canned-cycle mode or under G41/G42 with a nonzero radius it is an error
+  naming M6 (FANUC's G28/G30 are not allowed there either).
 """
 from __future__ import annotations
 
 from .blocks import AXIS_INDEX, Block, Rapid, Vec3
 from .codes import ValueWords
+from .compensation import RADIUS_ZERO
 from .errors import ErrorFactory
 from .lexer import Word
 from .modal import ModalState
@@ -104,3 +112,38 @@ def reference_number(p: Word | None, err: ErrorFactory) -> int:
         raise err("P" + p.text, f"G30 P{p.text} is not a reference position number",
                   "G30 P2, P3 or P4 (2nd/3rd/4th reference position; P omitted = P2)")
     return int(p.value)
+
+
+def tool_change_retract(st: ModalState, line: int, err: ErrorFactory, out: list[Block]) -> None:
+    """The Z move of an M6 to the tool-change position (see the module docstring); nothing when "off".
+
+    Parameters
+    ----------
+    st : ModalState
+        Modal state; Z ends at the reference position of ``st.settings.tool_change_retract``.
+    line : int
+        1-based source line of the M6 block.
+    err : ErrorFactory
+        Builds the error for this block.
+    out : list of Block
+        The program's blocks so far; the :class:`Rapid` is appended (none when Z is already there).
+    """
+    mode = st.settings.tool_change_retract
+    if mode == "off":
+        return
+    why = None
+    if st.xf.active:
+        why = f"{st.xf.codes()} is on"
+    elif st.cycle is not None:
+        why = f"canned cycle G{st.cycle} is modal"
+    elif st.comp != 40 and abs(st.tool_radius()) > RADIUS_ZERO:
+        why = f"cutter compensation G{st.comp} is on with a nonzero radius"
+    if why is not None:
+        raise err("M6", f"M6 with the Z retract to the tool-change position ({mode} Z) while {why}",
+                  "G69/G50/G50.1, G80 and G40 (as active) before M6")
+    start: Vec3 = tuple(st.machine)  # type: ignore[assignment]
+    st.machine[2] = st.settings.reference_position(1 if mode == "G28" else 2)[2]
+    st.applied_tool = 0.0
+    st.sync_prog([2])
+    if abs(st.machine[2] - start[2]) > SAME_POINT:
+        out.append(Rapid(line, start, tuple(st.machine)))  # type: ignore[arg-type]

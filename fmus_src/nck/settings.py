@@ -2,7 +2,8 @@
 
 Conventions
 -----------
-* Calculator-type decimal input (FANUC No. 3401#0 DPI = 1): ``X10`` is 10 mm.
+* Decimal point input (FANUC No. 3401#0): calculator type (DPI = 1, the default), ``X10`` is 10 mm; or
+  ``decimal_input="increment"`` (DPI = 0), ``X10`` is 10 least input increments, 0.010 mm (:mod:`.decimal_input`).
 * Program units: a length word times :data:`MM` (G21) or :data:`INCH` (G20) is metres, an S word times
   :data:`RPM` is rad/s; the writer and the optimiser use the same factors, so their numbers match the
   interpreter's bit for bit.
@@ -18,6 +19,8 @@ from typing import Mapping, Sequence
 
 from .blocks import Vec3
 from .cycles import CycleMachine
+from .decimal_input import DECIMAL_INPUTS
+from .errors import NCParameterError
 from .m_aliases import check_m_codes
 
 #: One millimetre (G21 program unit), m.
@@ -29,6 +32,9 @@ RPM = 2.0 * math.pi / 60.0
 #: Reference position (G28) of the default machine, machine coordinates (m): ``reference_*_mm`` of
 #: models/machines/default.toml (assumption, see there).
 DEFAULT_REFERENCE: Vec3 = (0.380, 0.225, 0.300)
+#: Settings of the M6 Z retract (:func:`.machine_moves.tool_change_retract`): none, to the 1st (G28) or the 2nd
+#: (G30 P2) reference position Z.
+TOOL_CHANGE_RETRACTS = ("off", "G28", "G30")
 #: Key of the external workpiece zero point offset in :attr:`InterpreterSettings.work_offsets` (FANUC "EXT",
 #: ``G10 L2 P0``): added to every work coordinate system.
 EXTERNAL_OFFSET = 0
@@ -101,6 +107,13 @@ class InterpreterSettings:
         The machine builder's M codes: alias -> the standard M codes it stands for (:mod:`.m_aliases`, the
         machine file's ``[nck.m_codes]``). Default: none (the FANUC codes only). Checked at construction
         (:class:`.errors.NCParameterError`).
+    decimal_input : {"calculator", "increment"}
+        FANUC No. 3401#0 DPI: a number without a decimal point is in mm/inch (``"calculator"``, DPI = 1, the
+        default) or in least input increments (``"increment"``, DPI = 0: ``X10`` = 0.010 mm); see
+        :mod:`.decimal_input`.
+    tool_change_retract : {"off", "G28", "G30"}
+        M6 first moves Z at rapid to the 1st ("G28") or 2nd ("G30") reference position Z, as a VMC's tool-change
+        macro does; "off" (default): M6 is the tool change time alone (:func:`.machine_moves.tool_change_retract`).
     """
 
     initial: Vec3 = (0.0, 0.0, 0.0)
@@ -114,9 +127,17 @@ class InterpreterSettings:
     reference4: Vec3 | None = None
     cycles: CycleMachine = field(default_factory=CycleMachine)
     m_codes: Mapping[int, tuple[int, ...]] = field(default_factory=dict)
+    decimal_input: str = "calculator"
+    tool_change_retract: str = "off"
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "m_codes", check_m_codes(self.m_codes, "InterpreterSettings.m_codes"))
+        if self.decimal_input not in DECIMAL_INPUTS:
+            raise NCParameterError(f"InterpreterSettings.decimal_input must be one of {list(DECIMAL_INPUTS)}, "
+                                   f"got {self.decimal_input!r}")
+        if self.tool_change_retract not in TOOL_CHANGE_RETRACTS:
+            raise NCParameterError(f"InterpreterSettings.tool_change_retract must be one of "
+                                   f"{list(TOOL_CHANGE_RETRACTS)}, got {self.tool_change_retract!r}")
 
     def reference_position(self, n: int) -> Vec3:
         """The n-th reference position (n = 1..4, m, machine coordinates); an unset 2nd-4th is the 1st."""

@@ -50,6 +50,8 @@ def _nck_parameters(machine: Machine, cls: type[Component]) -> dict[str, object]
     params.update({f"spindle_{k}": v for k, v in machine.si("spindle").items()})
     for a in AXES:
         params[f"{a}_rapid_feed"] = machine.si(f"axis.{a}")["rapid_feed"]
+    for a, (lo, hi) in machine.stroke_limits().items():  # stored stroke check of the axes with limits
+        params.update({f"{a}_stroke_check": True, f"{a}_stroke_min": lo, f"{a}_stroke_max": hi})
     return _declared(cls, params)
 
 

@@ -19,6 +19,8 @@ Conventions
   :mod:`.loop_slice`) are as in the pass before, and only the loop's own lines ran in between.
 * ``#3000 = n (MESSAGE)`` stops the program with a :class:`~..errors.GCodeError` naming the line, n and the
   message (FANUC macro alarm 3000 + n).
+* ``#3006 = n (MESSAGE)`` (stop with message, as hand-written programs ask the operator to turn the part over)
+  is a program stop: the line runs as the block ``M0`` (the axes come to rest, no operator wait is added).
 """
 from __future__ import annotations
 
@@ -28,11 +30,18 @@ from typing import Sequence
 
 from ..codes import LETTERS
 from ..errors import GCodeError
-from ..lexer import LexedLine, LexError
+from ..lexer import LexedLine, LexError, Word, lex_line
 from ..modal import ModalState
 from ..settings import INCH
 from ..subprograms import MAX_CALLED_LINES
 from .calls import MAX_MACRO_NESTING, MacroCall, read_macro_call
+
+#: FANUC system variable of the stop with message (the program stops as at M00 and shows the message).
+STOP_WITH_MESSAGE = 3006
+
+#: Letters of a G65 block read as integers (not affected by decimal point input): G, P (program), L (count), and
+#: the addresses H D M S T whose arguments FANUC passes as written.
+INTEGER_ARGUMENTS = "GPLHDMST"
 from .expressions import condition, evaluate, node_text, round_half_away, variable_number
 from .loop_slice import loop_slice
 from .loops import MAX_SEQUENCE, ProgramIndex, index_program, main_program_last
@@ -175,16 +184,16 @@ class MacroRuntime:
                 return lexed
         ctx = LineContext(self.store, self.file, number, self.lines[number - 1].strip())
         if parsed is None:
+            self._check_arguments(lexed.words, ctx)
             return read_macro_call([(w.letter, w.value, w.letter + w.text) for w in lexed.words], ctx.fail)
         s = parsed.statement
         if isinstance(s, NCBlock):
             return self._block(parsed, s, ctx)
         if isinstance(s, Assign):
-            self._assign(s, ctx, parsed)
-            return None
+            return self._assign(s, ctx, parsed)
         if isinstance(s, IfThen):
             if condition(s.condition, ctx, node_text(s.condition)):
-                self._assign(s.assign, ctx, parsed)
+                return self._assign(s.assign, ctx, parsed)
             return None
         if isinstance(s, Goto):
             if s.condition is None or condition(s.condition, ctx, node_text(s.condition)):
@@ -199,8 +208,22 @@ class MacroRuntime:
             return None
         return Jump(index.do_end[here] + 1)
 
+    def _check_arguments(self, words: Sequence[Word], ctx: LineContext) -> None:
+        """Under decimal point input DPI = 0 (:mod:`..decimal_input`), a G65 argument written without a decimal
+        point at an address that takes one is an error: FANUC passes it in least input increments of that
+        address, which the twin does not model for arguments."""
+        if self.st.settings.decimal_input != "increment":
+            return
+        for w in words:
+            if w.letter not in INTEGER_ARGUMENTS and not w.has_point:
+                shown = w.letter + w.text
+                raise ctx.fail(shown, f"G65 argument {shown} without a decimal point under decimal point input "
+                               "\"increment\" (FANUC No. 3401#0 DPI = 0: passed in least input increments, not "
+                               "modelled for arguments)", f"the argument with a decimal point ({w.letter}{w.text}.)")
+
     def _block(self, parsed: MacroLine, s: NCBlock, ctx: LineContext) -> MacroCall | LexedLine:
         if parsed.is_call:
+            self._check_arguments(parsed.static.words, ctx)
             items: list[tuple[str, float | None, str]] = [(w.letter, w.value, w.letter + w.text)
                                                           for w in parsed.static.words]
             for piece in s.values:
@@ -231,7 +254,8 @@ class MacroRuntime:
                 raise ctx.fail("G" + w.text, f"G{w.text} from a variable", f"G{w.text} written as a number")
         return lexed
 
-    def _assign(self, s: Assign, ctx: LineContext, parsed: MacroLine) -> None:
+    def _assign(self, s: Assign, ctx: LineContext, parsed: MacroLine) -> LexedLine | None:
+        """Run an assignment; ``#3006 = n (MESSAGE)`` is a program stop: the block ``M0`` to execute."""
         n = variable_number(s.target, ctx)
         v = evaluate(s.value, ctx)
         if isinstance(v, bool):
@@ -241,7 +265,10 @@ class MacroRuntime:
             shown = "vacant" if v is None else f"{v:g}"
             raise ctx.fail("#3000", f"macro alarm #3000 = {shown}: {parsed.comment or '(no message)'}",
                            "a program that does not raise its alarm (the program stopped it on purpose)")
+        if n == STOP_WITH_MESSAGE:  # FANUC: the program stops as at M00 and shows the message; cycle start resumes
+            return LexedLine(lex_line("M0").words, False, parsed.block_delete, parsed.text)
         self.store.write(n, v, s.target.text, ctx.fail)
+        return None
 
     def _goto(self, number: int, s: Goto, ctx: LineContext, stack: Sequence) -> Jump:
         v = evaluate(s.target, ctx)

@@ -90,7 +90,7 @@ class VariableStore:
                 self.common[n] = value
         elif n >= FIRST_SYSTEM:
             raise fail(text, f"system variable #{n} cannot be assigned (read-only or not supported)",
-                       f"a variable {RANGES}, or #3000 = <n> (MESSAGE) for an alarm")
+                       f"a variable {RANGES}, #3000 = <n> (MESSAGE) for an alarm, or #3006 = <n> (MESSAGE) for a stop")
         else:
             raise fail(text, f"#{n} is not a local or common variable", f"a variable {RANGES}")
 

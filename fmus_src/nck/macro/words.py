@@ -11,9 +11,12 @@ Conventions
   ``X#1`` with #1 = 10 is 10 mm and ``G4 X#1`` dwells #1 seconds (the twin reads numbers without a point in mm
   anyway, calculator-type input). K and Q get a point only when not integral (K is also a repeat count).
 * The resulting text goes through the plain lexer (:func:`..lexer.lex_line`), so a block with variables is
-  read exactly as the same block written with those numbers.
+  read exactly as the same block written with those numbers; the words from expressions are marked
+  (:attr:`..lexer.Word.variable`), so that decimal point input DPI = 0 (:mod:`..decimal_input`) leaves them real.
 """
 from __future__ import annotations
+
+import dataclasses
 
 from ..lexer import LexedLine, LexError, lex_line
 from .expressions import Context, evaluate, round_half_away
@@ -101,11 +104,19 @@ def evaluate_block(block: NCBlock, ctx: Context, inch: bool, block_delete: bool,
     """
     inch = block_inch(block, inch)
     parts: list[str] = []
+    starts: set[int] = set()  # columns where a word from an expression starts
+    column = 0
     for piece in block.pieces:
         if isinstance(piece, str):
             parts.append(piece)
+            column += len(piece)
             continue
         v = value_of(piece, ctx, inch)
-        parts.append(" " if v is None else f" {piece.letter}{address_text(piece.letter, v, inch)} ")
+        if v is not None:
+            starts.add(column + 1)
+        written = " " if v is None else f" {piece.letter}{address_text(piece.letter, v, inch)} "
+        parts.append(written)
+        column += len(written)
     lexed = lex_line("".join(parts))
-    return LexedLine(lexed.words, False, block_delete, text)
+    words = tuple(dataclasses.replace(w, variable=True) if w.start in starts else w for w in lexed.words)
+    return LexedLine(words, False, block_delete, text)
