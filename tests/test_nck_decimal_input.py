@@ -64,11 +64,15 @@ def test_offsets_shifts_chamfers_and_the_scaling_centre_scale_but_magnifications
                                 "G51 X10. Y0 P2000\nG1 X15.\nG50\nM30\n")
 
 
-def test_dwell_and_feed_read_as_in_calculator_mode():
-    # G4 X/P without a point are ms, F without a point under G21 G94 is mm/min: the same in both settings
-    text = "G90 G21 G94 G4 X1500\nG4 P250\nG1 X10. F600\nM30\n"
-    assert blocks(text) == blocks(text, InterpreterSettings())
-    assert [b.seconds for b in blocks(text) if isinstance(b, Dwell)] == pytest.approx([1.5, 0.25])
+def test_dwell_and_feed_without_a_point():
+    # G4 P without a point is ms in both settings; G4 X is s under calculator input (DPI = 1) and counts the
+    # 0.001 s increment under DPI = 0; F without a point under G21 G94 is mm/min in both settings
+    text = "G90 G21 G94 G4 X2\nG4 P250\nG4 X1.5\nG1 X10. F600\nM30\n"
+    assert [b.seconds for b in blocks(text) if isinstance(b, Dwell)] == pytest.approx([0.002, 0.25, 1.5])
+    calculator = blocks(text, InterpreterSettings())
+    assert [b.seconds for b in calculator if isinstance(b, Dwell)] == pytest.approx([2.0, 0.25, 1.5])
+    assert [b for b in blocks(text) if not isinstance(b, Dwell)] == [b for b in calculator
+                                                                     if not isinstance(b, Dwell)]
 
 
 @pytest.mark.parametrize("text, word", [

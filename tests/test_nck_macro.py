@@ -136,7 +136,7 @@ def test_round_in_an_address_rounds_to_the_least_input_increment_fanuc_example()
 def test_variables_have_a_decimal_point_dwell_in_seconds_and_g_codes_from_variables():
     text = "#1 = 2\nG4 X#1\n#10 = 1\n#11 = 91\nG#11 G#10 X1. F100\nM30\n"
     program = interpret(text)
-    assert program.blocks[0].seconds == 2.0  # X#1 = X2. : seconds (a literal G4 X2 would be 2 ms)
+    assert program.blocks[0].seconds == 2.0  # X#1 = X2. : seconds (so is a literal G4 X2 under calculator input)
     assert _moves(program) == [(5, [1, 0, 0])]  # G91 G1
 
 

@@ -16,7 +16,8 @@ Conventions
 
   Not affected: P (dwell in ms, program and offset numbers, the G51 magnification, always integers), the G51
   magnifications I J K (0.001 units anyway), K as the repeat count of a canned cycle, L, H, D, T, S, M, N, O, G;
-  G4 X without a decimal point is already read in ms (0.001 s, the time increment).
+  G4 X without a decimal point is read in ms (0.001 s, the time increment) by :mod:`.dwell` (in s under
+  ``"calculator"``).
 * F without a decimal point under G94 and G21 is in mm/min in either setting (the F increment of feed per
   minute in mm is 1 mm/min). Under G20 or G95 its increment differs (inch/min, mm/rev); the twin does not
   model those and rejects an F without a decimal point there under ``"increment"`` (write ``F.05``, ``F20.``).
@@ -100,7 +101,7 @@ def decimal_input_words(vals: ValueWords, gs: GWords, inch: bool, plane: str, po
     out: ValueWords = {}
     for letter, w in vals.items():
         if letter in "XYZ" and len(letter) == 1:
-            if non_modal == 4:  # G4 X: a time, already read in ms without a decimal point (see .dwell)
+            if non_modal == 4:  # G4 X: a time, read in ms without a decimal point by .dwell
                 out[letter] = w
             else:
                 out[letter] = _scaled(w, INCREMENT_DEG if letter == angle_axis else length)

@@ -3,7 +3,11 @@
 Conventions
 -----------
 * G4: a value with a decimal point is in seconds (``G4 X1.5``, ``G4 P1.5``),
-  without it in milliseconds (``G4 P1500`` as FANUC).
+  P without it in milliseconds (``G4 P1500`` as FANUC).
+* G4 X without a decimal point follows decimal point input (FANUC No. 3401#0):
+  seconds under calculator-type input (DPI = 1, ``G4 X2`` dwells 2 s, as
+  ``X10`` is 10 mm there), milliseconds, the least time increment, under
+  ``"increment"`` (DPI = 0).
 """
 from __future__ import annotations
 
@@ -14,9 +18,12 @@ from .input_ranges import MAX_DWELL
 from .lexer import Word
 
 
-def dwell_seconds(w: Word, err: ErrorFactory) -> float:
-    """Dwell of a P or X word (s): with a decimal point in s, without in ms (as FANUC G4 P)."""
-    seconds = w.value if w.has_point else w.value * 1e-3
+def dwell_seconds(w: Word, err: ErrorFactory, whole_seconds: bool = False) -> float:
+    """Dwell of a P or X word (s): with a decimal point in s, without in ms (as FANUC G4 P).
+
+    ``whole_seconds``: a value without a decimal point is in s too (G4 X under calculator-type input).
+    """
+    seconds = w.value if (w.has_point or whole_seconds) else w.value * 1e-3
     if seconds < 0:
         raise err(w.letter + w.text, "negative dwell time", "a time >= 0")
     if seconds > MAX_DWELL:
@@ -25,8 +32,11 @@ def dwell_seconds(w: Word, err: ErrorFactory) -> float:
     return seconds
 
 
-def dwell_block(gs: GWords, vals: ValueWords, line: int, err: ErrorFactory) -> Dwell:
-    """The :class:`Dwell` of a G4 block: G4 X<time> or G4 P<time>, alone with its time word."""
+def dwell_block(gs: GWords, vals: ValueWords, line: int, err: ErrorFactory, calculator: bool = True) -> Dwell:
+    """The :class:`Dwell` of a G4 block: G4 X<time> or G4 P<time>, alone with its time word.
+
+    ``calculator``: calculator-type decimal point input (FANUC No. 3401#0 DPI = 1), where ``G4 X2`` is 2 s.
+    """
     if "motion" in gs:
         raise err(f"G{gs['motion'][0]}", "G4 and a motion G code in one block", "G4 alone in its block")
     for a in ("Y", "Z", "I", "J", "K", "R", "Q"):
@@ -34,4 +44,6 @@ def dwell_block(gs: GWords, vals: ValueWords, line: int, err: ErrorFactory) -> D
             raise err(a + vals[a].text, f"word {a} in a G4 dwell block", "G4 X<time> or G4 P<time>")
     if ("X" in vals) == ("P" in vals):
         raise err("G4", "G4 needs exactly one of X or P", "G4 X1.5 (s), G4 P1500 (ms)")
-    return Dwell(line, dwell_seconds(vals.get("X") or vals["P"], err))
+    if "X" in vals:
+        return Dwell(line, dwell_seconds(vals["X"], err, whole_seconds=calculator))
+    return Dwell(line, dwell_seconds(vals["P"], err))

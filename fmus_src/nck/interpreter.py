@@ -338,7 +338,7 @@ def _block(st: ModalState, words: tuple[Word, ...], line: int, text: str, file: 
         if cycle == 80:
             end_cycle_mode(st, "G80", err)
     elif non_modal == 4:
-        out.append(dwell_block(gs, vals, line, err))
+        out.append(dwell_block(gs, vals, line, err, st.settings.decimal_input == "calculator"))
     else:
         # in a canned-cycle block K is the repeat count (checked by the cycle), not an arc centre
         cycle_block = cycle not in (None, 80) or (
