@@ -121,8 +121,19 @@ def _mcu_tick(pos_tick: bool, tp: float, tv: float, tp2: float, gains: np.ndarra
     """One velocity tick (and the position tick when ``pos_tick``) of one axis for all members.
 
     :func:`fmus_src.servo.control_numba.axis_ticks` with ``n_ticks = 1``, the member loop innermost.
-    ``gains`` (6, B) and ``state`` (7, B) are the axis' rows of the MCU's blocks; ``current`` receives the
-    current command (A).
+
+    Parameters
+    ----------
+    pos_tick : bool
+        Run the position loop first (the tick index is a multiple of ``Tp / Tv``; the same for every member).
+    tp, tv, tp2 : float
+        Position- and velocity-loop periods (s) and ``tp * tp`` (s^2).
+    gains, state : ndarray, shapes (6, B), (7, B)
+        The axis' rows of the MCU's gain and state blocks (state updated in place).
+    ref, position, velocity : ndarray, shape (B,)
+        Reference and actual position (m), actual velocity (m/s).
+    current : ndarray, shape (B,)
+        Receives the current command (A).
     """
     B = position.shape[0]
     kp, kv, ki, kvff, kaff, imax = gains[0], gains[1], gains[2], gains[3], gains[4], gains[5]
@@ -169,6 +180,26 @@ def _drive_substep(h: float, kt: np.ndarray, inv_mass: np.ndarray, fs_p: np.ndar
     friction ``fs_p`` / ``fs_n``); ``fc`` ... ``mu`` are the parameters of each member's current branch,
     ``direction`` its direction as a float (updated). ``refused[b]`` is set where the scalar step must run
     instead (break-away, reversal, large correction, ``|J h| > 0.2``, NaN state).
+
+    Parameters
+    ----------
+    h : float
+        Substep, s.
+    kt, inv_mass : ndarray, shape (B,)
+        Force per ampere (N/A, ``kt 2 pi / Lb``) and 1 / table mass (1/kg): rows 0 and 1 of the drive's packed
+        parameters.
+    fs_p, fs_n : ndarray, shape (B,)
+        Static friction in the positive and negative direction, N.
+    fc, delta, inv_vs, mu : ndarray, shape (B,)
+        Coulomb friction (N), Stribeck excess (N), 1 / Stribeck velocity (s/m), viscous coefficient (N s/m).
+    direction : ndarray, shape (B,)
+        +1, -1 or 0 (stick), as floats; updated.
+    disturbance, current : ndarray, shape (B,)
+        Disturbance force (N) and current command (A), held over the substep.
+    position, velocity : ndarray, shape (B,)
+        State, m and m/s; updated where the member is not refused.
+    refused : ndarray of bool, shape (B,)
+        Written: members the scalar step must take.
     """
     B = position.shape[0]
     for b in range(B):
