@@ -26,6 +26,7 @@ from .cfmu import build_lag_fmu, lag_ring
 from .fused import prepare_fused, reference_run
 from ..twin import TwinOptions, engagement_table
 from .native import bench_case, time_fused, time_twin
+from .simd import time_simd
 from .planning import time_planning
 from .replays import time_servo_replay
 from .systems import build_servo_fmus, native_lag_ring, plain_fmpy_loop, servo_fmu_system
@@ -293,6 +294,10 @@ def run_bench(settings: BenchSettings | None = None, quick: bool = False,
         problem.run()  # compile / load the cache
         fused[key] = time_fused(problem, repeats=2)
     out["fused"] = fused
+    # the member-vectorised prototype of the same loop (largest batch; CPU times, interleaved with the fused one)
+    say(f"fused reference, member-vectorised prototype: B = {max(s.batches)}")
+    problem = prepare_fused(case, int(round(s.batch_seconds / 1e-3)), batch=max(s.batches), reference=ref)
+    out["simd"] = time_simd(problem, repeats=2)
 
     # --- the servo replay of identification and diagnosis: compiled against the components tick by tick
     say(f"servo replay (identification, diagnosis): B = {s.replay_batch}, compiled {s.replay_seconds:g} s, "
@@ -443,6 +448,13 @@ def format_table(result: dict) -> str:
                   f"{plan['ms_per_member_reference']:>11.2f}",
                   f"{'compiled':<40}{plan['batch']:>5}{plan['compiled_s']:>9.3f}{plan['ms_per_member_compiled']:>11.2f}"
                   f"   ratio {plan['ratio']:.2f}, bit-identical: {'yes' if plan['identical'] else 'NO'}"]
+    simd = result.get("simd")
+    if simd:
+        lines += ["", f"fused reference, member-vectorised prototype (B = {simd['batch']}, {simd['steps']} steps, CPU "
+                      f"time): {simd['simd_s']:.3f} s against {simd['fused_s']:.3f} s scalar, "
+                      f"{simd['simd_speedup']:.2f}x; scalar fallback on {100 * simd['scalar_fraction']:.3f} % of "
+                      f"drive ticks; largest difference {simd['max_position_diff_m']:.2e} m, "
+                      f"{simd['max_current_diff_a']:.2e} A"]
     lines += ["", f"{'communication step of':<44}{'us/step':>10}"]
     for key, value in result["master_us_per_step"].items():
         lines.append(f"{key:<44}{value:>10.2f}")

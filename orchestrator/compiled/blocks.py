@@ -12,8 +12,12 @@ whole batch at one step.
 :class:`MemberBlocks` keeps exactly that schedule:
 
 * Each block gets copies of the member columns of every array the loop writes
-  (values, states, recording buffers) and read-only views of the NC plans; the
-  batch's own arrays are touched only when a pass is accepted.
+  (values, states) and read-only views of the NC plans; the batch's own arrays
+  are touched only when a pass is accepted. The exception is the recording: each
+  block writes its members' columns of the batch's recording rows after the
+  accepted samples directly (a strided view, no copy afterwards). Rows past the
+  accepted samples are only ever overwritten later with the same steps' values
+  (a replay runs the same steps from the same state), so they need no undo.
 * The blocks run with ``stop_record``: instead of returning at the stop condition
   they note, step by step, whether all their members meet it.
 * A pass is accepted when every block reached the same step with no event (or the
@@ -37,7 +41,7 @@ import numpy as np
 from fmus_src.threads import MIN_MEMBERS_PER_BLOCK, usable_cores
 
 from ..errors import CncTwinError
-from .loop import EV_CHECK, EV_CHUNK, EV_TIME, NO_STOP_FLAGS, recording_buffers, run_chunk
+from .loop import EV_CHECK, EV_CHUNK, EV_TIME, NO_STOP_FLAGS, run_chunk
 
 #: Longest pass of the blocks between two returns to Python, steps.
 PASS_STEPS = 500
@@ -122,11 +126,15 @@ def _merge(full: object, block: object, spec: object, b0: int, b1: int, first: b
 
 @dataclass
 class _Pass:
-    """One block's arguments, recording buffers, stop flags and ``run_chunk`` result."""
+    """One block's arguments, recording views, stop flags and ``run_chunk`` result.
+
+    ``rec`` is the block's member columns of the batch's recording after the accepted samples (a view: the
+    block writes the batch's rows directly); ``rec_t`` is the block's own column of sample times (a strided
+    view of a scratch array, so it has ``rec``'s array layout and the loop needs no second compilation).
+    """
 
     head: tuple
     tail: tuple
-    rows: np.ndarray  # recording_buffers(): rec_t and rec are views of it
     rec_t: np.ndarray
     rec: np.ndarray
     flags: np.ndarray
@@ -179,12 +187,15 @@ class MemberBlocks:
         tail[_COMP_HAS_FAILED] = tail[_COMP_FAILED].any(axis=1)
         return tuple(tail)
 
-    def _pass(self, k: int, k_limit: int) -> list[_Pass]:
-        n_probe = self.head[_PROBE_ROWS].shape[0]
+    def _pass(self, k: int, k_limit: int, rec: np.ndarray, n_rec: int) -> list[_Pass]:
         capacity = (k_limit - k) // int(self.head[_DECIMATION]) + 2
-        passes = [_Pass(_split(self.head, HEAD, b0, b1, self.batch), self._block_tail(b0, b1),
-                        *recording_buffers(capacity, n_probe, b1 - b0), np.zeros(k_limit - k + 1, dtype=np.bool_))
-                  for b0, b1 in self.bounds]
+        if rec.shape[1] < n_rec + capacity:
+            raise CncTwinError(f"compiled loop: recording holds {rec.shape[1]} samples, a pass from step {k} to "
+                               f"{k_limit} may need {n_rec + capacity}")
+        times = np.empty((capacity, len(self.bounds)))
+        passes = [_Pass(_split(self.head, HEAD, b0, b1, self.batch), self._block_tail(b0, b1), times[:, i],
+                        rec[:, n_rec:, b0:b1], np.zeros(k_limit - k + 1, dtype=np.bool_))
+                  for i, (b0, b1) in enumerate(self.bounds)]
 
         def run(p: _Pass) -> tuple:
             return run_chunk(k, k_limit, *p.head, p.rec_t, p.rec, 0, *p.tail, True, p.flags)
@@ -195,12 +206,11 @@ class MemberBlocks:
             p.result = f.result()
         return passes
 
-    def _accept(self, passes: list[_Pass], rec_t: np.ndarray, rec: np.ndarray, n_rec: int, n_new: int) -> None:
+    def _accept(self, passes: list[_Pass], rec_t: np.ndarray, n_rec: int, n_new: int) -> None:
         for i, ((b0, b1), p) in enumerate(zip(self.bounds, passes)):
             _merge(self.head, p.head, HEAD, b0, b1, i == 0)
             _merge(self.tail, p.tail, TAIL, b0, b1, i == 0)
-            rec[:, n_rec:n_rec + n_new, b0:b1] = p.rec[:, :n_new]
-        rec_t[n_rec:n_rec + n_new] = passes[0].rec_t[:n_new]
+        rec_t[n_rec:n_rec + n_new] = passes[0].rec_t[:n_new]  # the probes' samples are in place already
 
     def _stop_step(self, k: int, passes: list[_Pass]) -> int | None:
         """First step of the pass at whose top every block met the stop condition (None: none)."""
@@ -218,23 +228,23 @@ class MemberBlocks:
 
         ``rec_t`` and ``rec`` must hold ``(k_limit - k) // decimation + 2`` more samples after ``n_rec``.
         """
-        passes = self._pass(k, k_limit)
+        passes = self._pass(k, k_limit, rec, n_rec)
         k_stop = self._stop_step(k, passes)
         events = [p.k for p in passes if p.event != EV_CHUNK]
         if k_stop is None and (not events or all(p.event == EV_TIME for p in passes)):
             n_new = passes[0].n_rec
-            self._accept(passes, rec_t, rec, n_rec, n_new)
+            self._accept(passes, rec_t, n_rec, n_new)
             return passes[0].k, n_rec + n_new, passes[0].event, -1, 0, 0, 0
         k_target = min(([] if k_stop is None else [k_stop]) + events)
         if k_target > k:
             same = all(p.k == k_target and p.event in (EV_CHUNK, EV_CHECK) for p in passes)
             if not same:  # blocks ran past k_target or stopped inside it: run them again up to it
-                passes = self._pass(k, k_target)
+                passes = self._pass(k, k_target, rec, n_rec)
                 if not all(p.k == k_target and p.event in (EV_CHUNK, EV_CHECK) for p in passes):
                     raise CncTwinError(f"compiled loop: blocks replayed to step {k_target} ended at "
                                        f"{[(p.k, p.event) for p in passes]}")
             n_new = min(p.n_rec for p in passes)  # EV_CHECK returns before recording its step
-            self._accept(passes, rec_t, rec, n_rec, n_new)
+            self._accept(passes, rec_t, n_rec, n_new)
             n_rec += n_new
             if any(p.event == EV_CHECK for p in passes):
                 return k_target, n_rec, EV_CHECK, -1, 0, 0, 0
