@@ -11,6 +11,12 @@ Paper's reference (``method="paper"``)
     ``fitness_limit``). Values are snapped to the same grid so that both
     methods write the same kind of program.
 
+Equal feeds on equal cuts (``tidy``, time and cost with the default method)
+    After the search, :func:`.tidy.tidy_genes` copies feeds between
+    neighbouring cutting lines and lines that cut alike wherever the program
+    stays feasible and its objective is not worse; the result is the first
+    candidate below.
+
 The chosen program is re-simulated on its own (B = 1, rewritten text) with
 the Z-map cutting model (material removed from the stock, not the search's
 path-mode engagement): the ``after`` figures are those of the written
