@@ -119,3 +119,17 @@ def test_program_whose_every_feed_line_cuts(tmp_path):
     assert [row["line"] for row in report["lines"]] == feed_lines
     assert report["lines"][0]["s_word_line"] == 3
     assert all(math.isfinite(row["time_after_s"]) for row in report["lines"])
+
+
+def test_a_program_that_crashes_the_twin_is_refused_naming_the_line(tmp_path):
+    """The pocket with ``M3`` but no S: the plunge (line 8) feeds into the stock with the spindle stopped."""
+    folder = tmp_path / "no_speed"
+    folder.mkdir()
+    (folder / "case.toml").write_text((PARTS / "pocket_arcs" / "case.toml").read_text())
+    text = (PARTS / "pocket_arcs" / "program.nc").read_text()
+    assert text.splitlines()[7].startswith("N60 G1 Z-1.5")
+    (folder / "program.nc").write_text(text.replace("N40 S5000 M3", "N40 M3"))
+    settings = OptimizeSettings(pop=2, gens=1, progress=False, plot=False)
+    with pytest.raises(OptimizeError, match=r"no_speed/program\.nc:8: the original program fails on the twin: .*"
+                                            r"spindle stopped .*start the spindle \(M3\) before the cut"):
+        optimize(case=folder, settings=settings)

@@ -131,8 +131,11 @@ def build_reference(case: Case, program_text: str | None = None, ranges: Ranges 
         engagement = None
         probe.engagement = None
         run = run_twin(probe, None, None, 1, channels=None)
-    if not run.success:
-        raise OptimizeError(f"{case.program}: the original program fails on the twin: {run.message}")
+    if not run.success:  # name the line executing at the failure, as cnctwin simulate does
+        from ..simulate import failure_message
+
+        where = failure_message("", run.recording, case.program)
+        raise OptimizeError(f"{where or f'{case.program}: '}the original program fails on the twin: {run.message}")
     # the twin has planned the program: reuse its interpretation
 
     twin = build_twin(case, batch=1, options=TwinOptions(step=step), program_text=text)
