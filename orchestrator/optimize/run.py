@@ -595,6 +595,7 @@ def optimize(program: str | Path | None = None, case: str | Path | Case | None =
                          f"cutting model (or the search found none within it): the original program is written"
                          f"{over}")
     f, s, text, ev_after, rec_after = chosen
+    original = text == ctx.program_text
     if front and settings.check_front:
         front = check_front_zmap(ctx, front, alone)
     lines = []
@@ -610,7 +611,7 @@ def optimize(program: str | Path | None = None, case: str | Path | Case | None =
         if int(line) in ctx.per_rev_lines:  # G95: the F words as written, mm/rev (in/rev under G20)
             inch = int(line) in ctx.inch_lines
             unit = "in_per_rev" if inch else "mm_per_rev"
-            word = ctx.feed_per_rev_word(line, f[i], s[i])
+            word = ctx.original_feed_per_rev_word(line) if original else ctx.feed_per_rev_word(line, f[i], s[i])
             lines[-1][f"feed_before_{unit}"] = ctx.original_feed_per_rev_word(line)
             lines[-1][f"feed_after_{unit}"] = word
             # the feed in effect is the written word x S (what the NC kernel runs), not the gene it came from
