@@ -312,10 +312,11 @@ def test_g95_program_optimised_and_resimulated_gives_after(g95_run):
     report = json.loads((folder / "opt" / "report.json").read_text())
     blocks = interpret(written, "p.nc").blocks
     for row in report["lines"]:
-        gene, s = row["feed_after_mm_per_min"], row["spindle_after_rpm"]
+        gene, s = row["feed_gene_mm_per_min"], row["spindle_after_rpm"]
         assert (gene, s) == (result.X[f"L{row['line']:04d}.feed"], result.X[f"L{row['line']:04d}.spindle"])
         word = row["feed_after_mm_per_rev"]
         assert word == pytest.approx(round(gene / s, 3), abs=1e-12)  # inside the range here: no clipping
+        assert row["feed_after_mm_per_min"] == pytest.approx(word * s, rel=1e-12)  # the feed in effect, F x S
         assert row["feed_before_mm_per_rev"] == 0.1
         runs = [x for x in blocks if isinstance(x, Linear) and x.line == row["line"]]
         assert [x.feed_per_rev for x in runs] == [word * MM] * len(runs)

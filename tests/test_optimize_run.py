@@ -147,3 +147,41 @@ def test_paper_method_and_pareto(case_dir, reference, tmp_path):
     assert all(p["max_cutting_load_N"] <= 60.0 for p in front)
     with pytest.raises(OptimizeError, match="paper"):
         OptimizeSettings(method="paper", objective="pareto")
+
+
+def test_when_the_five_best_fail_the_zmap_check_a_later_candidate_is_written(case_dir, reference, tmp_path,
+                                                                             monkeypatch):
+    """A long search crowds its best programs at the limit, and the Z-map re-simulation can reject all five
+    best (the paper part's `--pop 60 --gens 50` run did, and the overloading original was written). Here the
+    number re-simulated alone is cut to two (this small search has four feasible programs) and those two
+    re-simulations are declared over the limit: the next candidates are checked in one batched Z-map run and the
+    first within the limit is written; with every re-simulation over, the original is written with a note saying
+    it exceeds the limit."""
+    from dataclasses import replace
+
+    from orchestrator.optimize import run as run_mod
+
+    real = run_mod._resimulate
+    texts: list[str] = []
+    reject = {"first": 2}
+
+    def resimulate(ctx, text):
+        ev, rec = real(ctx, text)
+        texts.append(text)
+        if len(texts) <= reject["first"]:
+            ev = replace(ev, feasible=np.array([False]), reason=["over the load limit (test)"])
+        return ev, rec
+
+    monkeypatch.setattr(run_mod, "_resimulate", resimulate)
+    monkeypatch.setattr(run_mod, "ALONE_CANDIDATES", 2)
+    settings = _settings(pop=6, gens=2, tidy=False)
+    later = optimize(case=case_dir, settings=settings, out=tmp_path / "later", reference=reference)
+    assert len(texts) == 3 and later.program_text == texts[2] != reference.context.program_text
+    assert later.after["feasible"] and later.after["max_cutting_load_N"] <= 60.0
+    assert later.notes == []
+    texts.clear()
+    reject["first"] = 10 ** 6
+    none = optimize(case=case_dir, settings=settings, out=tmp_path / "none", reference=reference)
+    assert none.program_text == reference.context.program_text
+    assert len(none.notes) == 1 and "the original program is written, although it exceeds the load limit (68." \
+        in none.notes[0]

@@ -12,6 +12,8 @@ build_reference, ProblemContext, Ranges
     The problem (cutting lines, genes, S-word placement) from one reference run.
 LineProblem
     The pymoo problem (and the line-wise operators in :mod:`.problem`).
+tidy_genes
+    Equal feeds on equal cuts: the post-pass on the search's best program (:mod:`.tidy`).
 """
 from __future__ import annotations
 
@@ -21,8 +23,10 @@ from .evaluate import Evaluation, evaluate_population
 from .problem import LineProblem
 from .reference import Reference, build_reference
 from .run import OptimizeResult, OptimizeSettings, check_front_zmap, optimize
+from .tidy import TidyResult, tidy_genes
 
 __all__ = [
     "Evaluation", "LineProblem", "OptimizeError", "OptimizeResult", "OptimizeSettings", "ProblemContext", "Ranges",
-    "Reference", "build_reference", "check_front_zmap", "evaluate_population", "optimize",
+    "Reference", "TidyResult", "build_reference", "check_front_zmap", "evaluate_population", "optimize",
+    "tidy_genes",
 ]

@@ -609,9 +609,13 @@ def _governed_spindle_lines(program: Program, cutting: list[int], target_of: dic
 def check_context(ctx: ProblemContext) -> None:
     """Refuse problems the optimiser cannot treat (no cutting line, spindle stopped on a cutting line)."""
     if ctx.n_lines == 0:
+        stock = ctx.case.stock
+        box = "" if stock is None else (f" from the stock {[float(v) for v in stock.min_mm]}.."
+                                        f"{[float(v) for v in stock.max_mm]} mm")
         raise OptimizeError(
-            f"{ctx.case.program}: no cutting line found (a feed move removing material in the reference run); "
-            "check the case's [stock] and the program's work offsets"
+            f"{ctx.case.program}: no cutting line found: no feed move removes material{box} in the reference run "
+            "(a plunge along Z, as a drilling cycle, removes none in the twin); expected at least one G1/G2/G3 "
+            "move through the stock: check the case's [stock] and the program's work offsets"
         )
     lo, hi = ctx.ranges.feed_mm_per_min
     if ctx.inch and math.ceil(lo / ctx.feed_step - 1e-9) * ctx.feed_step > hi + 1e-9:

@@ -19,6 +19,8 @@ from .tapping import check_tapping_spindle
 MIN_REMOVED_MM3 = 0.1
 #: Default cycle-time cut-off of an evaluation, as a multiple of the original cycle time.
 MAX_CYCLE_FACTOR = 1.5
+#: What the path-mode cutting load reports when a member leaves the engagement table's path.
+OFF_PATH = "farther than path_tolerance"
 
 
 @dataclass
@@ -107,7 +109,10 @@ def build_reference(case: Case, program_text: str | None = None, ranges: Ranges 
         times faster; largest loads within 0.1 N of the Z-map model's on the
         bundled parts, which :func:`~.run.optimize` uses for its final
         re-simulation). ``"zmap"``: every individual removes material from its
-        own stock.
+        own stock. When the path mode fails on the original program itself
+        (the tool leaves the table's path: a reversal on one line that the
+        servo does not reach, as the pecks of G83), the Z-map mode is used
+        (``context.engagement`` is then None).
     """
     if case.stock is None:
         raise OptimizeError(f"{case.source or case.program}: the case has no [stock]; nothing is cut, nothing to optimise")
@@ -120,8 +125,17 @@ def build_reference(case: Case, program_text: str | None = None, ranges: Ranges 
     probe = ProblemContext(case, text, np.zeros(0, int), np.zeros(0, int), {}, np.zeros(0), np.zeros(0), ranges,
                            float(load_limit_N), {}, step, time_limit_s, engagement=engagement)
     run = run_twin(probe, None, None, 1, channels=None)
-    if not run.success:
-        raise OptimizeError(f"{case.program}: the original program fails on the twin: {run.message}")
+    if not run.success and engagement is not None and OFF_PATH in run.message:
+        # the path mode lost the tool on its own reference path (a reversal on one line that the servo does not
+        # reach, e.g. the pecks of G83): every evaluation removes material from its own Z-map instead
+        engagement = None
+        probe.engagement = None
+        run = run_twin(probe, None, None, 1, channels=None)
+    if not run.success:  # name the line executing at the failure, as cnctwin simulate does
+        from ..simulate import failure_message
+
+        where = failure_message("", run.recording, case.program)
+        raise OptimizeError(f"{where or f'{case.program}: '}the original program fails on the twin: {run.message}")
     # the twin has planned the program: reuse its interpretation
 
     twin = build_twin(case, batch=1, options=TwinOptions(step=step), program_text=text)

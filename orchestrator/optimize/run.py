@@ -11,12 +11,20 @@ Paper's reference (``method="paper"``)
     ``fitness_limit``). Values are snapped to the same grid so that both
     methods write the same kind of program.
 
+Equal feeds on equal cuts (``tidy``, time and cost with the default method)
+    After the search, :func:`.tidy.tidy_genes` copies feeds between
+    neighbouring cutting lines and lines that cut alike wherever the program
+    stays feasible and its objective is not worse; the result is the first
+    candidate below.
+
 The chosen program is re-simulated on its own (B = 1, rewritten text) with
 the Z-map cutting model (material removed from the stock, not the search's
 path-mode engagement): the ``after`` figures are those of the written
 program. With the default method a candidate that exceeds the load limit in
-this re-simulation is skipped for the next best (and the original program is
-kept when none of the best five passes).
+this re-simulation is skipped for the next best; when none of the best five
+passes, the next 40 are checked in one batched Z-map run and the first within
+the limit is re-simulated alone; the original program is kept (with a note)
+only when none of these passes.
 
 Pareto front check (``objective="pareto"``, ``check_front=True``)
     Every point of the front is re-checked the same way: its written program
@@ -45,7 +53,11 @@ from pymoo.operators.sampling.rnd import FloatRandomSampling
 from pymoo.termination.max_gen import MaximumGenerationTermination
 from pymoo.util.nds.non_dominated_sorting import NonDominatedSorting
 
+from fmus_src.nck.blocks import ToolChange
+from fmus_src.nck.writer import MM_PER_INCH
+
 from ..case import Case
+from ..summary import tool_notes
 from .backends import CachedEvaluator, DaskBackend, ProcessBackend, SerialBackend
 from .checkpoint import latest_checkpoint, read_pickle, write_checkpoint, write_pickle
 from .context import Ranges
@@ -56,6 +68,7 @@ from .problem import (
     objectives,
 )
 from .reference import MAX_CYCLE_FACTOR, MIN_REMOVED_MM3, Reference, build_reference
+from .tidy import TidyResult, tidy_genes
 
 
 @dataclass
@@ -111,6 +124,11 @@ class OptimizeSettings:
     check_front : bool
         [--no-front-check] Pareto objective: re-simulate every front point's written program on the Z-map
         cutting model (:func:`check_front_zmap`). Off saves one batched run; ignored for ``time`` and ``cost``.
+    tidy : bool
+        [--no-tidy] ``time`` and ``cost`` with the default method: after the search, copy feeds between
+        neighbouring cutting lines and lines that cut alike wherever the program stays feasible and its
+        objective is not worse (:func:`.tidy.tidy_genes`: equal feeds on equal cuts). Ignored for ``pareto``
+        and the paper's method.
     """
 
     objective: str = "time"
@@ -138,6 +156,7 @@ class OptimizeSettings:
     progress: bool = True
     plot: bool = True
     check_front: bool = True
+    tidy: bool = True
 
     def __post_init__(self) -> None:
         if self.objective not in OBJECTIVES:
@@ -154,6 +173,8 @@ class OptimizeSettings:
             raise OptimizeError(f"workers must be an integer >= 1, got {self.workers!r}")
         if not isinstance(self.check_front, (bool, np.bool_)):
             raise OptimizeError(f"check_front must be True or False, got {self.check_front!r}")
+        if not isinstance(self.tidy, (bool, np.bool_)):
+            raise OptimizeError(f"tidy must be True or False, got {self.tidy!r}")
 
     def ranges(self) -> Ranges:
         """The search ranges and grid."""
@@ -184,8 +205,11 @@ class OptimizeResult:
         ``cycle_time_s``, ``cost_KRW``, ``max_cutting_load_N``, ``tool_life_used`` of the original and the
         optimised program (each re-simulated alone).
     lines : list of dict
-        Per cutting line: feed and spindle before/after, time and largest load before/after; on a G20 line also
-        ``feed_before_in_per_min`` and ``feed_after_in_per_min`` (the F words as written).
+        Per cutting line: feed (mm/min) and spindle (rpm) before/after, time (s) and largest load (N)
+        before/after; on a G20 line also ``feed_before_in_per_min`` and ``feed_after_in_per_min`` (the F words
+        as written). On a G95 line the feeds are the feeds in effect, F x S in mm/min (the written word times
+        the spindle speed), beside the words as written (``feed_before_mm_per_rev``, ``feed_after_mm_per_rev``;
+        ``_in_per_rev`` under G20) and the search's gene (``feed_gene_mm_per_min``, mm/min).
     history : list of dict
         Per generation: evaluations so far, best objective, feasible count.
     front : list of dict
@@ -198,6 +222,15 @@ class OptimizeResult:
         Wall time of the optimisation (all sessions of a resumed job), s.
     files : dict[str, Path]
         Files written.
+    tool_changes : list of dict
+        ``{"line": ..., "tool": ...}`` per M6 of the program, in execution order.
+    notes : list of str
+        What the twin assumed (as ``cnctwin simulate``'s summary): a program using more than one tool has every
+        tool's cutting load computed with the case's one ``[tool]``. Also when the original program was written
+        because no candidate passed the Z-map check (and whether the original itself exceeds the limit).
+    tidy : dict or None
+        The equal-feeds post-pass (``settings.tidy``): objective before and after (s or KRW, the search's
+        path-mode figures), rounds and the accepted copies (:class:`.tidy.TidyResult`); None when it did not run.
     """
 
     X: dict[str, float]
@@ -212,6 +245,9 @@ class OptimizeResult:
     files: dict[str, Path] = field(default_factory=dict)
     recording_before: Any = None
     recording_after: Any = None
+    tidy: dict[str, Any] | None = None
+    tool_changes: list[dict[str, int]] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
 
 
 class _ProgressBar:
@@ -235,6 +271,14 @@ class _ProgressBar:
         if self.enabled:
             sys.stderr.write("\n")
             sys.stderr.flush()
+
+
+#: Best candidates of the search re-simulated alone on the Z-map model, one after the other, until one is within
+#: the load limit.
+ALONE_CANDIDATES = 5
+#: When none of those is, the next ones are checked in one batched Z-map run (the first within the limit is then
+#: re-simulated alone).
+BATCH_CANDIDATES = 40
 
 
 def _ga_comparison(pop, P, **kwargs):
@@ -317,6 +361,20 @@ def _candidates(ctx, cache: dict, settings: OptimizeSettings) -> tuple[list[tupl
     on_front = set(knee.tolist())
     rest = [int(i) for i in feas[np.argsort(F[feas, 0], kind="stable")] if int(i) not in on_front]
     return [keys[i] for i in knee] + [keys[i] for i in rest], front
+
+
+def _tidy(ctx, evaluator: CachedEvaluator, candidates: list[tuple], settings: OptimizeSettings
+          ) -> TidyResult | None:
+    """The equal-feeds post-pass on the best feasible individual (time and cost, default method), or None."""
+    if not settings.tidy or settings.method != "default" or settings.objective == "pareto" or not candidates:
+        return None
+    L = ctx.n_lines
+    best = np.array(candidates[0], float)
+
+    def score(ev: Evaluation) -> np.ndarray:
+        return objectives(ev, settings.objective, settings.method, ctx.load_limit_N, settings.penalty_weight)[0][:, 0]
+
+    return tidy_genes(ctx, evaluator, score, best[:L], best[L:], max_candidates=max(8, int(settings.pop)))
 
 
 def _resimulate(ctx, text: str):
@@ -492,16 +550,21 @@ def optimize(program: str | Path | None = None, case: str | Path | Case | None =
             if callback is not None:
                 callback(row)
         bar.close()
+        L = ctx.n_lines
+        candidates, front = _candidates(ctx, evaluator.cache, settings)
+        tidied = _tidy(ctx, evaluator, candidates, settings)
+        if tidied is not None:
+            key = tuple(float(v) for v in np.concatenate([tidied.feeds, tidied.spindles]))
+            candidates = [key] + [k for k in candidates if k != key]
     finally:
         backend.close()
 
     # choose and re-simulate the written program
-    L = ctx.n_lines
-    candidates, front = _candidates(ctx, evaluator.cache, settings)
     before = reference.evaluation
     chosen = None
     alone: dict[tuple, Evaluation] = {}
-    for key in candidates[:5]:
+    notes: list[str] = []
+    for key in candidates[:ALONE_CANDIDATES]:
         f, s = np.array(key[:L]), np.array(key[L:])
         text = ctx.program_for(f, s)
         ev_after, rec_after = _resimulate(ctx, text)
@@ -509,9 +572,30 @@ def optimize(program: str | Path | None = None, case: str | Path | Case | None =
         if settings.method == "paper" or bool(ev_after.feasible[0]):
             chosen = (f, s, text, ev_after, rec_after)
             break
+    if chosen is None and settings.method == "default" and len(candidates) > ALONE_CANDIDATES:
+        # a long search crowds its best around the limit: the next ones, checked in one batched Z-map run
+        extra = candidates[ALONE_CANDIDATES:ALONE_CANDIDATES + BATCH_CANDIDATES]
+        checked = check_front_zmap(ctx, [{"X": ctx.as_dict(np.array(k[:L]), np.array(k[L:]))} for k in extra])
+        for key, point in zip(extra, checked):
+            if not point["zmap_feasible"]:
+                continue
+            f, s = np.array(key[:L]), np.array(key[L:])
+            text = ctx.program_for(f, s)
+            ev_after, rec_after = _resimulate(ctx, text)
+            alone[tuple(float(v) for v in key)] = ev_after
+            if bool(ev_after.feasible[0]):
+                chosen = (f, s, text, ev_after, rec_after)
+                break
     if chosen is None:
         chosen = (ctx.original_feed.copy(), ctx.original_spindle.copy(), ctx.program_text, before, reference.recording)
+        if settings.method == "default":
+            tried = min(len(candidates), ALONE_CANDIDATES + BATCH_CANDIDATES)
+            over = "" if before.feasible[0] else f", although it exceeds the load limit ({before.max_load_N[0]:.4g} N)"
+            notes.append(f"none of the {tried} best programs of the search stays within the load limit on the Z-map "
+                         f"cutting model (or the search found none within it): the original program is written"
+                         f"{over}")
     f, s, text, ev_after, rec_after = chosen
+    original = text == ctx.program_text
     if front and settings.check_front:
         front = check_front_zmap(ctx, front, alone)
     lines = []
@@ -525,9 +609,14 @@ def optimize(program: str | Path | None = None, case: str | Path | Case | None =
             "max_load_after_N": float(ev_after.line_max_load_N[0, i]),
         })
         if int(line) in ctx.per_rev_lines:  # G95: the F words as written, mm/rev (in/rev under G20)
-            unit = "in_per_rev" if int(line) in ctx.inch_lines else "mm_per_rev"
+            inch = int(line) in ctx.inch_lines
+            unit = "in_per_rev" if inch else "mm_per_rev"
+            word = ctx.original_feed_per_rev_word(line) if original else ctx.feed_per_rev_word(line, f[i], s[i])
             lines[-1][f"feed_before_{unit}"] = ctx.original_feed_per_rev_word(line)
-            lines[-1][f"feed_after_{unit}"] = ctx.feed_per_rev_word(line, f[i], s[i])
+            lines[-1][f"feed_after_{unit}"] = word
+            # the feed in effect is the written word x S (what the NC kernel runs), not the gene it came from
+            lines[-1]["feed_after_mm_per_min"] = round(word * (MM_PER_INCH if inch else 1.0) * float(s[i]), 6)
+            lines[-1]["feed_gene_mm_per_min"] = float(f[i])
         elif int(line) in ctx.inch_lines:  # G20: the F words as written, in/min
             lines[-1]["feed_before_in_per_min"] = ctx.feed_word(line, ctx.original_feed[i])
             lines[-1]["feed_after_in_per_min"] = ctx.feed_word(line, f[i])
@@ -536,7 +625,11 @@ def optimize(program: str | Path | None = None, case: str | Path | Case | None =
         history=history, front=front, evaluations=evaluator.evaluations,
         wall_time_s=wall_before + time.perf_counter() - t_start,
         recording_before=reference.recording, recording_after=rec_after,
+        tidy=None if tidied is None else tidied.as_dict(),
     )
+    changes = [(b.line, b.tool) for b in ctx.interpreted().blocks if isinstance(b, ToolChange)]
+    result.tool_changes, tool_text = tool_notes(changes, True, ctx.case.tool.diameter_mm, ctx.case.tool.flutes)
+    result.notes = tool_text + notes
     if out_path is not None:
         result.files = write_outputs(result, ctx, settings, out_path)
     return result
