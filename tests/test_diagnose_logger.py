@@ -321,12 +321,31 @@ def test_an_axis_whose_lag_differs_does_not_pull_the_clock_of_the_others():
     assert used == ["y", "z"]
     assert found == pytest.approx(2.5, abs=5e-6)
     # an x that a shift fits only roughly (0.8 ms more lag and 0.5 % more travel, as a compliance might
-    # give): its own best shift is inside the span, but its residual is large, so it gets little weight
+    # give): its own best shift is inside the span, but its residual is large and smooth, so its clock is
+    # uncertain (it agrees with y and z within its standard error) and it gets little weight
     rec["x"] = np.round(1.005 * move(t_rec - 2.5 - 0.8e-3, starts["x"]) * 1e3) / 1e3
     assert abs(refine_offset(t_rec, rec, t_nc, nc, 2.5) - 2.5) > 20e-6                  # pulled by x
     found, used = refine_offset_by_axes(t_rec, rec, t_nc, nc, 2.5)
     assert used == ["x", "y", "z"]
     assert found == pytest.approx(2.5, abs=5e-6)
+    # an x whose lag differs by 50 µs only, a shift fitting it exactly (a small feed-forward): inside the span
+    # and with as small a residual as y and z, so weighting alone pulled the clock by about a third of that
+    rec["x"] = np.round(move(t_rec - 2.5 + 50e-6, starts["x"]) * 1e3) / 1e3
+    found, used = refine_offset_by_axes(t_rec, rec, t_nc, nc, 2.5)
+    assert used == ["y", "z"]
+    assert found == pytest.approx(2.5, abs=5e-6)
+
+
+def test_axes_agree_on_a_clock_within_their_standard_errors():
+    # the largest group agreeing pairwise within 4 standard errors, when it is the only one; else all axes
+    from orchestrator.diagnose.align import agreeing_axes
+
+    us = 1e-6
+    assert agreeing_axes({"x": (0.0, us), "y": (3 * us, us), "z": (-2 * us, us)}) == ["x", "y", "z"]
+    assert agreeing_axes({"x": (1000 * us, us), "y": (0.0, us), "z": (1 * us, us)}) == ["y", "z"]
+    # two axes that disagree, or a chain (x~y, y~z, x!~z): which one is off cannot be told
+    assert agreeing_axes({"x": (100 * us, us), "y": (0.0, us)}) == ["x", "y"]
+    assert agreeing_axes({"x": (0.0, us), "y": (5 * us, us), "z": (10 * us, us)}) == ["x", "y", "z"]
 
 
 def test_a_start_offset_beyond_the_span_is_re_centred():

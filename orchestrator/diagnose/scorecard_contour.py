@@ -19,6 +19,7 @@ import numpy as np
 
 from ..atomic import atomic_write_json, atomic_write_text
 from ..case import load_case
+from ..recording import Recording
 from .core import diagnose
 from .prepare import twin_commands
 from .truth import Recorder, record, simulate_truth
@@ -77,7 +78,8 @@ CHANNELS: dict[str, tuple[str, ...]] = {
 
 
 def write_contour_case(folder: Path, axis: str, effects: dict, seed: int, period_s: float,
-                       drop: tuple[str, ...] = (), offset_range_s: tuple[float, float] = (0.1, 2.0)) -> Path:
+                       drop: tuple[str, ...] = (), offset_range_s: tuple[float, float] = (0.1, 2.0),
+                       nc: Recording | None = None) -> Path:
     """A case folder with the contour program and a truth recording with ``effects`` hidden on ``axis``.
 
     Parameters
@@ -95,12 +97,15 @@ def write_contour_case(folder: Path, axis: str, effects: dict, seed: int, period
         Channels the logger does not record.
     offset_range_s : (float, float)
         Range of the seeded logger clock offset, s.
+    nc : Recording, optional
+        The twin's run of :data:`PROGRAM` on the default machine (:func:`.prepare.twin_commands`), when
+        already at hand: the controller's commands of the truth.
     """
     folder.mkdir(parents=True, exist_ok=True)
     atomic_write_text(folder / "program.nc", PROGRAM)
     atomic_write_text(folder / "case.toml", CASE_TOML)
     case = load_case(folder)
-    nc = twin_commands(case, case.machine)
+    nc = nc if nc is not None else twin_commands(case, case.machine)
     truth = simulate_truth(case.machine, nc, {axis: effects} if effects else {})
     rng = np.random.default_rng(seed)
     rec = Recorder(period_s=period_s, jitter_s=0.05 * period_s, time_offset_s=float(rng.uniform(*offset_range_s)),
@@ -132,13 +137,20 @@ def score_contour(out: Path, seeds: int = 1, periods_ms: tuple[float, ...] = (1.
                   scenarios: list[str] | None = None, channels: list[str] | None = None) -> dict:
     """Run the study; returns ``{"runs": [...], "by_effect": {...}, "by_logger": {...}}`` (also written)."""
     runs = []
+    program = out / "program"
+    program.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(program / "program.nc", PROGRAM)
+    atomic_write_text(program / "case.toml", CASE_TOML)
+    case = load_case(program)
+    nc = twin_commands(case, case.machine)
     for name in scenarios or list(SCENARIOS):
         axis, effects = SCENARIOS[name]
         for chan in channels or list(CHANNELS):
             for period in periods_ms:
                 for seed in range(seeds):
                     tag = f"{name}_{chan}_{period:g}ms_{seed}".replace(" ", "_").replace("+", "and")
-                    folder = write_contour_case(out / tag, axis, effects, seed, period * 1e-3, CHANNELS[chan])
+                    folder = write_contour_case(out / tag, axis, effects, seed, period * 1e-3, CHANNELS[chan],
+                                                nc=nc)
                     truth = json.loads((folder / "truth.json").read_text())
                     try:
                         d = diagnose(folder)
