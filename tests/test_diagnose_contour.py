@@ -23,8 +23,8 @@ def contour(tmp_path_factory):
     case = load_case(first)
     nc = twin_commands(case, case.machine)
 
-    def make(name: str, axis: str, effects: dict, period_s: float, channels: str):
-        return write_contour_case(root / name, axis, effects, 0, period_s, CHANNELS[channels], nc=nc)
+    def make(name: str, axis: str, effects: dict, period_s: float, channels: str, seed: int = 0):
+        return write_contour_case(root / name, axis, effects, seed, period_s, CHANNELS[channels], nc=nc)
 
     return first, make
 
@@ -59,10 +59,15 @@ def test_a_backlash_on_x_does_not_move_the_clock_within_the_line_bracket(contour
     assert d.effects[0]["parameters"]["width_um"] == pytest.approx(3.0, rel=0.05)
 
 
-def test_a_servo_delay_logged_at_the_position_loop_period_is_refitted_past_the_tick_kink(contour):
-    """A 0.3 ms delay on Y, logged at 1 ms with commands: the refit stopped at 0.235 ms, a local minimum below
-    the kink of one velocity tick (0.25 ms), and a false Z feed-forward of 0.009 was named with it."""
+@pytest.mark.parametrize("period_s, seed, was", [
+    (1e-3, 0, "0.235 ms and a false z velocity_feedforward of 0.009"),
+    (4e-3, 2, "0.221 ms and a false y inertia_mismatch of -32 kg"),
+])
+def test_a_servo_delay_between_whole_ticks_is_refitted_past_the_tick_kink(contour, period_s, seed, was):
+    """A 0.3 ms delay on Y (1.2 velocity ticks), logged with commands: the selection's delay column is the
+    response to one whole tick, the refit started below the kink at 0.25 ms and stopped in the local minimum
+    there; another effect took up the rest (``was``). It now starts from a quarter-tick scan."""
     _, make = contour
-    d = diagnose(make("delay_y", "y", {"servo_delay": {"delay_ms": 0.3}}, 1e-3, "commands + line"))
-    assert _named(d) == [("servo_delay", "y")], d.log
-    assert d.effects[0]["parameters"]["delay_ms"] == pytest.approx(0.3, rel=0.02)
+    d = diagnose(make(f"delay_y_{seed}", "y", {"servo_delay": {"delay_ms": 0.3}}, period_s, "commands + line", seed))
+    assert _named(d) == [("servo_delay", "y")], (was, d.log)
+    assert d.effects[0]["parameters"]["delay_ms"] == pytest.approx(0.3, rel=0.02), was

@@ -2,12 +2,13 @@
 
 ``python -m orchestrator.diagnose.scorecard_contour OUT_DIR [--seeds N] [--periods 1,2,4,8]`` writes a case per
 hidden effect, logger and seed: an air-cut XY contour with arcs, reversals on X and Y and a Z move (about
-5 s, no stock, so no forces and no spindle channel), recorded by the independent truth simulation
-(:mod:`.truth`) with the hidden effect on X or Y, and logged at each sample period with the channels a user
-may have: commands and ``line``, ``line`` only, commands only, or neither (a Servo Guide log); a seeded
-clock offset of 0.1 to 2 s, a 1 µm encoder, 0.3 µm / 0.02 A noise, 0.01 A current resolution, 5 % of the
-period of jitter. It diagnoses each and tabulates detection, false effects and the parameter error per
-effect and per logger, into ``OUT_DIR/scorecard_contour.json`` and ``.md``.
+5 s after the rapid from the reference position; no stock, so no forces and no spindle channel), recorded by
+the independent truth simulation (:mod:`.truth`) with the hidden effect on X or Y, and logged at each sample
+period with the channels a user may have: commands and ``line``, ``line`` only, commands only, or neither (a
+Servo Guide log). Every logger of a scenario has its own seed: noise, jitter (5 % of the period) and clock
+offset (0.1 to 2 s); a 1 µm encoder, 0.3 µm / 0.02 A noise, 0.01 A current resolution. It diagnoses each and
+tabulates detection, false effects and the parameter error per effect and per logger, into
+``OUT_DIR/scorecard_contour.json`` and ``.md``.
 """
 from __future__ import annotations
 
@@ -145,9 +146,11 @@ def score_contour(out: Path, seeds: int = 1, periods_ms: tuple[float, ...] = (1.
     nc = twin_commands(case, case.machine)
     for name in scenarios or list(SCENARIOS):
         axis, effects = SCENARIOS[name]
-        for chan in channels or list(CHANNELS):
-            for period in periods_ms:
-                for seed in range(seeds):
+        for c, chan in enumerate(channels or list(CHANNELS)):
+            for p, period in enumerate(periods_ms):
+                for k in range(seeds):
+                    # every logger of a scenario its own noise, jitter and clock offset
+                    seed = 100 * k + 10 * c + p
                     tag = f"{name}_{chan}_{period:g}ms_{seed}".replace(" ", "_").replace("+", "and")
                     folder = write_contour_case(out / tag, axis, effects, seed, period * 1e-3, CHANNELS[chan],
                                                 nc=nc)
