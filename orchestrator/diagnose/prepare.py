@@ -24,7 +24,8 @@ from .errors import DiagnosisError
 SAME_COMMANDS_MM = 1e-3
 #: An axis whose command spans less than this is not diagnosed, m.
 MIN_STROKE_M = 1e-5
-#: Grid of the velocity match (least squares over every lag) that aligns a recording without 'line' transitions with the program, s.
+#: Grid of the velocity match (least squares over every lag) that aligns a recording without 'line' transitions
+#: with the program, s.
 ALIGN_GRID_S = 1e-3
 
 
@@ -418,7 +419,7 @@ def prepare(case: Case, recording: Recording, machine: Machine, axes: list[str] 
                 offset = time_offset_from_signal(t, recording[f"{a}{suffix}"], nc.t, nc[twin], grid_s=ALIGN_GRID_S)
                 method = (f"least-squares match of the velocity of {a}{suffix} with the twin's "
                           + ("command" if suffix == "_ref_mm" else "position"))
-                if suffix == "_mm":  # the correlation peak is good to a fraction of its 1 ms grid: refine
+                if suffix == "_mm":  # the velocity match is good to a fraction of its 1 ms grid: refine
                     offset, used = refine_offset_by_axes(
                         t, {c: np.asarray(recording[f"{c}_mm"], float) for c in cands}, np.asarray(nc.t, float),
                         {c: np.asarray(nc[f"{c}_mm"], float) for c in cands}, offset)
