@@ -71,3 +71,48 @@ def test_a_servo_delay_between_whole_ticks_is_refitted_past_the_tick_kink(contou
     d = diagnose(make(f"delay_y_{seed}", "y", {"servo_delay": {"delay_ms": 0.3}}, period_s, "commands + line", seed))
     assert _named(d) == [("servo_delay", "y")], (was, d.log)
     assert d.effects[0]["parameters"]["delay_ms"] == pytest.approx(0.3, rel=0.02), was
+
+
+def test_an_axis_held_at_its_breakaway_current_is_not_replayed_beyond_it(contour):
+    """A Servo Guide log cut into the first X move: Z stands after its rapid down, its integrator wound to the
+    static friction (-1418.9 N, -2.7099 A). The current estimated from the first noisy samples, -2.7156 A, lay
+    beyond it: the replay broke away at once and slipped (0.69 A rms of Z current residual), and a Z reversal
+    friction and a torque ripple were named next to the X feed-forward. The held current is now limited to what
+    static friction holds."""
+    import numpy as np
+
+    from orchestrator.recording import Recording
+
+    _, make = contour
+    folder = make("ff_x_cut", "x", {"velocity_feedforward": {"gain": 0.05}}, 2e-3, "servo guide", seed=7)
+    rec = Recording.read_csv(folder / "recording.csv")
+    ch = {c: np.asarray(rec[c], float) for c in rec.channels}
+    fast = np.flatnonzero(np.abs(np.gradient(ch["x_mm"], ch["t_s"])) * 60.0 > 1900.0)   # the F2000 X move
+    start = int(fast[fast.size // 4])
+    Recording.from_channels({c: v[start:] for c, v in ch.items()}).write_csv(folder / "recording.csv")
+    d = diagnose(folder)
+    assert _named(d) == [("velocity_feedforward", "x")], d.log
+    assert d.rms_before["z_tcmd_A"] < 1.1 * d.noise["z_tcmd_A"]
+
+
+def test_a_holding_current_is_limited_to_the_static_friction_band():
+    # default Z: Fs 1418.8 N (+) / 1418.9 N (-), kf = kt 2 pi / lead = 2 pi / 0.012 m = 523.6 N/A; no load
+    import math
+
+    import numpy as np
+
+    from orchestrator.identify.start_state import held_within_static_friction
+    from orchestrator.machine import load_machine
+    from orchestrator.twin import drive_parameters
+    from fmus_src.servo import DriveAxis
+
+    machine = load_machine("default")
+    d = DriveAxis("z_drive", batch=2, **drive_parameters(machine, "z"))
+    d.setup(0.0)
+    kf = 2.0 * math.pi / 0.012
+    np.testing.assert_allclose(held_within_static_friction(d, -2.7156), -1418.9 / kf, rtol=1e-8)
+    np.testing.assert_allclose(held_within_static_friction(d, 3.0), 1418.8 / kf, rtol=1e-8)
+    np.testing.assert_array_equal(held_within_static_friction(d, -1.0), [-1.0, -1.0])
+    # a load resisting positive motion of 500 N shifts the band by 500 N / kf
+    np.testing.assert_allclose(held_within_static_friction(d, 5.0, np.full(2, 500.0)), (500.0 + 1418.8) / kf,
+                               rtol=1e-8)
