@@ -321,12 +321,77 @@ def test_an_axis_whose_lag_differs_does_not_pull_the_clock_of_the_others():
     assert used == ["y", "z"]
     assert found == pytest.approx(2.5, abs=5e-6)
     # an x that a shift fits only roughly (0.8 ms more lag and 0.5 % more travel, as a compliance might
-    # give): its own best shift is inside the span, but its residual is large, so it gets little weight
+    # give): its own best shift is inside the span, but its residual is large and smooth, so its clock is
+    # uncertain (it agrees with y and z within its standard error) and it gets little weight
     rec["x"] = np.round(1.005 * move(t_rec - 2.5 - 0.8e-3, starts["x"]) * 1e3) / 1e3
     assert abs(refine_offset(t_rec, rec, t_nc, nc, 2.5) - 2.5) > 20e-6                  # pulled by x
     found, used = refine_offset_by_axes(t_rec, rec, t_nc, nc, 2.5)
     assert used == ["x", "y", "z"]
     assert found == pytest.approx(2.5, abs=5e-6)
+    # an x whose lag differs by 50 µs only, a shift fitting it exactly (a small feed-forward): inside the span
+    # and with as small a residual as y and z, so weighting alone pulled the clock by about a third of that
+    rec["x"] = np.round(move(t_rec - 2.5 + 50e-6, starts["x"]) * 1e3) / 1e3
+    found, used = refine_offset_by_axes(t_rec, rec, t_nc, nc, 2.5)
+    assert used == ["y", "z"]
+    assert found == pytest.approx(2.5, abs=5e-6)
+
+
+def test_axes_agree_on_a_clock_within_their_standard_errors():
+    # the largest group agreeing pairwise within 4 standard errors, when it is the only one; else all axes
+    from orchestrator.diagnose.align import agreeing_axes
+
+    us = 1e-6
+    assert agreeing_axes({"x": (0.0, us), "y": (3 * us, us), "z": (-2 * us, us)}) == ["x", "y", "z"]
+    assert agreeing_axes({"x": (1000 * us, us), "y": (0.0, us), "z": (1 * us, us)}) == ["y", "z"]
+    # two axes that disagree, or a chain (x~y, y~z, x!~z): which one is off cannot be told
+    assert agreeing_axes({"x": (100 * us, us), "y": (0.0, us)}) == ["x", "y"]
+    assert agreeing_axes({"x": (0.0, us), "y": (5 * us, us), "z": (10 * us, us)}) == ["x", "y", "z"]
+
+
+def test_a_start_offset_beyond_the_span_is_re_centred():
+    # the coarse clock handed to the refinement is 8 ms off (beyond its +-5 ms): every axis found its best shift
+    # at the span's edge, and that edge was returned. The search is re-centred and the clock found.
+    from orchestrator.diagnose.align import MAX_RECENTRES, refine_offset_by_axes
+
+    def move(t):
+        s = np.clip((t - 1.0) / 0.5, 0.0, 1.0)
+        return 5.0 * s ** 2 * (3.0 - 2.0 * s)
+
+    t_nc = np.arange(0.0, 3.0, 1e-3)
+    nc = {"x": move(t_nc)}
+    t_rec = 2.5 + np.arange(0.2, 2.8, 2e-3)
+    rec = {"x": np.round(move(t_rec - 2.5) * 1e3) / 1e3}
+    found, used = refine_offset_by_axes(t_rec, rec, t_nc, nc, 2.5 + 8e-3)
+    assert used == ["x"] and found == pytest.approx(2.5, abs=5e-6)
+    # a clock farther than the re-centred spans reach is not searched for: the last edge is returned
+    reach = (1 + MAX_RECENTRES) * 5e-3
+    found, _ = refine_offset_by_axes(t_rec, rec, t_nc, nc, 2.5 + reach + 4e-3)
+    assert found == pytest.approx(2.5 + 4e-3, abs=0.1e-3)
+
+
+def test_the_least_squares_lag_is_the_brute_force_one_and_unbiased_on_a_cut_window():
+    # a window of a signal that does not vanish at the window's ends (a log cut into a move): the correlation
+    # peak is pulled towards the lag that puts more of the signal's energy inside the window, the least-squares
+    # lag is the true one; both against numpy's direct sums at every lag
+    from orchestrator.diagnose.correlate import correlation_peak, least_squares_lag
+
+    t = np.arange(0.0, 6.0, 1e-3)
+
+    def ramp(t0: float) -> np.ndarray:
+        return np.clip((t - t0) / 0.2, 0.0, 1.0)
+
+    a = ramp(1.0) - ramp(2.0) + 2.0 * (ramp(3.0) - ramp(4.5))     # a velocity: plateaus of 1 and 2
+    true = 3500                                                   # a window starting in the second plateau
+    v = a[true:true + 1500] + np.random.default_rng(1).normal(0.0, 0.01, 1500)
+    corr = np.correlate(a, v, mode="full")
+    lags = np.arange(corr.size) - (v.size - 1)
+    energy = np.array([np.sum(a[max(0, g):min(a.size, g + v.size)] ** 2) for g in lags])
+    cost = energy - 2.0 * corr
+    i, c_m, c_0, c_p = least_squares_lag(a, v)
+    assert i == int(np.argmin(cost)) and lags[i] == true
+    np.testing.assert_allclose([c_m, c_0, c_p], cost[i - 1:i + 2], rtol=1e-12)
+    j, _, _, _ = correlation_peak(a, v)
+    assert abs(lags[j] - true) > 100                               # the correlation peak is 0.27 s off here
 
 
 def test_the_correlation_peak_is_numpys_full_correlation_peak_bit_for_bit():

@@ -78,6 +78,23 @@ def test_the_twins_own_run_cut_into_a_move_names_nothing_and_leaves_the_noise(ow
         assert _within_noise(d.rms_after[key], noise, rows[key]), (key, d.rms_after, noise, rows[key])
 
 
+#: A Servo Guide log: positions and current commands only (no commands, no ``line``), on the logger's own clock.
+SERVO_GUIDE = ("t_s", "x_mm", "y_mm", "z_mm", "x_tcmd_A", "y_tcmd_A", "z_tcmd_A")
+
+
+def test_a_servo_guide_log_cut_into_a_move_is_aligned_and_names_nothing(own_run):
+    """The velocity cross-correlation put this log's clock 14 ms off (the twin's velocity energy inside the
+    log's window grows with the lag when the log starts in a move), the +-5 ms refinement stopped at its edge,
+    and the remaining lag was named a feed-forward of 0.22 and a servo delay. The least-squares velocity match
+    and the re-centred refinement give the logger's 2.5 s clock."""
+    root, ch, start = own_run
+    folder = _write(root / "cut_servo_guide", (root / "run" / "case.toml").read_text(),
+                    (root / "run" / "program.nc").read_text(), {n: ch[n][start:] for n in SERVO_GUIDE})
+    d = diagnose(folder)
+    assert d.alignment["time_offset_s"] == pytest.approx(2.5, abs=0.05e-3), d.log
+    assert d.effects == [] and d.unexplained == [], d.log
+
+
 #: effect -> hidden parameters and the relative accuracy claimed for the whole log (tests/test_diagnose_single.py)
 HIDDEN = {
     "gravity": ({"force_N": 40.0}, 0.1),

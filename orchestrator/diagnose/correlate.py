@@ -1,4 +1,4 @@
-"""The peak of a full cross-correlation, found by FFT and read off exact dot products.
+"""The peak of a full cross-correlation, and the best least-squares lag, found by FFT and read off exact dot products.
 
 ``numpy.correlate(a, v, "full")`` costs ``len(a) len(v)`` operations: 2e9 for
 two 40 s signals on a 1 ms grid, a minute of CPU. :func:`correlation_peak`
@@ -70,3 +70,60 @@ def correlation_peak(a: np.ndarray, v: np.ndarray) -> tuple[int, float, float, f
     before = lag_value(a, v, i - 1) if i > 0 else float("nan")
     after = lag_value(a, v, i + 1) if i < size - 1 else float("nan")
     return i, before, peak, after
+
+
+def _energy(a: np.ndarray, m: int, k: int) -> float:
+    """``sum(a[lo:hi] ** 2)`` over the overlap of full-mode index ``k`` (``v`` of length ``m``), by dot product."""
+    lag = k - (m - 1)
+    lo, hi = max(0, lag), min(a.size, lag + m)
+    return float(np.dot(a[lo:hi], a[lo:hi])) if hi > lo else 0.0
+
+
+def least_squares_lag(a: np.ndarray, v: np.ndarray) -> tuple[int, float, float, float]:
+    """The full-mode index whose overlap of ``a`` matches ``v`` best in least squares, and its neighbours' costs.
+
+    The cost at full-mode index ``k`` (lag ``k - (m - 1)`` of ``v`` against ``a``, as in
+    ``numpy.correlate(a, v, "full")``) is ``sum(a[lag + j] ** 2) - 2 sum(a[lag + j] v[j])`` over the overlap:
+    ``sum((a[lag + j] - v[j]) ** 2)`` less the constant ``sum(v ** 2)``, with ``a`` read as zero outside. The
+    plain correlation peak (:func:`correlation_peak`) is biased when ``v`` is a window of a signal that does
+    not vanish at the window's ends (a log started or stopped while an axis moves): the energy of ``a`` inside
+    the sliding window then changes with the lag, and the peak moves towards more energy (14 ms on a servo
+    log cut into a 500 mm/min move). The least-squares match has no such term.
+
+    Parameters
+    ----------
+    a, v : ndarray, shape (n,), (m,)
+        Real, finite signals; ``a`` the longer reference.
+
+    Returns
+    -------
+    i : int
+        Full-mode index of the smallest cost (the first of equal minima).
+    before, at, after : float
+        The costs at ``i - 1``, ``i``, ``i + 1`` (``nan`` outside ``0 .. n + m - 2``).
+    """
+    a = np.ascontiguousarray(a, dtype=float)
+    v = np.ascontiguousarray(v, dtype=float)
+    size = a.size + v.size - 1
+    n_fft = 1 << int(np.ceil(np.log2(size)))
+    circ = np.fft.irfft(np.fft.rfft(a, n_fft) * np.conj(np.fft.rfft(v, n_fft)), n_fft)
+    corr = np.concatenate([circ[n_fft - (v.size - 1):], circ[:a.size]]) if v.size > 1 else circ[:a.size]
+    lags = np.arange(size) - (v.size - 1)
+    cum = np.concatenate([[0.0], np.cumsum(a * a)])
+    energy = cum[np.clip(lags + v.size, 0, a.size)] - cum[np.clip(lags, 0, a.size)]
+    approx = energy - 2.0 * corr
+    # the FFT and the running sum err by far less than this bound; every lag within it is recomputed exactly
+    tol = FFT_ERROR * (float(np.dot(a, a)) + float(np.linalg.norm(a)) * float(np.linalg.norm(v)))
+    candidates = np.flatnonzero(approx <= float(approx.min()) + 4.0 * tol)
+
+    def cost(k: int) -> float:
+        return _energy(a, v.size, k) - 2.0 * lag_value(a, v, k)
+
+    i, best = -1, np.inf
+    for k in candidates:
+        value = cost(int(k))
+        if value < best:
+            i, best = int(k), value
+    before = cost(i - 1) if i > 0 else float("nan")
+    after = cost(i + 1) if i < size - 1 else float("nan")
+    return i, before, best, after

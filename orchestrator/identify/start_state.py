@@ -170,6 +170,44 @@ def initial_positions(starts: Mapping[str, AxisStart] | None, t0: float | np.nda
     return {a: s.at(t0)[0] for a, s in (starts or {}).items() if s.moving}
 
 
+def held_within_static_friction(d: DriveAxis, current: float, disturbance: np.ndarray | None = None) -> np.ndarray:
+    """A holding current of an axis at rest, limited per member to what static friction can hold, A.
+
+    The axis stood in the recording, so the force it held, ``kf I - load``, lay within the break-away band
+    ``[-Fs_neg, Fs_pos]`` of the machine. An axis stopped by a move against its friction holds the current at
+    that band's edge (its integrator winds up to it), and the current estimated from noisy samples (0.02 A
+    noise, 0.01 A steps) can lie beyond it: a replay started there broke away at once, slipped and never
+    matched again (Z of an XY contour's Servo Guide log cut into an X move: 0.69 A rms of current residual,
+    named a reversal friction and a ripple; the same log cut 4 ms later, its estimate 6 mA lower, had none).
+
+    Parameters
+    ----------
+    d : DriveAxis
+        Set up, not yet stepped (its members' friction, including a reversal friction at the start's travel,
+        and its load terms).
+    current : float
+        Estimated holding current, A.
+    disturbance : ndarray, optional
+        Disturbance force of the first tick [N] (shape (1,) or (B,)); default the drive's own input.
+
+    Returns
+    -------
+    ndarray, shape (B,)
+        The current of each member, clipped to ``[(load - Fs_neg) / kf, (load + Fs_pos) / kf]``.
+    """
+    friction, _ = d._step_friction()
+    load = np.asarray(disturbance, dtype=float) if disturbance is not None else \
+        np.asarray(d.values["disturbance_force"], dtype=float)
+    if d._load_on:
+        v = d.values
+        load = load + axis_load(d._state.position, v["gravity_force"], v["gravity_spring"], v["ripple_amplitude"],
+                                v["ripple_period"])
+    inside = 1.0 - 1e-9   # strictly inside: the drive breaks away when the force exceeds Fs by a rounding
+    lo = (load - inside * friction.static_neg) / d._kf
+    hi = (load + inside * friction.static_pos) / d._kf
+    return np.clip(np.full(d.batch, float(current)), lo, hi)
+
+
 def apply_start(mcu: MCU, drives: Mapping[str, DriveAxis], starts: Mapping[str, AxisStart] | None, t0: float,
                 ref_before: Mapping[str, Callable[[np.ndarray], np.ndarray]] | None = None,
                 disturbance: Mapping[str, np.ndarray] | None = None,
@@ -214,9 +252,11 @@ def apply_start(mcu: MCU, drives: Mapping[str, DriveAxis], starts: Mapping[str, 
                 if ref_before is not None and a in ref_before else float(x0[0])
             err = g.position[i] * (ref0 - d._state.position)
             limit = g.peak_current[i]
-            state.integrator[i] = np.clip(s.holding_current - (g.velocity_p[i] + g.velocity_i[i] * mcu._tv) * err,
+            holding = held_within_static_friction(d, s.holding_current, disturbance[a] if disturbance is not None
+                                                  and a in disturbance else None)
+            state.integrator[i] = np.clip(holding - (g.velocity_p[i] + g.velocity_i[i] * mcu._tv) * err,
                                           -limit, limit)
-            state.current_cmd[i] = s.holding_current
+            state.current_cmd[i] = holding
             _publish(mcu, d, a, i)
             continue
         sign = math.copysign(1.0, s.velocity)
