@@ -171,8 +171,34 @@ def test_a_dynamometer_merged_with_the_controller_log_is_fitted(cut_log):
     fit = identify_cutting([_write(folder, ch)])
     assert fit.kt_ == pytest.approx(0.95e9, rel=0.01)
     assert fit.ke_ == pytest.approx(0.38, rel=0.03)
-    # a row with x_mm but no y_mm is not a second stream: named by its file line
+    # a row with x_mm but no y_mm is not a second stream: it is left out, and the note names its file line
     k = int(np.flatnonzero(np.isfinite(ch["x_mm"]))[10])
     ch["y_mm"][k] = np.nan
-    with pytest.raises(IdentificationError, match=rf"recording\.csv:{k + 2}: y_mm empty where the other positions"):
+    fit = identify_cutting([_write(folder, ch)])
+    assert fit.notes_ == [f"{folder / 'recording.csv'}:{k + 2}: 1 of {merged_t.size} row(s) with only part of the "
+                          "positions and spindle speed (y_mm empty: not measured) left out of cutting "
+                          f"identification (first at line(s) [{k + 2}])"]
+    assert fit.kt_ == pytest.approx(0.95e9, rel=0.01)
+    assert fit.ke_ == pytest.approx(0.38, rel=0.03)
+
+
+def test_a_dropped_force_cell_leaves_its_row_out(cut_log, tmp_path):
+    """One log, every column at every row, but the dynamometer lost fy at a few samples (fx there): those rows
+    are left out and noted (as friction and servo do), the fit is the clean one; with fy measured in fewer than
+    3 rows the error names the file and the columns."""
+    folder, clean = cut_log
+    ch = _channels(clean)
+    lost = np.array([40, 41, 300])
+    ch["fy_N"][lost] = np.nan
+    fit = identify_cutting([_write(folder, ch)])
+    assert len(fit.notes_) == 1
+    assert fit.notes_[0].startswith(f"{folder / 'recording.csv'}:{lost[0] + 2}: 3 of {ch['t_s'].size} row(s) "
+                                    "with only part of the forces (fy_N empty")
+    assert fit.kt_ == pytest.approx(0.95e9, rel=0.005)
+    assert fit.ke_ == pytest.approx(0.38, rel=0.01)
+    report = json.loads(fit.write(tmp_path / "out", plots=False)["report"].read_text())
+    assert report["notes"] == fit.notes_
+    ch["fy_N"][2:] = np.nan
+    with pytest.raises(IdentificationError, match=r"recording\.csv: cutting identification needs forces "
+                                                  r"\(\['fx_N', 'fy_N'\]\) measured together in at least 3 rows"):
         identify_cutting([_write(folder, ch)])

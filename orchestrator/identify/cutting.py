@@ -31,6 +31,7 @@ at a wall) or a small phase error swaps full force for zero.
 """
 from __future__ import annotations
 
+import logging
 import math
 import time
 from dataclasses import dataclass, field
@@ -46,10 +47,12 @@ from fmus_src.cutting import CuttingLoad
 from ..case import Case
 from ..twin import cutting_parameters
 from .common import fitted_machine, provenance, write_outputs
-from .data import CaseData, check_columns, load_inputs
+from .data import CaseData, _first, _places, check_columns, load_inputs
 from .errors import IdentificationError
 from .ga import paper_objective, run_ga
 from .journal import Journal
+
+_log = logging.getLogger(__name__)
 
 #: Kt of the unit runs, N/m2 (a realistic magnitude keeps every threshold of the component meaningful).
 KT_UNIT = 1.0e9
@@ -99,7 +102,8 @@ class CuttingFit:
     traces_ : list of dict
         Per case: ``t``, measured and simulated ``fc`` (for plots).
     notes_ : list of str
-        Warnings (e.g. Kt, Ke not separately identifiable from ``fc`` alone).
+        Warnings (e.g. Kt, Ke not separately identifiable from ``fc`` alone) and rows left out because a
+        needed cell was empty (not measured), per stream (``report.json`` -> ``notes``).
     """
 
     kt_: float
@@ -160,7 +164,7 @@ def _columns(d: CaseData) -> tuple[str, list[str]]:
     return spindle, forces
 
 
-def cutting_samples(d: CaseData) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+def cutting_samples(d: CaseData, notes: list[str] | None = None) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     """Times [s] and the columns cutting identification uses, on common rows.
 
     A controller log and a dynamometer log merged into one file (``fx_N``, ``fy_N`` at 10 kHz, positions at
@@ -169,17 +173,29 @@ def cutting_samples(d: CaseData) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     span, or in a gap of more than 5 of its median sampling steps, are not used). A recording in which
     every row has every column is used as it is.
 
+    A row with only part of a stream (e.g. ``fx_N`` without ``fy_N``: the logger dropped one cell, an
+    empty cell is "not measured") is left out of that stream, as friction and servo identification leave
+    out incomplete rows; each such stream adds a line to ``notes`` (and a log warning) when ``notes`` is given.
+
+    Parameters
+    ----------
+    d : CaseData
+        The case and its recording.
+    notes : list of str, optional
+        Receives ``"file:line: N of M row(s) with only part of ... left out ..."`` per stream concerned.
+
     Returns
     -------
     t : ndarray, shape (n,)
+        Times, s.
     columns : dict
         ``x_mm``, ``y_mm``, ``z_mm``, the spindle speed column and the force columns, each shape (n,).
 
     Raises
     ------
     IdentificationError
-        A missing column, a row with only part of a stream (e.g. ``x_mm`` without ``y_mm``; named by file
-        line), a stream with fewer than 3 samples, or streams that do not overlap in time.
+        A missing column, a stream with fewer than 3 complete rows (naming the file and the columns), or
+        streams that do not overlap in time.
     """
     rec = d.recording
     spindle, forces = _columns(d)
@@ -196,17 +212,19 @@ def cutting_samples(d: CaseData) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     for name, names in streams.items():
         have = np.array([np.isfinite(cols[c]) for c in names])
         partial = have.any(axis=0) & ~have.all(axis=0)
-        if partial.any():
-            k = int(np.flatnonzero(partial)[0])
-            empty = [c for c, h in zip(names, have[:, k]) if not h]
-            raise IdentificationError(
-                f"{rec.where(k)}: {', '.join(empty)} empty where the other {name} columns have a sample "
-                f"({int(partial.sum())} such row(s)); cutting identification needs {names} together on every row "
-                "of that stream")
         full[name] = have.all(axis=0)
         if full[name].sum() < 3:
-            raise IdentificationError(f"{d.source}: cutting identification needs {name} ({names}) in at least 3 "
-                                      f"rows; the recording has them in {int(full[name].sum())}")
+            raise IdentificationError(f"{d.source}: cutting identification needs {name} ({names}) measured together "
+                                      f"in at least 3 rows; the recording has them all in {int(full[name].sum())} "
+                                      "(an empty cell is 'not measured')")
+        if partial.any():
+            empty = [c for c, h in zip(names, have) if not h[partial].all()]
+            note = (f"{_first(rec, partial)}: {int(partial.sum())} of {len(rec)} row(s) with only part of the "
+                    f"{name} ({' / '.join(empty)} empty: not measured) left out of cutting identification "
+                    f"({_places(rec, partial)})")
+            if notes is not None:
+                _log.warning("%s", note)
+                notes.append(note)
     kin, frc = full["positions and spindle speed"], full["forces"]
     if (kin & frc).all():
         return t, cols
@@ -312,7 +330,7 @@ def _parabola_min(x: np.ndarray, y: np.ndarray) -> float:
 
 
 def _prepare(d: CaseData, phases: int, smooth_s: float, position_lag_s: float, journal: Journal,
-             index: int = 0) -> _Prepared:
+             index: int = 0, notes: list[str] | None = None) -> _Prepared:
     rec = d.recording
 
     def unit_runs(angles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -321,7 +339,7 @@ def _prepare(d: CaseData, phases: int, smooth_s: float, position_lag_s: float, j
                             lambda: basis_forces(d, angles, smooth_s, position_lag_s))
 
     _, forces = _columns(d)
-    t, cols = cutting_samples(d)
+    t, cols = cutting_samples(d, notes)
     meas = {"fx": cols["fx_N"], "fy": cols["fy_N"]} if "fx_N" in forces else {"fc": cols["fc_N"]}
     flutes = int(d.case.tool.flutes)
     pitch = 2.0 * math.pi / flutes
@@ -416,7 +434,8 @@ def identify_cutting(
     start = time.perf_counter()
     data = load_inputs(cases)
     journal = journal or Journal()
-    prepared = [_prepare(d, phases, smooth_s, position_lag_s, journal, i) for i, d in enumerate(data)]
+    notes: list[str] = []
+    prepared = [_prepare(d, phases, smooth_s, position_lag_s, journal, i, notes) for i, d in enumerate(data)]
     use_xy = all("fx" in p.measured for p in prepared)
 
     def stack(fn) -> np.ndarray:
@@ -439,7 +458,6 @@ def identify_cutting(
         return np.abs(kt)[..., None] * np.hypot(a_all[:, 0] + ke[..., None] * b_all[:, 0],
                                                 a_all[:, 1] + ke[..., None] * b_all[:, 1])
 
-    notes: list[str] = []
     if method == "default":
         kt, ke = float(c[0]), float(c[1] / c[0]) if c[0] != 0 else 0.0
         if not use_xy:
