@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 
 import numpy as np
 import pytest
@@ -145,3 +146,27 @@ def test_paper_ga_on_the_same_data(clean_case):
         p = fit.params_["x"][d]
         assert p.fitness <= 100.0 or p.iterations == 500
         assert p.coulomb == pytest.approx(TRUE[d]["coulomb_N"], rel=0.05)
+
+
+def test_a_friction_law_outside_the_stribeck_family_is_flagged(clean_case, tmp_path):
+    """A second bump of friction at mid speed (60 N, Gaussian in ln v around 150 mm/min) is no Stribeck curve:
+    the fit's chi-square against the plateaus' own scatter exceeds its 99.9 % bound and the result says so,
+    naming the speeds; the same log without the bump (README noise) carries no note."""
+    folder, clean = clean_case
+    _with_noise(clean, folder, 1.0, seed=11)
+    assert identify_friction([folder]).notes_ == []
+    rec = Recording.read_csv(folder / "recording.csv")
+    ch = {n: np.asarray(rec[n], dtype=float).copy() for n in rec.channels}
+    v = np.gradient(ch["x_ref_mm"], ch["t_s"]) * 1e-3  # m/s
+    bump = 60.0 * np.exp(-0.5 * (np.log(np.maximum(np.abs(v), 1e-12) / (150.0 / 6e4)) / 0.5) ** 2)
+    ch["x_tcmd_A"] += np.sign(v) * bump / KF
+    Recording.from_channels(ch).write_csv(folder / "recording.csv")
+    fit = identify_friction([folder])
+    assert len(fit.notes_) == 2, fit.notes_
+    for note, name in zip(fit.notes_, ("positive", "negative")):
+        assert f"axis x {name}: the Stribeck fit misfits" in note
+        named = [float(x) for x in re.findall(r"([0-9.]+) mm/min \(", note)]
+        assert any(abs(x / 150.0 - 1.0) < 0.01 for x in named), named  # the bump's centre
+        assert max(named) < 3000.0, named  # 6000 mm/min, where the bump is nil, still fits
+    report = json.loads(fit.write(tmp_path / "out", plots=False)["report"].read_text())
+    assert report["notes"] == fit.notes_

@@ -21,6 +21,7 @@ from ..machine import Machine
 from .common import fitted_machine, provenance, write_outputs
 from .data import CaseData, axes_in, check_columns, force_per_amp, load_inputs, measured_rows
 from .errors import IdentificationError
+from .fit_quality import stribeck_misfit
 from .journal import Journal
 from .segments import Segment, SegmentSettings, find_segments, require_segments
 from .stribeck import StribeckFit, fit_stribeck
@@ -50,8 +51,9 @@ class FrictionFit:
         Seconds for the whole identification.
     cases : list of str
     notes_ : list of str
-        Rows left out because a needed cell was empty (not measured), per case and axis
-        (``report.json`` -> ``notes``).
+        Rows left out because a needed cell was empty (not measured), per case and axis, and fits whose
+        residual the plateaus' own scatter does not explain (:func:`.fit_quality.stribeck_misfit`: the
+        friction does not follow the Stribeck law at the speeds named) (``report.json`` -> ``notes``).
     """
 
     params_: dict[str, dict[str, StribeckFit]]
@@ -194,6 +196,10 @@ def identify_friction(
             label = f"{data[0].source}: axis {a} {name}"
             params[a][name] = journal.memo("friction.stribeck", (speed, force, method, seed, label),
                                            lambda: fit_stribeck(speed, force, method, seed, label=label))
+            misfit = stribeck_misfit(segs, params[a][name], label)
+            if misfit is not None:
+                _log.warning("%s", misfit)
+                notes.append(misfit)
     names = [d.name for d in data]
     source = provenance(f"friction {method} (Stribeck fit of constant-velocity segments, J = sum e^2 + max|e|)", names)
     updates = {
