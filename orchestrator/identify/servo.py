@@ -40,7 +40,8 @@ uses it.
 ``"paper-ga"``
     pymoo GA, population 50, at most 100 generations, fitness limit 10
     (Section 2.3); one GA per axis in lockstep, one batched replay (B = 50)
-    per generation.
+    per generation. It runs on the samples left after the glitch screening
+    of the least-squares fit (:func:`_screen_glitches`), as the default does.
 """
 from __future__ import annotations
 
@@ -568,14 +569,20 @@ def identify_servo(
     notes: list[str] = []
     series, used = _prepare(data, axes, base, notes)
     w: dict[str, tuple[float, float]] = {}
-    for a in used:
-        e_all = np.concatenate([s.e[a] for s in series if a in s.e])
-        c_all = np.concatenate([s.cur[a] for s in series if a in s.cur])
-        w[a] = weights or (1.0 / max(float(np.sqrt(np.mean(e_all ** 2))), 1e-3),
-                           1.0 / max(float(np.sqrt(np.mean(c_all ** 2))), 1e-3))
+    masks: dict[tuple[int, str], np.ndarray] = {}   # (series, axis) -> 0/1 per stacked residual (glitches left out)
+
+    def set_weights() -> None:
+        """``w[a]``: the given weights, else 1/RMS of each measured channel over the samples not left out."""
+        for a in used:
+            keep = [(s, masks.get((i, a), np.ones(2 * s.t.size)) > 0.0) for i, s in enumerate(series) if a in s.e]
+            e_all = np.concatenate([s.e[a][k[: s.t.size]] for s, k in keep])
+            c_all = np.concatenate([s.cur[a][k[s.t.size:]] for s, k in keep])
+            w[a] = weights or (1.0 / max(float(np.sqrt(np.mean(e_all ** 2))), 1e-3),
+                               1.0 / max(float(np.sqrt(np.mean(c_all ** 2))), 1e-3))
+
+    set_weights()
     counter = {"sims": 0}
     journal = journal or Journal()
-    masks: dict[tuple[int, str], np.ndarray] = {}   # (series, axis) -> 0/1 per stacked residual (glitches left out)
 
     def residuals(scales: dict[str, np.ndarray], summed: bool = False,
                   shifts: dict[int, np.ndarray] | None = None, smooth: bool = False) -> dict[str, np.ndarray]:
@@ -600,15 +607,16 @@ def identify_servo(
 
     if method not in ("default", "paper-ga"):
         raise IdentificationError(f"unknown servo method {method!r}; expected 'default' or 'paper-ga'")
-    shifts: dict[int, float] = {}
-    iterations = 0
-    glitches: list[str] = []
+    # every method starts with the least-squares fit: its residuals screen the logger's glitches (paper-ga too:
+    # its GA then runs on the screened samples, a glitch would dominate its J = sum e^2 + max|e| as well), and
+    # paper-ga on a log without commands takes the clock shifts from it
+    scales, shifts, iterations = _fit_least_squares(base, series, used, residuals, max_iterations, journaled)
+    at = residuals({a: scales[a][None, :] for a in used},
+                   shifts={i: np.full(1, v) for i, v in shifts.items()} if shifts else None)
+    glitches = _screen_glitches(series, used, at, masks)
+    if glitches:
+        set_weights()  # the weights 1/RMS of the measurement are not set by the glitches either
     if method == "default" or any(s.source == "twin" for s in series):
-        # paper-ga on a log without commands: the residual clock shifts come from the least-squares fit first
-        scales, shifts, iterations = _fit_least_squares(base, series, used, residuals, max_iterations, journaled)
-        at = residuals({a: scales[a][None, :] for a in used},
-                       shifts={i: np.full(1, v) for i, v in shifts.items()} if shifts else None)
-        glitches = _screen_glitches(series, used, at, masks)
         if glitches:
             # a logger's bad sample (a position jump, a current spike) dominates the squared residual: fit again
             # without it, from there (the first fit on one 0.5 mm position glitch gave Svp 1.08 for 1.2)
