@@ -170,3 +170,12 @@ def test_a_friction_law_outside_the_stribeck_family_is_flagged(clean_case, tmp_p
         assert max(named) < 3000.0, named  # 6000 mm/min, where the bump is nil, still fits
     report = json.loads(fit.write(tmp_path / "out", plots=False)["report"].read_text())
     assert report["notes"] == fit.notes_
+
+
+def test_the_paper_ga_stopping_at_its_fitness_limit_is_not_a_misfit(clean_case):
+    """The GA stops at J <= 100 N^2 (about 3 N rms, four times the plateau means' noise): the law is judged by the
+    best Stribeck curve of the same points, so a clean Stribeck log carries no note with paper-ga either."""
+    folder, clean = clean_case
+    _with_noise(clean, folder, 1.0, seed=11)
+    fit = identify_friction([folder], method="paper-ga", seed=0)
+    assert fit.notes_ == []

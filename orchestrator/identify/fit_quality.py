@@ -2,11 +2,12 @@
 
 Each Stribeck point is the mean force of a constant-velocity plateau; its standard error follows from the
 scatter of the force within that plateau, ``s / sqrt(n)`` (:class:`.segments.Segment` ``force_std``,
-``samples``), at least ``RELATIVE_FLOOR`` of the force. If the friction follows the Stribeck law, the normalised residuals ``r_i / (s_i / sqrt(n_i))``
-are standard normal and their sum of squares follows a chi-square law with ``points - 4`` degrees of freedom
-(four parameters fitted). A sum above its ``1 - MISFIT_PROBABILITY`` quantile means the law does not
-describe the data (a bump the Stribeck curve cannot follow, a mixed-up log), not that the data are noisy:
-the fit then carries a note naming the speeds where it misfits.
+``samples``), at least ``RELATIVE_FLOOR`` of the force. If the friction follows the Stribeck law, the
+normalised residuals ``r_i / (s_i / sqrt(n_i))`` of the best Stribeck curve are standard normal and their
+sum of squares follows a chi-square law with ``points - 4`` degrees of freedom (four parameters fitted).
+A sum above its ``1 - MISFIT_PROBABILITY`` quantile means the law does not describe the data (a bump the
+Stribeck curve cannot follow, a mixed-up log), not that the data are noisy: the fit then carries a note
+naming the speeds where it misfits.
 """
 from __future__ import annotations
 
@@ -35,7 +36,7 @@ def stribeck_misfit(segments: Sequence[Segment], fit: StribeckFit, label: str) -
     segments : sequence of Segment
         The plateaus of one axis and direction that were fitted (force signed, velocity in m/s).
     fit : StribeckFit
-        Their Stribeck fit (magnitudes).
+        Their best Stribeck fit (magnitudes; the default method's, see :func:`.stribeck.fit_stribeck`).
     label : str
         ``"file: axis x positive"``, starts the note.
 

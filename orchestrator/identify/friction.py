@@ -196,7 +196,10 @@ def identify_friction(
             label = f"{data[0].source}: axis {a} {name}"
             params[a][name] = journal.memo("friction.stribeck", (speed, force, method, seed, label),
                                            lambda: fit_stribeck(speed, force, method, seed, label=label))
-            misfit = stribeck_misfit(segs, params[a][name], label)
+            # the law is tested with the best Stribeck curve (the default fit): the paper's GA stops at its fitness
+            # limit (100 N^2), about 3 N rms from Stribeck data, which is its tolerance, not a misfit of the law
+            best = params[a][name] if method == "default" else fit_stribeck(speed, force, "default", label=label)
+            misfit = stribeck_misfit(segs, best, label)
             if misfit is not None:
                 _log.warning("%s", misfit)
                 notes.append(misfit)
