@@ -47,7 +47,7 @@ from fmus_src.cutting import CuttingLoad
 from ..case import Case
 from ..twin import cutting_parameters
 from .common import fitted_machine, provenance, write_outputs
-from .data import CaseData, _first, _places, check_columns, load_inputs
+from .data import CaseData, check_columns, first_row_place, load_inputs, row_places
 from .errors import IdentificationError
 from .ga import paper_objective, run_ga
 from .journal import Journal
@@ -219,9 +219,9 @@ def cutting_samples(d: CaseData, notes: list[str] | None = None) -> tuple[np.nda
                                       "(an empty cell is 'not measured')")
         if partial.any():
             empty = [c for c, h in zip(names, have) if not h[partial].all()]
-            note = (f"{_first(rec, partial)}: {int(partial.sum())} of {len(rec)} row(s) with only part of the "
-                    f"{name} ({' / '.join(empty)} empty: not measured) left out of cutting identification "
-                    f"({_places(rec, partial)})")
+            note = (f"{first_row_place(rec, partial)}: {int(partial.sum())} of {len(rec)} row(s) with only "
+                    f"part of the {name} ({' / '.join(empty)} empty: not measured) left out of cutting identification "
+                    f"({row_places(rec, partial)})")
             if notes is not None:
                 _log.warning("%s", note)
                 notes.append(note)

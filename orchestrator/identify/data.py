@@ -110,8 +110,8 @@ def check_columns(recording: Recording, columns: Sequence[str], purpose: str) ->
     t = recording.t
     if not np.all(np.isfinite(t)):
         bad = ~np.isfinite(t)
-        raise IdentificationError(f"{_first(recording, bad)}: t_s has NaN or infinite values "
-                                  f"({_places(recording, bad)})")
+        raise IdentificationError(f"{first_row_place(recording, bad)}: t_s has NaN or infinite values "
+                                  f"({row_places(recording, bad)})")
     if np.any(np.diff(t) <= 0.0):
         k = int(np.flatnonzero(np.diff(t) <= 0.0)[0]) + 1
         raise IdentificationError(
@@ -121,8 +121,8 @@ def check_columns(recording: Recording, columns: Sequence[str], purpose: str) ->
         bad = ~np.isfinite(np.asarray(recording[c], dtype=float))
         if bad.any():
             raise IdentificationError(
-                f"{_first(recording, bad)}: column {c!r} has {int(bad.sum())} empty or NaN cell(s) "
-                f"({_places(recording, bad)}); {purpose} needs it at every sample"
+                f"{first_row_place(recording, bad)}: column {c!r} has {int(bad.sum())} empty or NaN cell(s) "
+                f"({row_places(recording, bad)}); {purpose} needs it at every sample"
             )
 
 
@@ -168,17 +168,17 @@ def measured_rows(recording: Recording, columns: Sequence[str], purpose: str) ->
             f"{recording.source}: {purpose} needs {list(columns)} measured together in at least 3 rows; "
             f"{int(have.sum())} of the {len(recording)} rows have them all (an empty cell is 'not measured')")
     empty = [c for c in columns if not np.isfinite(np.asarray(recording[c], dtype=float)).all()]
-    note = (f"{_first(recording, ~have)}: {int((~have).sum())} of {len(recording)} row(s) without "
-            f"{' / '.join(empty)} (empty: not measured) left out of {purpose} ({_places(recording, ~have)})")
+    note = (f"{first_row_place(recording, ~have)}: {int((~have).sum())} of {len(recording)} row(s) without "
+            f"{' / '.join(empty)} (empty: not measured) left out of {purpose} ({row_places(recording, ~have)})")
     return recording.take(have), note
 
 
-def _first(recording: Recording, mask: np.ndarray) -> str:
+def first_row_place(recording: Recording, mask: np.ndarray) -> str:
     """``"file:line"`` (or ``"source, row k"``) of the first True entry of ``mask``."""
     return recording.where(int(np.flatnonzero(mask)[0]))
 
 
-def _places(recording: Recording, mask: np.ndarray) -> str:
+def row_places(recording: Recording, mask: np.ndarray) -> str:
     """The first few True entries of ``mask`` as file lines (1-based, blank lines counted) or, in memory, rows."""
     rows = np.flatnonzero(mask)[:5]
     if recording.file_lines is not None:
