@@ -101,6 +101,10 @@ def test_bad_element_names_are_errors_naming_the_array_and_its_shape(matvec3, tm
     with pytest.raises(FMUError, match=r"mapping 'pos' -> 'y\[7\]': the FMU has no variable 'y\[7\]' \('y' is an "
                                        r"array of shape 3 \(elements y\[1\] \.\. y\[3\]\): 'y\[7\]' is outside it\)"):
         FMUComponent(matvec3, "m", mapping={"pos": "y[7]"})
+    dotted = _zip(tmp_path / "dotted.fmu", XML.replace('name="u"', 'name="in.u"'))  # not an identifier
+    with pytest.raises(FMUError, match=r"array 'in\.u': elements \['in\.u\[1\]', 'in\.u\[3\]'\] have no name the "
+                                       r"twin can address, and the array is exchanged whole; map the array"):
+        FMUComponent(dotted, mapping={"p": "in.u[2]"})
     with pytest.raises(FMUError, match=r"start has 2 values; expected 9 \(its shape\) or 1"):
         FMUComponent(_zip(tmp_path / "bad.fmu", XML.replace('start="1 0 0 0 1 0 0 0 1"', 'start="1 0"')))
 
@@ -252,3 +256,37 @@ def test_fmi2_bracket_names_are_plain_scalars(tmp_path):
         assert c.get("y[1]")[0] == 1.0
     finally:
         c.close()
+
+
+def test_bare_fmu3_slaves_exchange_arrays_in_the_compiled_loop(matvec3):
+    """FastFMULoop with fmpy FMU3Slave objects (no FMUComponent): the elements of an array are ports of their
+    own, set and read in one call per array (the fixture refuses any other nValues).
+
+    s (A = I, u = (1, 2, 3) at its start, unconnected) -> y = (1, 2, 3); t.u[1] <- s.y[3], t.u[2..3] keep
+    their start (2, 3): t.y = (3, 2, 3) after the first step (the outputs follow the inputs of the step).
+    """
+    from orchestrator.fmu import fmi3
+    from orchestrator.fmu.component import load_fmu
+    from orchestrator.fmu.fast_loop import FastFMULoop
+
+    loaded = load_fmu(matvec3)
+    token = loaded.model_description.guid
+    slaves, keep = {}, []
+    for name in ("s", "t"):
+        slave, *callbacks = fmi3.instantiate_co_simulation("MatVec3", token, loaded.unzip_dir, name,
+                                                           lambda *a: None)
+        slave.fmi3EnterInitializationMode(slave.component, False, 0.0, 0.0, False, 0.0)
+        slave.fmi3ExitInitializationMode(slave.component)
+        slaves[name] = slave
+        keep.append(callbacks)
+    try:
+        loop = FastFMULoop(slaves, [("s.y[3]", "t.u[1]")], record=["t.y[1]", "t.y[2]", "t.y[3]", "t.sets_u"])
+        result = loop.run(3, 1e-3)
+        np.testing.assert_array_equal(result["t.y[1]"], [1.0, 3.0, 3.0, 3.0])  # row 0: initialised from u = (1, 2, 3)
+        np.testing.assert_array_equal(result["t.y[2]"], 2.0)
+        np.testing.assert_array_equal(result["t.y[3]"], 3.0)
+        np.testing.assert_array_equal(result["t.sets_u"], [0.0, 1.0, 2.0, 3.0])
+    finally:
+        for slave in slaves.values():
+            slave.fmi3Terminate(slave.component)
+            slave.fmi3FreeInstance(slave.component)

@@ -665,9 +665,15 @@ class FMUComponent:
             native = _native(v, md.fmiVersion)
             if native is None:
                 continue  # FMI 3.0 Binary or Clock: not exchanged, shown by check_fmu
-            for ours, element, count, raw_start in self._elements(v, reverse, where):
-                if not (ours.isidentifier() or is_element_name(ours)):
-                    continue  # e.g. "der(x)" or "gain.k": not addressable by the twin, shown by check_fmu
+            elements = self._elements(v, reverse, where)
+            named = [e for e in elements if e[0].isidentifier() or is_element_name(e[0])]
+            # others, e.g. "der(x)" or "gain.k": not addressable by the twin, shown by check_fmu
+            if named and len(named) != len(elements):  # an array is exchanged whole: every element needs a name
+                raise FMUError(
+                    f"{where}: array {v.name!r}: elements {[e[0] for e in elements if e not in named]} have no name "
+                    f"the twin can address, and the array is exchanged whole; map the array (mapping={{'your_name': "
+                    f"{v.name!r}}}) or every element", path=str(self.path), component=self.name)
+            for ours, element, count, raw_start in named:
                 found = self._binding(v, native, ours, element, count, raw_start, definitions, problems, where)
                 if found is not None:
                     bindings.append(found)

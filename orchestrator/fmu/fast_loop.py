@@ -34,7 +34,10 @@ call and operation for operation, so recordings are bit-identical:
   master's Python loop do.
 
 Only Real variables can be connected (of an FMI 3.0 FMU: ``Float64``
-variables). Recorded outputs and stop signals of an FMI 2.0 FMU may also be
+variables, array elements included: an element is a port of its own, a
+(value reference, position) pair resolved once, and each array is set or read
+with its value reference once and ``nValues`` = its element count, as
+:class:`FMUComponent` does). Recorded outputs and stop signals of an FMI 2.0 FMU may also be
 Boolean or Integer (read with ``fmi2GetBoolean`` / ``fmi2GetInteger`` after
 every step of their component). The other outputs of an :class:`FMUComponent`
 (FMI 2.0: Integer, Boolean, String; FMI 3.0: all but ``Float64``) are read
