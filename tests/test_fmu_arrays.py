@@ -7,8 +7,10 @@ parameter with start 4) from the inputs held at the start of each step, and
 counts in ``sets_u`` the ``fmi3SetFloat64`` calls that wrote ``u``. It refuses
 (fmi3Error) every get/set call whose ``nValues`` is not the sum of the sizes of
 the value references it names, so a run that succeeds exchanged each array in
-one call with all its elements. Expected numbers are the matrix products written
-out by hand below.
+one call with all its elements. ``sgn`` (Int32[3], the sign of ``y``) is an array
+of another type, which the compiled loop reads after every step (the values the
+components hold afterwards are compared with the Python loop's). Expected
+numbers are the matrix products written out by hand below.
 """
 from __future__ import annotations
 
@@ -57,7 +59,9 @@ def test_elements_are_scalars_with_structured_names_units_and_start_values(matve
     c = FMUComponent(matvec3, "m")
     try:
         assert c.names("input") == ["u[1]", "u[2]", "u[3]", "w[1]", "w[2]", "w[3]", "w[4]"]  # n = 4 (its start)
-        assert c.names("output") == ["y[1]", "y[2]", "y[3]", "z[1]", "z[2]", "z[3]", "z[4]", "sets_u"]
+        assert c.names("output") == ["y[1]", "y[2]", "y[3]", "z[1]", "z[2]", "z[3]", "z[4]", "sets_u",
+                                     "sgn[1]", "sgn[2]", "sgn[3]"]
+        assert c.variable("sgn[2]").type == "Integer"
         assert c.names("parameter") == [f"A[{i},{j}]" for i in (1, 2, 3) for j in (1, 2, 3)] + ["k"]
         assert {c.variable(n).unit for n in ("u[1]", "u[3]", "y[2]")} == {"mm"}
         assert c.variable("w[4]").unit == "N" and c.variable("A[2,3]").unit is None
@@ -76,6 +80,10 @@ def test_elements_are_scalars_with_structured_names_units_and_start_values(matve
         np.testing.assert_array_equal(c.get("y"), [1.0, 0.5, 8.0])
         np.testing.assert_array_equal(c.get("z"), [1.0, 3.0, 6.0, 10.0])
         assert c.get("sets_u")[0] == 2.0  # setup and the step: one call each, with all three values
+        c.set("u", [-1.0, 0.0, 0.25])
+        c.do_step(1e-3, 1e-3)
+        np.testing.assert_array_equal(c.get("y"), [0.0, 0.5, -8.0])
+        np.testing.assert_array_equal(c.get("sgn"), [0, 1, -1])  # Int32[3], read in one fmi3GetInt32
     finally:
         c.close()
 
