@@ -298,3 +298,17 @@ def test_bare_fmu3_slaves_exchange_arrays_in_the_compiled_loop(matvec3):
         for slave in slaves.values():
             slave.fmi3Terminate(slave.component)
             slave.fmi3FreeInstance(slave.component)
+
+
+def test_cnctwin_check_fmu_sets_and_maps_elements(matvec3, capsys):
+    import argparse
+
+    from orchestrator.cli_fmu import add_parsers
+
+    parser = argparse.ArgumentParser(prog="cnctwin")
+    add_parsers(parser.add_subparsers(dest="command", required=True))
+    args = parser.parse_args(["check-fmu", str(matvec3), "--set", "A[2,2]=3", "--set", "k=2", "--map", "pos=y[2]"])
+    assert args.func(args) == 0
+    out = capsys.readouterr().out
+    assert "[array 3x3: A[1,1] .. A[3,3]]" in out and "[array 4: w[1] .. w[4]]" in out
+    assert "with ['A[2,2]', 'k'] set" in out and "verdict: OK" in out
