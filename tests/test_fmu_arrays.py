@@ -312,3 +312,16 @@ def test_cnctwin_check_fmu_sets_and_maps_elements(matvec3, capsys):
     out = capsys.readouterr().out
     assert "[array 3x3: A[1,1] .. A[3,3]]" in out and "[array 4: w[1] .. w[4]]" in out
     assert "with ['A[2,2]', 'k'] set" in out and "verdict: OK" in out
+
+
+def test_check_fmu_reports_a_tunable_dimension_as_a_failed_smoke_run(matvec3, tmp_path):
+    with zipfile.ZipFile(matvec3) as zf:
+        library = zf.read("binaries/x86_64-linux/MatVec3.so")
+    path = tmp_path / "tunable.fmu"
+    with zipfile.ZipFile(path, "w") as zf:
+        zf.writestr("modelDescription.xml", XML.replace('causality="structuralParameter" variability="fixed"',
+                                                        'causality="structuralParameter" variability="tunable"'))
+        zf.writestr("binaries/x86_64-linux/MatVec3.so", library)
+    report = check_fmu(path)
+    assert {v.name: v.shape for v in report.variables}["w"] == (4,)
+    assert not report.smoke_ok and "tunable structural parameter 'n'" in report.smoke_message

@@ -172,6 +172,12 @@ def _without_alias_artifacts(problems: list[str], aliases: set[str], notes: list
     return kept
 
 
+def _shape(v: object) -> tuple[int, ...]:
+    """An FMI 3.0 array's shape as declared (structural parameters at their start, as fmpy computes it), ``()``
+    for a scalar; what :class:`FMUComponent` refuses (a tunable dimension) the smoke run reports."""
+    return tuple(int(n) for n in getattr(v, "shape", None) or ()) if arrays.is_array(v) else ()
+
+
 def _role_rows(path: Path, role_name: str, mapping: Mapping[str, str]) -> list[RoleRow]:
     role = get_role(role_name)
     loaded = load_fmu(path)
@@ -180,7 +186,7 @@ def _role_rows(path: Path, role_name: str, mapping: Mapping[str, str]) -> list[R
     fmu_vars = {v.name: v for v in md.modelVariables}
     for v in list(md.modelVariables):  # an FMI 3.0 array's elements map like scalars of its type and unit
         if v.causality in ("parameter", "input", "output") and arrays.is_array(v):
-            for element in arrays.element_names(v.name, arrays.shape_of(v, md, str(loaded.path))):
+            for element in arrays.element_names(v.name, _shape(v)):
                 fmu_vars.setdefault(element, v)
     rows = []
     required = {v.name for v in role.required}
@@ -288,8 +294,7 @@ def check_fmu(
         VariableInfo(v.name, v.causality, v.variability, v.type, fmu_unit(v), None if v.start is None else str(v.start),
                      v.description or "", getattr(v, "displayUnit", None) or None,
                      None if getattr(v, "alias", None) is None else v.alias.name,
-                     arrays.shape_of(v, md, str(loaded.path))
-                     if arrays.is_array(v) and v.causality in ("parameter", "input", "output") else ())
+                     _shape(v) if v.causality in ("parameter", "input", "output") else ())
         for v in md.modelVariables
     ]
     notes: list[str] = []
