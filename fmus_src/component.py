@@ -27,6 +27,7 @@ can ship it inside an FMU.
 """
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, ClassVar, Literal, Mapping
 
@@ -41,6 +42,14 @@ Causality = Literal["parameter", "input", "output"]
 VariableType = Literal["Real", "Integer", "Boolean", "String"]
 
 _NUMPY_TYPES: dict[str, type] = {"Real": np.float64, "Integer": np.int64, "Boolean": np.bool_}
+#: An array element's structured name: an identifier and 1-based indices (``u[1]``, ``A[2,3]``).
+_ELEMENT_NAME = re.compile(r"([A-Za-z_][A-Za-z0-9_]*)\[[1-9][0-9]*(?:,[1-9][0-9]*)*\]")
+
+
+def is_element_name(name: str) -> bool:
+    """Whether ``name`` is an array element's structured name (``"u[1]"``, ``"A[2,3]"``; indices from 1)."""
+    found = _ELEMENT_NAME.fullmatch(name)
+    return found is not None and found.group(1).isidentifier()
 
 
 class ComponentError(CncTwinError):
@@ -54,7 +63,9 @@ class Variable:
     Parameters
     ----------
     name : str
-        Python identifier, unique within the component (e.g. ``"x_ref"``).
+        Python identifier, unique within the component (e.g. ``"x_ref"``), or
+        the structured name of an element of an FMU's array variable: an
+        identifier with 1-based indices (``"u[1]"``, ``"A[2,3]"``).
     causality : {"parameter", "input", "output"}
         FMI 2.0 causality.
     unit : str or None
@@ -83,8 +94,9 @@ class Variable:
     unit_definition: "UnitDefinition | None" = None
 
     def __post_init__(self) -> None:
-        if not self.name.isidentifier():
-            raise ComponentError(f"variable name {self.name!r} is not an identifier")
+        if not (self.name.isidentifier() or is_element_name(self.name)):
+            raise ComponentError(f"variable name {self.name!r} is not an identifier (nor an array element "
+                                 "such as 'u[1]' or 'A[2,3]')")
         if self.causality not in ("parameter", "input", "output"):
             raise ComponentError(f"variable {self.name!r}: unknown causality {self.causality!r}")
         if self.type not in ("Real", "Integer", "Boolean", "String"):

@@ -10,6 +10,7 @@ from fmpy.validation import validate_fmu
 
 from fmus_src.units import UnitError, conversion, known
 
+from . import arrays
 from .component import FMUComponent, fmu_unit, load_fmu, our_type, unit_definitions, variable_unit_definition
 from .errors import FMUError
 from .roles import get_role
@@ -29,7 +30,9 @@ class VariableInfo:
 
     ``type`` is the FMU's own type name (FMI 2.0 ``"Real"``, FMI 3.0 ``"Float64"``, ...);
     ``display_unit`` the ``displayUnit`` (an FMI 3.0 ``<Alias>`` may have its own); ``alias_of`` the
-    variable an FMI 3.0 ``<Alias>`` names (same value reference, causality and unit), else None.
+    variable an FMI 3.0 ``<Alias>`` names (same value reference, causality and unit), else None;
+    ``shape`` an FMI 3.0 array's shape (``(3, 3)``; its elements are exposed as ``A[1,1]`` ...), ``()``
+    for a scalar.
     """
 
     name: str
@@ -41,6 +44,7 @@ class VariableInfo:
     description: str
     display_unit: str | None = None
     alias_of: str | None = None
+    shape: tuple[int, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -126,6 +130,8 @@ class FMUCheckReport:
         for v in self.variables:
             if v.causality in ("parameter", "input", "output"):
                 extra = "".join(f"  [{text}]" for text in (
+                    f"array {arrays.shape_text(v.shape)}: {arrays.element_name(v.name, [1] * len(v.shape))} .. "
+                    f"{arrays.element_name(v.name, v.shape)}" if v.shape else "",
                     f"alias of {v.alias_of}" if v.alias_of else "",
                     f"displayed in {v.display_unit}" if v.display_unit and v.display_unit != v.unit else "") if text)
                 lines.append(f"  {v.name:<28} {v.causality:<10} {v.type:<8} {v.unit or '-':<8} {v.start or ''}{extra}"
@@ -166,12 +172,22 @@ def _without_alias_artifacts(problems: list[str], aliases: set[str], notes: list
     return kept
 
 
+def _shape(v: object) -> tuple[int, ...]:
+    """An FMI 3.0 array's shape as declared (structural parameters at their start, as fmpy computes it), ``()``
+    for a scalar; what :class:`FMUComponent` refuses (a tunable dimension) the smoke run reports."""
+    return tuple(int(n) for n in getattr(v, "shape", None) or ()) if arrays.is_array(v) else ()
+
+
 def _role_rows(path: Path, role_name: str, mapping: Mapping[str, str]) -> list[RoleRow]:
     role = get_role(role_name)
     loaded = load_fmu(path)
     md = loaded.model_description
     definitions = unit_definitions(md, str(loaded.path), loaded.inverse_display_units)
     fmu_vars = {v.name: v for v in md.modelVariables}
+    for v in list(md.modelVariables):  # an FMI 3.0 array's elements map like scalars of its type and unit
+        if v.causality in ("parameter", "input", "output") and arrays.is_array(v):
+            for element in arrays.element_names(v.name, _shape(v)):
+                fmu_vars.setdefault(element, v)
     rows = []
     required = {v.name for v in role.required}
     for spec in role.variables():
@@ -277,7 +293,8 @@ def check_fmu(
     variables = [
         VariableInfo(v.name, v.causality, v.variability, v.type, fmu_unit(v), None if v.start is None else str(v.start),
                      v.description or "", getattr(v, "displayUnit", None) or None,
-                     None if getattr(v, "alias", None) is None else v.alias.name)
+                     None if getattr(v, "alias", None) is None else v.alias.name,
+                     _shape(v) if v.causality in ("parameter", "input", "output") else ())
         for v in md.modelVariables
     ]
     notes: list[str] = []
@@ -295,6 +312,13 @@ def check_fmu(
                 notes.append(f"variable {v.name!r}: unit {v.unit!r} is not known to cnctwin (fmus_src.units) nor "
                              "defined in the FMU's <UnitDefinitions>: it can be connected and recorded in its own "
                              "unit only")
+    by_name = {v.name: v for v in md.modelVariables}
+    for v in variables:
+        holders = arrays.dimension_holders(by_name[v.name], md) if v.shape and v.alias_of is None else []
+        if holders:
+            sizes = ", ".join(f"{v.shape[axis]} from {holder.causality} {holder.name!r}" for axis, holder in holders)
+            notes.append(f"array {v.name!r}: dimension(s) {sizes} (its start, checked after instantiation; fixed "
+                         "for the run)")
     cs = md.coSimulation
     if getattr(cs, "needsExecutionTool", False):
         notes.append(f"needsExecutionTool=\"true\": the FMU runs only where its tool ({md.generationTool or '?'}) is "

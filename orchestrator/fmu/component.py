@@ -8,10 +8,13 @@ in place), ``variable``, ``names``, ``setup``, ``do_step``, ``reset``,
 ``values`` into the FMU, calls ``fmi2DoStep`` (``fmi3DoStep``) and pulls the
 outputs back.
 
-FMI 3.0 (:mod:`orchestrator.fmu.fmi3`): scalar variables of every type but
+FMI 3.0 (:mod:`orchestrator.fmu.fmi3`): variables of every type but
 ``Binary`` and ``Clock`` (``Float64``/``Float32`` are Real, ``Int8`` ...
-``UInt64`` Integer); an array variable (``<Dimension>``) among the
-parameters, inputs and outputs is refused. The instance is made with
+``UInt64`` Integer). An array variable (``<Dimension>``) is exposed as its
+elements with FMI's structured names (``u[1]``, ``A[2,3]``; see
+:mod:`orchestrator.fmu.arrays`), each a scalar signal with the array's unit,
+exchanged together in one get/set call on the array's value reference with
+``nValues`` = the element count. The instance is made with
 ``eventModeUsed = false`` and ``earlyReturnAllowed = false``; a step that
 returns ``terminateSimulation`` or ``earlyReturn`` raises :class:`FMUError`.
 
@@ -51,8 +54,9 @@ from fmpy.fmi2 import fmi2CallbackFreeMemoryTYPE, fmi2CoSimulation
 from fmpy.model_description import ModelDescription, ScalarVariable
 
 from . import fmi3
+from . import arrays
 
-from fmus_src.component import Variable
+from fmus_src.component import Variable, is_element_name
 from fmus_src.units import UnitDefinition, UnitError, conversion, disagreement
 
 from .binary_check import shared_library_problem
@@ -302,8 +306,9 @@ def no_variable_error(component: str, path: Path, name: str, exposed: Mapping[st
 
     Shared by :class:`FMUComponent` and
     :class:`~orchestrator.fmu.isolated.IsolatedFMUComponent`: a structured FMU
-    name (``gain.k``, ``der(x)``, ``a[1]``) is reachable through ``mapping``;
-    a local or independent variable is not exchanged.
+    name (``gain.k``, ``der(x)``) is reachable through ``mapping``; a local or
+    independent variable is not exchanged; an index outside an array
+    (``u[4]`` of an array of 3) names the array and its shape.
 
     Parameters
     ----------
@@ -319,8 +324,11 @@ def no_variable_error(component: str, path: Path, name: str, exposed: Mapping[st
         The FMU's model description.
     """
     theirs = {v.name: v for v in md.modelVariables}.get(name)
-    if theirs is not None and theirs.causality in ("parameter", "input", "output"):
-        # an FMU name the twin cannot address (structured names "gain.k", "der(x)", "a[1]")
+    array = arrays.bad_element_reason(name, arrays.arrays_among(exposed))
+    if array is not None:
+        why = array  # "u[4]" of an array of 3, or an array's own name where a scalar is needed
+    elif theirs is not None and theirs.causality in ("parameter", "input", "output"):
+        # an FMU name the twin cannot address (structured names "gain.k", "der(x)")
         why = (f"the FMU's {theirs.causality} {name!r} is not an identifier; give it one through "
                f"mapping={{'your_name': {name!r}}}")
     elif theirs is not None:
@@ -341,8 +349,9 @@ def our_type(type_name: str) -> str:
     return ours[0] if ours is not None else type_name
 
 
-def _start(variable: ScalarVariable, type_: str) -> Any:
-    raw = variable.start
+def _start(variable: ScalarVariable, type_: str, raw: Any = None) -> Any:
+    """Start value of ``variable`` in our type (``raw``: an array element's own start text)."""
+    raw = variable.start if raw is None else raw
     if type_ == "String":
         return raw or ""
     if raw is None or raw == "":
@@ -361,6 +370,13 @@ class _Binding:
     to_fmu: float  # their value = to_fmu × our value + offset (Real only)
     native: _Native  # how it is exchanged (FMI type, functions)
     offset: float = 0.0  # their value at our 0 (an affine unit: degC for our K), Real only
+    element: int = -1  # an FMI 3.0 array's element: its row-major position (0-based); -1 for a scalar
+    count: int = 1  # values behind the value reference (the array's element count; 1 for a scalar)
+
+    @property
+    def key(self) -> tuple[str, int, int]:
+        """(setter, value reference, element): what one value of the FMU is (aliases share it)."""
+        return self.native.setter, int(self.theirs.valueReference), self.element
 
 
 class _Block:
@@ -368,6 +384,9 @@ class _Block:
 
     ``args`` are the arguments of the get/set call after the instance:
     ``(vr, nvr, values)`` (FMI 2.0) or ``(vr, nvr, values, nValues)`` (FMI 3.0).
+    An FMI 3.0 array contributes its value reference once and all its
+    elements, row-major, in a row (``nValues`` > ``nvr``); the bindings must
+    hold every element of each array they touch, in order.
     Reals are converted with ``to_fmu`` and ``offset`` (their value = to_fmu × ours + offset); String
     values are held in ``values`` as str, the others in arrays of shape (1,).
     """
@@ -378,9 +397,11 @@ class _Block:
         self.native = native
         self.values = values
         self.names = [b.ours.name for b in bindings]
-        self.vr = (ctypes.c_uint * n)(*[b.theirs.valueReference for b in bindings])
+        vrs = _value_references(bindings)
+        self.nvr = len(vrs)
+        self.vr = (ctypes.c_uint * self.nvr)(*vrs)
         self.buffer = (native.ctype * n)()
-        self.args = (self.vr, n, self.buffer) + ((n,) if native.counted else ())
+        self.args = (self.vr, self.nvr, self.buffer) + ((n,) if native.counted else ())
         self.fast = native.ctype is ctypes.c_double  # vectorised Real path (the common case)
         self.view = np.ctypeslib.as_array(self.buffer) if self.fast and n else np.empty(0)
         self.arrays = [values[name] for name in self.names] if native.ours != "String" else []
@@ -433,6 +454,31 @@ class _Block:
         else:
             for i, arr in enumerate(self.arrays):
                 arr[0] = self.buffer[i]
+
+
+def _value_references(bindings: list[_Binding]) -> list[int]:
+    """The value references of one get/set call: a scalar's each, an array's once (at its first element).
+
+    Raises
+    ------
+    FMUError
+        An array whose elements are not all there in row-major order (an internal error).
+    """
+    vrs: list[int] = []
+    expected = 0  # the next element of the array being read
+    for b in bindings:
+        if b.element < 0 and expected == 0:
+            vrs.append(int(b.theirs.valueReference))
+            continue
+        if b.element != expected or (expected and int(b.theirs.valueReference) != vrs[-1]):
+            raise FMUError(f"internal error: array {b.theirs.name!r} exchanged without all its elements in order "
+                           f"({b.ours.name!r} at position {expected})")
+        if expected == 0:
+            vrs.append(int(b.theirs.valueReference))
+        expected = 0 if b.element + 1 == b.count else b.element + 1
+    if expected:
+        raise FMUError(f"internal error: array {bindings[-1].theirs.name!r} exchanged without its last elements")
+    return vrs
 
 
 def _blocks(values: dict, bindings: list[_Binding]) -> list[_Block]:
@@ -516,9 +562,10 @@ class FMUComponent:
     ------
     FMUError
         Bad file (see :func:`load_fmu`), missing or incompatible role
-        variables, unknown mapping or parameter names, an array variable
-        (FMI 3.0 ``<Dimension>``) among the parameters, inputs and outputs,
-        instantiation failure.
+        variables, unknown mapping or parameter names (an index outside an
+        FMI 3.0 array names the array and its shape), an array sized by a
+        tunable structural parameter or one whose size the FMU reports
+        differently after instantiation, instantiation failure.
 
     Attributes
     ----------
@@ -556,13 +603,15 @@ class FMUComponent:
         self.mapping = dict(mapping or {})
         self._bindings = self._bind(md)
         self._by_name = {b.ours.name: b for b in self._bindings}
+        #: FMI 3.0 arrays addressable as a whole by their (our) name: name -> (shape, element names)
+        self._whole = arrays.complete_arrays(self._by_name)
         #: alias -> the variable its name set shares one value with (inputs and parameters; see _alias_sets)
         self._alias_of = self._alias_sets()
         #: the inputs among them: one input, written once per step, connected under any of its names
         self._input_alias = {a: h for a, h in self._alias_of.items() if self._by_name[a].ours.causality == "input"}
         self.values: dict[str, np.ndarray | str] = {}
         self._load_start_values()
-        self._init_parameters: dict[str, object] = dict(parameters or {})
+        self._init_parameters: dict[str, object] = self._expand(dict(parameters or {}))
         #: names given a value by the caller (constructor parameters, set()); see _settable_bindings
         self._explicit: set[str] = set()
         for key in self._init_parameters:
@@ -586,14 +635,21 @@ class FMUComponent:
     def _bind(self, md: ModelDescription) -> list[_Binding]:
         fmu_vars = {v.name: v for v in md.modelVariables}
         where = f"{self.path}"
+        #: FMI 3.0 arrays among the exchanged variables: their name -> shape (see orchestrator.fmu.arrays)
+        self._shapes: dict[str, tuple[int, ...]] = {
+            v.name: arrays.shape_of(v, md, where) for v in md.modelVariables
+            if v.causality in ("parameter", "input", "output") and arrays.is_array(v)}
+        element_vars = {name for v, shape in self._shapes.items() for name in arrays.element_names(v, shape)}
         reverse: dict[str, str] = {}
         for ours, theirs in self.mapping.items():
-            if theirs not in fmu_vars:
+            if theirs not in fmu_vars and theirs not in element_vars:
+                reason = arrays.bad_element_reason(theirs, self._shapes)
                 raise FMUError(
-                    f"{where}: mapping {ours!r} -> {theirs!r}: the FMU has no variable {theirs!r}; "
-                    f"it has {sorted(fmu_vars)}", path=str(self.path), component=self.name,
+                    f"{where}: mapping {ours!r} -> {theirs!r}: the FMU has no variable {theirs!r}"
+                    + (f" ({reason})" if reason else "") + f"; it has {sorted(fmu_vars)}",
+                    path=str(self.path), component=self.name,
                 )
-            if not ours.isidentifier():
+            if not (ours.isidentifier() or is_element_name(ours)):
                 raise FMUError(f"{where}: mapping target name {ours!r} is not an identifier", path=str(self.path))
             if theirs in reverse:
                 raise FMUError(f"{where}: mapping {reverse[theirs]!r} and {ours!r} both -> {theirs!r}; map each FMU "
@@ -606,53 +662,21 @@ class FMUComponent:
         for v in md.modelVariables:
             if v.causality not in ("parameter", "input", "output"):
                 continue
-            if getattr(v, "dimensions", None):
-                raise FMUError(
-                    f"{where}: variable {v.name!r} ({v.causality}) is an array (<Dimension>); only scalar "
-                    "variables are supported", path=str(self.path), component=self.name,
-                )
             native = _native(v, md.fmiVersion)
             if native is None:
                 continue  # FMI 3.0 Binary or Clock: not exchanged, shown by check_fmu
-            type_ = native.ours
-            ours = reverse.get(v.name, v.name)
-            if not ours.isidentifier():
-                continue  # e.g. "der(x)" or "a[1]": not addressable by the twin, shown by check_fmu
-            their_unit = fmu_unit(v) if type_ == "Real" else None
-            their_definition = variable_unit_definition(v, definitions, self._fmu.relative) if type_ == "Real" else None
-            spec = self.role.variable(ours) if self.role else None
-            our_unit: str | None = their_unit if type_ == "Real" else "1"
-            our_definition = their_definition
-            factor, offset = 1.0, 0.0
-            if spec is not None:
-                if spec.causality != v.causality:
-                    problems.append(f"{ours!r} (FMU {v.name!r}) is a {v.causality}, the role needs a {spec.causality}")
-                    continue
-                if spec.type != type_:
-                    problems.append(f"{ours!r} (FMU {v.name!r}) is {type_}, the role needs {spec.type}")
-                    continue
-                our_unit, our_definition = spec.unit, None
-                if their_unit is None and type_ == "Real":
-                    log.info("%s: %r (FMU %r) declares no unit; taken as the role's %s", where, ours, v.name,
-                             spec.unit)
-                if their_unit is not None and type_ == "Real":
-                    try:
-                        factor, offset = conversion(our_unit, their_unit, None, their_definition)
-                    except UnitError as exc:
-                        problems.append(f"{ours!r} (FMU {v.name!r} [{their_unit}]): {exc}")
-                        continue
-            try:
-                start = _start(v, type_)
-            except ValueError:
+            elements = self._elements(v, reverse, where)
+            named = [e for e in elements if e[0].isidentifier() or is_element_name(e[0])]
+            # others, e.g. "der(x)" or "gain.k": not addressable by the twin, shown by check_fmu
+            if named and len(named) != len(elements):  # an array is exchanged whole: every element needs a name
                 raise FMUError(
-                    f"{where}: modelDescription.xml: variable {v.name!r}: start={v.start!r} is not a {v.type} "
-                    f"value; expected a number", path=str(self.path), component=self.name,
-                ) from None
-            if type_ == "Real" and (factor != 1.0 or offset != 0.0):
-                start = (start - offset) / factor  # their start in our unit
-            declared = Variable(ours, v.causality, our_unit, start, v.description or "", type_,  # type: ignore[arg-type]
-                                our_definition)
-            bindings.append(_Binding(declared, v, factor, native, offset))
+                    f"{where}: array {v.name!r}: elements {[e[0] for e in elements if e not in named]} have no name "
+                    f"the twin can address, and the array is exchanged whole; map the array (mapping={{'your_name': "
+                    f"{v.name!r}}}) or every element", path=str(self.path), component=self.name)
+            for ours, element, count, raw_start in named:
+                found = self._binding(v, native, ours, element, count, raw_start, definitions, problems, where)
+                if found is not None:
+                    bindings.append(found)
         if self.role is not None:
             present = {b.ours.name for b in bindings}
             missing = [r.name for r in self.role.required if r.name not in present]
@@ -679,6 +703,64 @@ class FMUComponent:
                 )
         return bindings
 
+    def _elements(self, v: ScalarVariable, reverse: Mapping[str, str],
+                  where: str) -> list[tuple[str, int, int, str | None]]:
+        """(our name, element, element count, start text) of each value of ``v``: one for a scalar, one per
+        element (row-major) for an FMI 3.0 array, named ``base[i,j]`` after the array's own or mapped name
+        unless the element is mapped itself."""
+        if v.name not in self._shapes:
+            return [(reverse.get(v.name, v.name), -1, 1, None)]
+        shape = self._shapes[v.name]
+        theirs = arrays.element_names(v.name, shape)
+        ours = arrays.element_names(reverse.get(v.name, v.name), shape)
+        starts = arrays.start_values(v, len(theirs), where)
+        return [(reverse.get(t, o), k, len(theirs), start)
+                for k, (t, o, start) in enumerate(zip(theirs, ours, starts))]
+
+    def _binding(self, v: ScalarVariable, native: _Native, ours: str, element: int, count: int,
+                 raw_start: str | None, definitions: Mapping[str, UnitDefinition], problems: list[str],
+                 where: str) -> _Binding | None:
+        """The binding of one value of ``v`` under our name ``ours`` (None, and a problem noted, when it does
+        not fit the role)."""
+        type_ = native.ours
+        their_name = v.name if element < 0 else arrays.element_name(
+            v.name, [int(i) + 1 for i in np.unravel_index(element, self._shapes[v.name])])
+        their_unit = fmu_unit(v) if type_ == "Real" else None
+        their_definition = variable_unit_definition(v, definitions, self._fmu.relative) if type_ == "Real" else None
+        spec = self.role.variable(ours) if self.role else None
+        our_unit: str | None = their_unit if type_ == "Real" else "1"
+        our_definition = their_definition
+        factor, offset = 1.0, 0.0
+        if spec is not None:
+            if spec.causality != v.causality:
+                problems.append(f"{ours!r} (FMU {their_name!r}) is a {v.causality}, the role needs a {spec.causality}")
+                return None
+            if spec.type != type_:
+                problems.append(f"{ours!r} (FMU {their_name!r}) is {type_}, the role needs {spec.type}")
+                return None
+            our_unit, our_definition = spec.unit, None
+            if their_unit is None and type_ == "Real":
+                log.info("%s: %r (FMU %r) declares no unit; taken as the role's %s", where, ours, their_name,
+                         spec.unit)
+            if their_unit is not None and type_ == "Real":
+                try:
+                    factor, offset = conversion(our_unit, their_unit, None, their_definition)
+                except UnitError as exc:
+                    problems.append(f"{ours!r} (FMU {their_name!r} [{their_unit}]): {exc}")
+                    return None
+        try:
+            start = _start(v, type_, raw_start)
+        except ValueError:
+            raise FMUError(
+                f"{where}: modelDescription.xml: variable {their_name!r}: start={raw_start or v.start!r} is not a "
+                f"{v.type} value; expected a number", path=str(self.path), component=self.name,
+            ) from None
+        if type_ == "Real" and (factor != 1.0 or offset != 0.0):
+            start = (start - offset) / factor  # their start in our unit
+        declared = Variable(ours, v.causality, our_unit, start, v.description or "", type_,  # type: ignore[arg-type]
+                            our_definition)
+        return _Binding(declared, v, factor, native, offset, element, count)
+
     def _alias_sets(self) -> dict[str, str]:
         """Inputs and parameters that alias another (same causality, value reference and FMI type) -> that one.
 
@@ -696,10 +778,10 @@ class FMUComponent:
         FMUError
             Two names of one input converted differently (one mapped to a role unit).
         """
-        sets: dict[tuple[str, str, int], list[_Binding]] = {}
+        sets: dict[tuple[str, str, int, int], list[_Binding]] = {}
         for b in self._bindings:
             if b.ours.causality in ("input", "parameter") and b.theirs.variability != "constant":
-                sets.setdefault((b.ours.causality, b.native.setter, int(b.theirs.valueReference)), []).append(b)
+                sets.setdefault((b.ours.causality, *b.key), []).append(b)
         out: dict[str, str] = {}
         for group in sets.values():
             head = next((b for b in group if b.theirs.start is not None), group[0])
@@ -812,8 +894,33 @@ class FMUComponent:
                            path=str(self.path), component=self.name)
         self.values[var.name][...] = arr.reshape(1)  # type: ignore[index]
 
+    def _expand(self, values: Mapping[str, object]) -> dict[str, object]:
+        """``values`` with each whole array (``"A": [[...], ...]``) replaced by its elements (``"A[1,1]"``, ...).
+
+        Raises
+        ------
+        FMUError
+            A whole-array value of another shape.
+        """
+        out: dict[str, object] = {}
+        for name, value in values.items():
+            if name in self._whole and name not in self._by_name:
+                shape, elements = self._whole[name]
+                out.update(arrays.expand(name, value, elements, shape, f"{self.name} ({self.path.name})"))
+            else:
+                out[name] = value
+        return out
+
     def set(self, name: str, value: object) -> None:
-        """Set a parameter (before :meth:`setup`) or an input (any time), in our units."""
+        """Set a parameter (before :meth:`setup`) or an input (any time), in our units.
+
+        An FMI 3.0 array is set element by element (``"A[2,3]"``) or whole by
+        its name (``"A"``, a nested list or an array of its shape, or flat row-major).
+        """
+        if name in self._whole and name not in self._by_name:
+            for element, each in self._expand({name: value}).items():
+                self.set(element, each)
+            return
         var = self.variable(name)
         if var.causality == "output":
             raise FMUError(f"{self.name}.{name} is an output and cannot be set", path=str(self.path), component=self.name)
@@ -824,7 +931,11 @@ class FMUComponent:
         self._explicit.add(var.name)
 
     def get(self, name: str) -> np.ndarray | str:
-        """Current value of a variable (copy of shape ``(1,)``, or a str)."""
+        """Current value of a variable (copy of shape ``(1,)``, or a str); of a whole FMI 3.0 array by its name,
+        an array of its shape."""
+        if name in self._whole and name not in self._by_name:
+            shape, elements = self._whole[name]
+            return np.array([self.values[e][0] for e in elements]).reshape(shape)  # type: ignore[index]
         value = self.values[self.variable(name).name]
         return value if isinstance(value, str) else value.copy()
 
@@ -917,6 +1028,37 @@ class FMUComponent:
         frees = not tool.startswith(NO_FREE_TOOLS)
         self._finalizer = weakref.finalize(self, _free_instance, self._slave, self._alive, frees,
                                            f"{self._prefix}FreeInstance")
+        self._check_dimensions()
+
+    def _check_dimensions(self) -> None:
+        """Read the structural parameters that size the exchanged arrays and compare with the shapes in use.
+
+        Raises
+        ------
+        FMUError
+            The FMU reports another size than its parameter's ``start`` (the
+            instance is freed): the element names and buffers were made for that.
+        """
+        md = self.model_description
+        variables = {v.name: v for v in md.modelVariables}
+        for name, shape in self._shapes.items():
+            holders = arrays.dimension_holders(variables[name], md)
+            actual = []
+            for _, holder in holders:
+                native = _native(holder, md.fmiVersion)
+                if native is None or native.ours != "Integer":
+                    raise FMUError(f"{self.path}: array {name!r}: its dimension {holder.name!r} is a {holder.type}; "
+                                   "expected an integer structural parameter", path=str(self.path),
+                                   component=self.name)
+                buffer = (native.ctype * 1)()
+                self._fmi(native.getter, (ctypes.c_uint * 1)(int(holder.valueReference)), 1, buffer,
+                          *((1,) if native.counted else ()))
+                actual.append(int(buffer[0]))
+            problem = arrays.dimension_problem(variables[name], shape, holders, actual)
+            if problem is not None:
+                self._close()
+                raise FMUError(f"{self.name}: {problem} (FMU {self.path})", path=str(self.path),
+                               component=self.name)
 
     def _claim_once_per_process(self) -> None:
         """Refuse a second live instance of an FMU with ``canBeInstantiatedOnlyOncePerProcess="true"``.
@@ -1038,10 +1180,10 @@ class FMUComponent:
         FMUError
             Two aliases of one set given different values.
         """
-        groups: dict[tuple[str, int], list[_Binding]] = {}
+        groups: dict[tuple[str, int, int], list[_Binding]] = {}
         for b in self._bindings:
             if b.ours.causality in causalities and b.theirs.variability != "constant":
-                groups.setdefault((b.native.setter, int(b.theirs.valueReference)), []).append(b)
+                groups.setdefault(b.key, []).append(b)
         write: list[_Binding] = []
         keep: list[_Binding] = []
         for group in groups.values():
@@ -1060,8 +1202,31 @@ class FMUComponent:
         return write, keep
 
     def _set_all(self, causalities: tuple[str, ...]) -> list[_Binding]:
-        """Write parameters and inputs (see :meth:`_settable_bindings`); returns the bindings left unwritten."""
+        """Write parameters and inputs (see :meth:`_settable_bindings`); returns the bindings left unwritten.
+
+        An FMI 3.0 array is written whole (one call, every element): elements
+        that would otherwise be left to the FMU get its current values first.
+        """
         write, keep = self._settable_bindings(causalities)
+        chosen = {b.key for b in write}
+        touched = {b.key[:2] for b in write if b.element >= 0}
+        fill = [b for b in keep if b.element >= 0 and b.key[:2] in touched and b.key not in chosen]
+        if fill:
+            unique = list({b.key: b for b in fill}.values())
+            whole = [b for b in self._bindings if b.key[:2] in {b.key[:2] for b in unique}
+                     and b.ours.name not in self._alias_of]
+            scratch = {b.ours.name: np.zeros(1, dtype=_DTYPES.get(b.ours.type, object)) for b in whole}
+            for block in _blocks(scratch, whole):  # the FMU's current values of those arrays
+                self._fmi(block.native.getter, *block.args)
+                block.unpack()
+            for b in unique:
+                if b.ours.type != "String":
+                    self.values[b.ours.name][...] = scratch[self.canonical(b.ours.name)]
+            write += unique
+            keep = [b for b in keep if b.key not in {u.key for u in unique}]
+        position = {id(b): i for i, b in enumerate(self._bindings)}
+        write.sort(key=lambda b: position[id(b)])  # an array's elements in a row, row-major
+        keep.sort(key=lambda b: position[id(b)])
         for block in _blocks(self.values, write):
             block.pack()
             self._fmi(block.native.setter, *block.args)

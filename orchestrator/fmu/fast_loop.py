@@ -34,7 +34,10 @@ call and operation for operation, so recordings are bit-identical:
   master's Python loop do.
 
 Only Real variables can be connected (of an FMI 3.0 FMU: ``Float64``
-variables). Recorded outputs and stop signals of an FMI 2.0 FMU may also be
+variables, array elements included: an element is a port of its own, a
+(value reference, position) pair resolved once, and each array is set or read
+with its value reference once and ``nValues`` = its element count, as
+:class:`FMUComponent` does). Recorded outputs and stop signals of an FMI 2.0 FMU may also be
 Boolean or Integer (read with ``fmi2GetBoolean`` / ``fmi2GetInteger`` after
 every step of their component). The other outputs of an :class:`FMUComponent`
 (FMI 2.0: Integer, Boolean, String; FMI 3.0: all but ``Float64``) are read
@@ -75,7 +78,7 @@ from fmpy import read_model_description
 from fmpy.fmi2 import FMU2Slave
 from fmpy.fmi3 import FMU3Slave
 
-from . import fmi3
+from . import arrays, fmi3
 from .component import FMUComponent, _Block
 from .errors import FMUError, status_name
 
@@ -178,6 +181,10 @@ typedef struct {
     void **other_cap;             /* String block i: size_t[other_n[i]], bytes allocated for each copy */
     const double *in_shift;       /* FMU value at our 0 of input i (a role mapping into an affine unit), or 0 */
     const double *out_shift;      /* the same for output i: our value = (raw - out_shift) * out_from */
+    /* the value references of each call: an FMI 3.0 array's once for all its elements (nValues > nvr) */
+    const int *in_vr_start;       /* value references of component c's inputs: in_vr[in_vr_start[c] ..] */
+    const int *out_vr_start;      /* the same for its outputs in out_vr */
+    const int *other_nvr;         /* value references of other block i (other_n[i]: its values) */
 } Loop;
 
 static int copy_texts(char **text, size_t *cap, const char *const *src, size_t n) {
@@ -199,8 +206,10 @@ void cnct_free_text(char **text, size_t *cap, size_t n) {
     for (size_t k = 0; k < n; ++k) { free(text[k]); text[k] = NULL; cap[k] = 0; }
 }
 
-static fmi2Status set_real(Loop *L, int c, const fmi2ValueReference *vr, size_t n) {
-    if (L->fmi3[c]) return ((SetFloat64F)L->set_real[c])(L->comp[c], vr, n, L->buffer, n);
+static fmi2Status set_real(Loop *L, int c, size_t n) {
+    const fmi2ValueReference *vr = L->in_vr + L->in_vr_start[c];
+    const size_t nvr = (size_t)(L->in_vr_start[c + 1] - L->in_vr_start[c]);
+    if (L->fmi3[c]) return ((SetFloat64F)L->set_real[c])(L->comp[c], vr, nvr, L->buffer, n);
     return ((SetRealF)L->set_real[c])(L->comp[c], vr, n, L->buffer);
 }
 
@@ -208,8 +217,10 @@ static int get_outputs(Loop *L, int c) {
     int a = L->out_start[c], b = L->out_start[c + 1];
     if (b == a) return 0;
     const size_t n = (size_t)(b - a);
-    fmi2Status s = L->fmi3[c] ? ((GetFloat64F)L->get_real[c])(L->comp[c], L->out_vr + a, n, L->buffer, n)
-                              : ((GetRealF)L->get_real[c])(L->comp[c], L->out_vr + a, n, L->buffer);
+    const fmi2ValueReference *vr = L->out_vr + L->out_vr_start[c];
+    const size_t nvr = (size_t)(L->out_vr_start[c + 1] - L->out_vr_start[c]);
+    fmi2Status s = L->fmi3[c] ? ((GetFloat64F)L->get_real[c])(L->comp[c], vr, nvr, L->buffer, n)
+                              : ((GetRealF)L->get_real[c])(L->comp[c], vr, n, L->buffer);
     if (s > 1) { L->err[1] = 2; L->err[3] = s; return 1; }
     for (int i = a; i < b; ++i) {
         const double raw = L->buffer[i - a];
@@ -223,7 +234,8 @@ static int get_discrete(Loop *L, int c) {
         const size_t n = (size_t)L->other_n[i];
         const fmi2ValueReference *vr = (const fmi2ValueReference *)L->other_vr[i];
         const int kind = L->other_kind[i];
-        fmi2Status s = (kind & 1) ? ((Get3F)L->other_get[i])(L->comp[c], vr, n, L->other_buf[i], n)
+        fmi2Status s = (kind & 1) ? ((Get3F)L->other_get[i])(L->comp[c], vr, (size_t)L->other_nvr[i],
+                                                             L->other_buf[i], n)
                                   : ((Get2F)L->other_get[i])(L->comp[c], vr, n, L->other_buf[i]);
         if (s > 1) { L->err[1] = 3; L->err[3] = s; L->err_block = i; return 1; }
         if ((kind & 2) && copy_texts((char **)L->other_text[i], (size_t *)L->other_cap[i],
@@ -279,7 +291,7 @@ int cnct_run(Loop *L, long k0, long n_steps, double t0, double h) {
                         L->buffer[i - a] = v * L->in_to[i];
                         if (L->in_shift[i] != 0.0) L->buffer[i - a] += L->in_shift[i];
                     }
-                    s = set_real(L, c, L->in_vr + a, (size_t)(b - a));
+                    s = set_real(L, c, (size_t)(b - a));
                     if (s > 1) {
                         L->err[0] = c; L->err[1] = 0; L->err[2] = j; L->err[3] = s; L->err_step = k;
                         return 1;
@@ -388,6 +400,9 @@ class _Loop(ctypes.Structure):
         ("other_cap", ctypes.POINTER(ctypes.c_void_p)),
         ("in_shift", ctypes.POINTER(ctypes.c_double)),
         ("out_shift", ctypes.POINTER(ctypes.c_double)),
+        ("in_vr_start", ctypes.POINTER(ctypes.c_int)),
+        ("out_vr_start", ctypes.POINTER(ctypes.c_int)),
+        ("other_nvr", ctypes.POINTER(ctypes.c_int)),
     ]
 
 
@@ -442,6 +457,16 @@ class _Port:
     vr: int
     to_fmu: float
     offset: float = 0.0  # FMU value = to_fmu × ours + offset
+    element: int = -1  # an FMI 3.0 array's element: its row-major position; -1 for a scalar
+    count: int = 1  # values behind ``vr`` (the array's element count)
+
+
+def _value_references(ports: Sequence[_Port]) -> list[int]:
+    """The value references of one get/set call over ``ports`` (an array's once, at its first element).
+
+    The ports hold every element of each array, in row-major order (as :class:`FMUComponent` binds them).
+    """
+    return [p.vr for p in ports if p.element <= 0]
 
 
 class _Instance:
@@ -479,7 +504,7 @@ class _Instance:
                 if b.native.getter != real_getter:
                     self.discrete.add(b.ours.name)
                     continue
-                port = _Port(int(b.theirs.valueReference), float(b.to_fmu), float(b.offset))
+                port = _Port(int(b.theirs.valueReference), float(b.to_fmu), float(b.offset), b.element, b.count)
                 if b.ours.causality == "input":
                     self.inputs[b.ours.name] = port
                 elif b.ours.causality == "output":
@@ -506,17 +531,23 @@ class _Instance:
             for v in md.modelVariables:
                 if v.causality not in ("input", "output"):
                     continue
+                shape = tuple(getattr(v, "shape", None) or ()) if arrays.is_array(v) else ()
+                names = arrays.element_names(v.name, shape) if shape else [v.name]
                 if v.causality == "input" and getattr(v, "alias", None) is not None:
-                    self.input_alias[v.name] = v.alias.name  # an FMI 3.0 <Alias>: the input it names
+                    for name, head in zip(names, arrays.element_names(v.alias.name, shape) if shape
+                                          else [v.alias.name]):
+                        self.input_alias[name] = head  # an FMI 3.0 <Alias>: the input it names
                     continue
                 if v.type != real:
-                    self.discrete.add(v.name)
+                    self.discrete.update(names)
                     if (not self.v3 and v.causality == "output"
                             and v.type in ("Boolean", "Integer", "Enumeration")):
                         kind = "Boolean" if v.type == "Boolean" else "Integer"
                         self.discrete_outputs[v.name] = (int(v.valueReference), kind)
                     continue
-                (self.inputs if v.causality == "input" else self.outputs)[v.name] = _Port(int(v.valueReference), 1.0)
+                ports = self.inputs if v.causality == "input" else self.outputs
+                for k, name in enumerate(names):
+                    ports[name] = _Port(int(v.valueReference), 1.0, 0.0, k if shape else -1, len(names))
         else:
             raise FMUError(f"FastFMULoop: {name!r} is a {type(obj).__name__}; expected an fmpy FMU2Slave or "
                            f"FMU3Slave, or an FMUComponent")
@@ -543,8 +574,9 @@ class _Instance:
         addresses = [ctypes.cast(getattr(dll, f), ctypes.c_void_p).value for f in names]
         return (comp, *addresses, *([0, 0] if self.v3 else []))
 
-    def other_pointers(self) -> list[tuple[int, int, int, int, int, int, int]]:
-        """(getter, value references, count, buffer, kind, copies, capacities) of :attr:`other_blocks`.
+    def other_pointers(self) -> list[tuple[int, int, int, int, int, int, int, int]]:
+        """(getter, value references, count, buffer, kind, copies, capacities, value reference count) of
+        :attr:`other_blocks` (the count is of values: an FMI 3.0 array's elements are one value reference).
 
         ``kind``: bit 0 an FMI 3.0 getter, bit 1 a String block (copies and capacities: its :attr:`texts`,
         else 0).
@@ -556,7 +588,7 @@ class _Instance:
                         ctypes.addressof(b.vr), b.n, ctypes.addressof(b.buffer),
                         int(self.v3) | (2 if text is not None else 0),
                         ctypes.addressof(text) if text is not None else 0,
-                        ctypes.addressof(cap) if cap is not None else 0))
+                        ctypes.addressof(cap) if cap is not None else 0, b.nvr))
         return out
 
     def held_strings(self, block: _Block) -> None:
@@ -573,15 +605,16 @@ class _Instance:
         return [ctypes.addressof(x) for x in (f.event_handling_needed, f.terminate_simulation, f.early_return,
                                               f.last_successful_time)]
 
-    def get_real(self, vr: int) -> float:
-        """One Real (FMI 3.0: Float64) value straight from the FMU, in its units (fmpy checks the status)."""
-        raw = (ctypes.c_double * 1)()
-        vrs = (ctypes.c_uint * 1)(vr)
+    def get_real(self, port: _Port) -> float:
+        """One Real (FMI 3.0: Float64) value straight from the FMU, in its units (fmpy checks the status);
+        of an array element, the whole array is read and the element taken."""
+        raw = (ctypes.c_double * port.count)()
+        vrs = (ctypes.c_uint * 1)(port.vr)
         if self.v3:
-            self.slave.fmi3GetFloat64(self.slave.component, vrs, 1, raw, 1)
+            self.slave.fmi3GetFloat64(self.slave.component, vrs, 1, raw, port.count)
         else:
             self.slave.fmi2GetReal(self.slave.component, vrs, 1, raw)
-        return raw[0]
+        return raw[max(port.element, 0)]
 
     def port(self, variable: str, causality: str) -> _Port:
         ports = self.inputs if causality == "input" else self.outputs
@@ -796,7 +829,7 @@ class FastFMULoop:
                 src = self._unit(source)
                 value = (src.owner.values[_split(source)[1]] if src.owner is not None else None)
                 if value is None:
-                    value = np.array([src.get_real(src.outputs[_split(source)[1]].vr)])
+                    value = np.array([src.get_real(src.outputs[_split(source)[1]])])
                 dst = owner.values[_split(target)[1]]
                 if factor == 1.0:
                     np.copyto(dst, value, casting="unsafe")
@@ -819,15 +852,17 @@ class FastFMULoop:
             return a
 
         slot_of: dict[str, int] = {}
-        out_start, out_vr, out_from, out_shift = [0], [], [], []
+        out_start, out_vr, out_from, out_shift, out_vr_start = [0], [], [], [], [0]
+        n_real = 0
         for u in self.units:
             for name, port in u.outputs.items():
-                slot_of[f"{u.name}.{name}"] = len(out_vr)
-                out_vr.append(port.vr)
+                slot_of[f"{u.name}.{name}"] = n_real
+                n_real += 1
                 out_from.append(1.0 / port.to_fmu)
                 out_shift.append(port.offset)
-            out_start.append(len(out_vr))
-        n_real = len(out_vr)
+            out_start.append(n_real)
+            out_vr += _value_references(list(u.outputs.values()))
+            out_vr_start.append(len(out_vr))
         bool_start, bool_vr, int_start, int_vr = [0], [], [0], []
         bool_names, int_names = [], []
         for i, u in enumerate(self.units):
@@ -841,11 +876,13 @@ class FastFMULoop:
             slot_of[ref] = n_real + i
         source_of = {target: (source, factor, offset) for source, target, factor, offset in self.connections}
         in_start, in_vr, in_src, in_factor, in_offset, in_to, in_const = [0], [], [], [], [], [], []
-        in_shift = []
+        in_shift, in_vr_start, n_in = [], [0], 0
         for u in self.units:
+            in_vr += _value_references(list(u.inputs.values()))
+            in_vr_start.append(len(in_vr))
             for name, port in u.inputs.items():
                 ref = f"{u.name}.{name}"
-                in_vr.append(port.vr)
+                n_in += 1
                 in_to.append(port.to_fmu)
                 in_shift.append(port.offset)
                 if ref in source_of:
@@ -859,7 +896,7 @@ class FastFMULoop:
                     in_factor.append(1.0)
                     in_offset.append(0.0)
                     in_const.append(self._held_input(u, name, port))
-            in_start.append(len(in_vr))
+            in_start.append(n_in)
         n_fine = math.lcm(*self.rates.values())
         tick_start, tick_comp, tick_h = [0], [], []
         for j in range(n_fine):
@@ -900,7 +937,7 @@ class FastFMULoop:
             out_start=arr(out_start, ctypes.c_int), out_vr=arr(out_vr, ctypes.c_uint),
             out_from=arr(out_from, ctypes.c_double),
             slots=self._slots.ctypes.data_as(dptr),
-            snapshot=arr([0.0] * len(out_vr), ctypes.c_double),
+            snapshot=arr([0.0] * n_real, ctypes.c_double),
             buffer=arr([0.0] * width, ctypes.c_double),
             n_fine=n_fine,
             tick_start=arr(tick_start, ctypes.c_int), tick_comp=arr(tick_comp, ctypes.c_int),
@@ -937,6 +974,9 @@ class FastFMULoop:
             other_cap=arr([o[6] for o in others], ctypes.c_void_p),
             in_shift=arr(in_shift, ctypes.c_double),
             out_shift=arr(out_shift, ctypes.c_double),
+            in_vr_start=arr(in_vr_start, ctypes.c_int),
+            out_vr_start=arr(out_vr_start, ctypes.c_int),
+            other_nvr=arr([o[7] for o in others], ctypes.c_int),
         )
         self._slot_of = slot_of
         return loop, keep
@@ -946,7 +986,7 @@ class FastFMULoop:
         """Value (our units) an unconnected input keeps over the run."""
         if u.owner is not None:
             return float(u.owner.values[name][0])
-        return (u.get_real(port.vr) - port.offset) / port.to_fmu
+        return (u.get_real(port) - port.offset) / port.to_fmu
 
     # ------------------------------------------------------------------ run
     def run(self, n_steps: int, h: float, t0: float = 0.0) -> FastLoopResult:

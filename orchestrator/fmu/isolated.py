@@ -39,6 +39,7 @@ import numpy as np
 from fmus_src.component import Variable
 from fmus_src.units import UnitDefinition
 
+from . import arrays
 from .component import _DTYPES, FMUComponent, load_fmu, no_variable_error, unit_definitions
 from .errors import FMUError
 
@@ -248,6 +249,8 @@ class IsolatedFMUComponent:
         variables: tuple[Variable, ...] = reply[1]
         self._variables = variables
         self._by_name = {v.name: v for v in variables}
+        #: FMI 3.0 arrays addressable as a whole (as the worker's FMUComponent): name -> (shape, element names)
+        self._whole = arrays.complete_arrays(self._by_name)
         for var in variables:
             start = reply[2][var.name]
             if var.type == "String":
@@ -348,7 +351,14 @@ class IsolatedFMUComponent:
 
     # ------------------------------------------------------------------ values
     def set(self, name: str, value: object) -> None:
-        """Set a parameter (before :meth:`setup`) or an input (any time), in our units."""
+        """Set a parameter (before :meth:`setup`) or an input (any time), in our units; an FMI 3.0 array by
+        element (``"A[2,3]"``) or whole by its name (``FMUComponent.set``)."""
+        if name in self._whole and name not in self._by_name:
+            shape, elements = self._whole[name]
+            for element, each in arrays.expand(name, value, elements, shape,
+                                               f"{self.name} ({self.path.name})").items():
+                self.set(element, each)
+            return
         var = self.variable(name)
         if var.causality == "output":
             raise FMUError(f"{self.name}.{name} is an output and cannot be set", path=str(self.path),
@@ -371,7 +381,10 @@ class IsolatedFMUComponent:
         self.values[name][...] = arr.reshape(1)  # type: ignore[index]
 
     def get(self, name: str) -> np.ndarray | str:
-        """Current value (copy of shape ``(1,)``, or a str)."""
+        """Current value (copy of shape ``(1,)``, or a str); of a whole FMI 3.0 array, an array of its shape."""
+        if name in self._whole and name not in self._by_name:
+            shape, elements = self._whole[name]
+            return np.array([self.values[e][0] for e in elements]).reshape(shape)  # type: ignore[index]
         value = self.values[self.variable(name).name]
         return value if isinstance(value, str) else value.copy()
 
