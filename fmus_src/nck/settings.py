@@ -90,7 +90,8 @@ class InterpreterSettings:
     initial : Vec3
         Tool position before the program (m, axis frame; without tool length).
     work_offsets : Mapping[int, Vec3]
-        Work offset → (x, y, z) (m, machine coordinates of the work zero; the external offset a shift). Keys: 54..59 for G54..G59, :func:`additional_offset_key` ``(n)`` = 1000 + n
+        Work offset → (x, y, z) (m, machine coordinates of the work zero; the external offset a shift).
+        Keys: 54..59 for G54..G59, :func:`additional_offset_key` ``(n)`` = 1000 + n
         for G54.1 Pn (n = 1..48) and :func:`g154_offset_key` ``(n)`` = 1000 + n for Haas G154 Pn (n = 1..99;
         G110..G129 = G154 P1..P20), :data:`EXTERNAL_OFFSET` = 0 for the external workpiece zero point offset,
         which is added to every work coordinate system. A missing work system is the default work zero
