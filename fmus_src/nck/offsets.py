@@ -7,8 +7,8 @@ Conventions
   work offset like G54-G59 (modal, group 14); its value is
   ``work_offsets[additional_offset_key(n)]`` (key 1000 + n, the default
   work zero ``-machine_zero`` when missing, like G54-G59). G54.1 without
-  P, P outside 1..48 or with a decimal point, and G54.1 in a block where P means something else (G4, G10, M98, a canned
-  cycle) are errors (FANUC takes G54.1 without P as P1; the twin asks for
+  P, P outside 1..48 or with a decimal point, and G54.1 in a block where
+  P means something else (G4, G10, M98, a canned cycle) are errors (FANUC takes G54.1 without P as P1; the twin asks for
   it). ``G54 P<n>`` in such a block is plain G54 (P keeps its meaning there).
 * Haas additional work offsets (Haas mill operator's manual, G154, group
   12): ``G154 P<n>``, n = 1..99, and its aliases G110..G129 (= G154

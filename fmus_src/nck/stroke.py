@@ -152,7 +152,7 @@ def _what(block: Block) -> str:
 
 
 def _alarm(point: Vec3, line: int, limits: StrokeLimits, file: str, text: str, what: str) -> None:
-    """Raise the alarm of the first axis of ``point`` (machine coordinates) beyond its limit (nothing when none is)."""
+    """Raise the alarm of the first axis of ``point`` (machine coordinates, m) beyond its limit (none: nothing)."""
     for axis, (letter, pair) in enumerate(zip(_AXES, limits.axes)):
         if pair is None:
             continue
