@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from fmus_src.nck import GCodeError, NCKernel, Rapid
-from orchestrator.fmu.build import _nck_parameters
+from orchestrator.fmu.build import _nck_parameters, machine_parameters
 from orchestrator.machine import MachineFileError, load_machine
 from orchestrator.twin import nck_parameters
 
@@ -69,10 +69,13 @@ def test_default_machine_places_machine_zero_at_the_reference_position_and_work_
             assert params[f"g{g}_{a}"] == -ZERO_MM[i] * MM
         lo, hi = m.stroke_limits()[a]
         assert hi == 0.0  # the + end of the travel is machine zero
-    # the FMU build's own mapping (used when orchestrator.twin does not import) gives the same frame
+    # the NCK FMU's start values, and the FMU build's own mapping (used when orchestrator.twin does not import),
+    # carry the same frame
+    starts = machine_parameters("NCKernel", m, NCKernel)
     fmu = _nck_parameters(m, NCKernel)
     for key in ("machine_zero_x", "machine_zero_z", "g54_x", "g59_z", "reference_z", "reference2_z", "reference4_x"):
-        assert fmu[key] == params[key], key
+        assert starts[key] == params[key] and fmu[key] == params[key], key
+    assert starts["machine_zero_z"] == 0.3 and starts["g54_z"] == -0.3
 
 
 def test_fusion_haas_safe_retract_goes_to_the_top_of_the_travel_and_parks_at_the_reference_xy():
