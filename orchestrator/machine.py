@@ -77,7 +77,7 @@ SCHEMA: dict[str, set[str]] = {
         "reference_x_mm", "reference_y_mm", "reference_z_mm", "g73_retract_mm", "g83_clearance_mm",
         *(f"reference{n}_{a}_mm" for n in (2, 3, 4) for a in AXES),
         "rigid_tapping_time_constant_ms", "rigid_tapping_mode", "boring_shift", "decimal_point_input",
-        "tool_change_retract",
+        "tool_change_retract", *(f"machine_zero_{a}_mm" for a in AXES),
     },
     "spindle": {"max_speed_rpm", "ramp_rpm_per_s", "speed_arrival_tolerance_percent", "power_kW"},
     "servo": {"position_loop_period_ms", "velocity_loop_period_ms"},
@@ -97,15 +97,21 @@ M_CODES_SECTION = "nck.m_codes"
 
 #: Keys that may be left out of a machine file (the component default is used).
 OPTIONAL_SECTIONS: set[str] = {"machine", "material.*", *(f"axis.{a}.effects" for a in AXES), "cutting.effects"}
-#: Keys of required sections that may be left out (the component default, equal to default.toml's value, is
-#: used): keys added after machine files were written, so that a user's older file still loads.
+#: Keys of required sections that may be left out (the component default, equal in effect to default.toml's
+#: value, is used; the reference positions of a file with machine_zero_*_mm: 0, machine zero): keys added after
+#: machine files were written, so that a user's older file still loads.
 OPTIONAL_KEYS: dict[str, set[str]] = {
     "nck": {"reference_x_mm", "reference_y_mm", "reference_z_mm", "g73_retract_mm", "g83_clearance_mm",
             *(f"reference{n}_{a}_mm" for n in (2, 3, 4) for a in AXES),
             "rigid_tapping_time_constant_ms", "rigid_tapping_mode", "boring_shift", "decimal_point_input",
-            "tool_change_retract"},
+            "tool_change_retract", *(f"machine_zero_{a}_mm" for a in AXES)},
     **{f"axis.{a}": set(STROKE_KEYS) for a in AXES},
 }
+#: Where machine zero sits in the twin's axis frame (mm), optional, all three or none: the axis frame is the work
+#: coordinate system of the default work offsets (G54..G59 = -machine zero), and machine coordinates (G53, the
+#: reference positions, stroke limits, work offsets) are axis frame - machine zero. Without them machine
+#: coordinates are the axis frame (the frame of files written before these keys).
+MACHINE_ZERO_KEYS = tuple(f"machine_zero_{a}_mm" for a in AXES)
 
 
 class MachineFileError(CncTwinError):
@@ -278,6 +284,13 @@ class Machine:
         table = self.values.get("nck", {}).get("m_codes", {})
         return {int(code): tuple(means) for code, means in table.items()}
 
+    def machine_zero(self) -> tuple[float, float, float] | None:
+        """Where machine zero sits in the axis frame, m (``[nck] machine_zero_{x,y,z}_mm``); None without them."""
+        nck = self.values.get("nck", {})
+        if not all(k in nck for k in MACHINE_ZERO_KEYS):
+            return None
+        return tuple(to_si(float(nck[k]), "mm") for k in MACHINE_ZERO_KEYS)  # type: ignore[return-value]
+
     def stroke_limits(self) -> dict[str, tuple[float, float]]:
         """The stored stroke limits of the axes that have them: axis letter -> (minimum, maximum), m.
 
@@ -442,6 +455,7 @@ def _check_relations(path: Path, text: str, values: dict[str, Any]) -> None:
                 f"Stribeck friction of [axis.{a}.friction.*] (static - coulomb over stribeck_velocity) needs drive "
                 f"substeps of {cap:.3g} s; expected a moving mass and friction that allow at least "
                 f"{MIN_DRIVE_STEP_S:g} s (a larger mass_kg or stribeck_velocity_m_per_s)")
+    _check_machine_zero(path, text, values)
     _check_strokes(path, text, values)
     effects = values.get("cutting", {}).get("effects", {})
     if effects.get("chatter_frequency_Hz", 0.0) > 0.0 and not effects.get("chatter_stiffness_N_per_um", 0.0) > 0.0:
@@ -449,6 +463,24 @@ def _check_relations(path: Path, text: str, values: dict[str, Any]) -> None:
             f"{path}:{_line_of(text, 'cutting.effects', 'chatter_stiffness_N_per_um')}: [cutting.effects] "
             f"chatter_frequency_Hz = {effects['chatter_frequency_Hz']!r} needs chatter_stiffness_N_per_um > 0 "
             f"(the modal stiffness of the chatter mode), got {effects.get('chatter_stiffness_N_per_um', 0.0)!r}")
+
+
+def _check_machine_zero(path: Path, text: str, values: dict[str, Any]) -> None:
+    """``machine_zero_{x,y,z}_mm``: all three or none."""
+    nck = values.get("nck", {})
+    given = [k for k in MACHINE_ZERO_KEYS if k in nck]
+    if given and len(given) < len(MACHINE_ZERO_KEYS):
+        missing = [k for k in MACHINE_ZERO_KEYS if k not in nck]
+        raise MachineFileError(
+            f"{path}:{_line_of(text, 'nck', given[0])}: [nck] {given[0]} without {', '.join(missing)}; expected "
+            "all three machine_zero_{x,y,z}_mm (where machine zero sits in the twin's axis frame) or none (machine "
+            "coordinates = the axis frame)")
+
+
+def _reference_default(nck: dict[str, Any]) -> float | None:
+    """The reference position of a file that leaves it out (mm): 0 (machine zero, FANUC No. 1240 = 0) when the
+    file places machine zero, else None (the NC kernel's default, :data:`fmus_src.nck.settings.DEFAULT_REFERENCE`)."""
+    return 0.0 if all(k in nck for k in MACHINE_ZERO_KEYS) else None
 
 
 def _check_strokes(path: Path, text: str, values: dict[str, Any]) -> None:
@@ -469,12 +501,34 @@ def _check_strokes(path: Path, text: str, values: dict[str, Any]) -> None:
             raise MachineFileError(f"{where} stroke_min_mm = {lo!r} must be less than stroke_max_mm = {hi!r}")
         for n in ("", "2", "3", "4"):
             key = f"reference{n}_{a}_mm"
-            ref = nck.get(key, nck.get(f"reference_{a}_mm"))
+            ref = nck.get(key, nck.get(f"reference_{a}_mm", _reference_default(nck)))
             if ref is not None and not lo <= float(ref) <= hi:
                 raise MachineFileError(
                     f"{path}:{_line_of(text, 'nck', key if key in nck else f'reference_{a}_mm')}: [nck] {key} = "
                     f"{float(ref)!r} is outside the stroke limits of [axis.{a}] [{lo!r}, {hi!r}] mm; expected a "
                     "reference position inside the travel (a reference return there would be an overtravel)")
+
+
+def frame_parameters(machine: Machine) -> dict[str, float]:
+    """NC kernel parameters (m) of the machine coordinate frame of a machine file.
+
+    With ``[nck] machine_zero_{x,y,z}_mm``: ``machine_zero_<a>``, the default work offsets G54..G59 =
+    -machine zero (their work coordinates are the axis frame: recordings, stock and ``case.toml`` keep those),
+    and 0 (machine zero, FANUC No. 1240 = 0) for a reference position the file leaves out. Without them: nothing
+    (the NC kernel's defaults: machine coordinates are the axis frame).
+    """
+    zero = machine.machine_zero()
+    if zero is None:
+        return {}
+    nck = machine.values.get("nck", {})
+    params: dict[str, float] = {}
+    for i, a in enumerate(AXES):
+        params[f"machine_zero_{a}"] = zero[i]
+        for g in range(54, 60):
+            params[f"g{g}_{a}"] = -zero[i]
+        if f"reference_{a}_mm" not in nck:
+            params[f"reference_{a}"] = 0.0
+    return params
 
 
 def resolve_machine_path(name_or_path: str | Path, relative_to: Path | None = None) -> Path:

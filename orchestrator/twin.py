@@ -31,7 +31,7 @@ from fmus_src.servo.mcu import MCU
 
 from .case import Case
 from .errors import CncTwinError, SystemDescriptionError
-from .machine import AXES, Machine
+from .machine import AXES, Machine, frame_parameters
 from .master import Probe
 from .system import System
 
@@ -84,9 +84,12 @@ def nck_parameters(machine: Machine) -> dict[str, object]:
 
     A 2nd/3rd/4th reference position (G30) the file leaves out is its 1st one (``reference_*_mm``). The M-code
     aliases of ``[nck.m_codes]`` become the String parameter ``m_codes`` (none in the file: no aliases). The stroke
-    limits of ``[axis.<a>]`` switch on the stored stroke check of that axis (:func:`stroke_parameters`).
+    limits of ``[axis.<a>]`` switch on the stored stroke check of that axis (:func:`stroke_parameters`). A file
+    with ``machine_zero_*_mm`` also sets the default work offsets G54..G59 to -machine zero
+    (:func:`~orchestrator.machine.frame_parameters`).
     """
     params: dict[str, object] = dict(machine.si("nck"))
+    params.update(frame_parameters(machine))
     for n in (2, 3, 4):
         for a in AXES:
             if f"reference_{a}" in params:

@@ -196,7 +196,8 @@ def validate_recording(
         The program as text instead of a file (``program`` then only names it).
     nc_parameters : mapping, optional
         NC kernel parameters (SI, e.g. :func:`orchestrator.twin.nck_parameters`) used to plan the
-        program for the duration check; default: the NC kernel's defaults (the default machine).
+        program for the duration check; default: the NC kernel's defaults (the default machine's values, but
+        without its stroke check and with machine zero at the axis origin, so G53 positions differ from it).
     ranges : mapping channel -> Range, optional
         Plausible ranges that replace the built-in ones for some channels.
 

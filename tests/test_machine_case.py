@@ -62,7 +62,9 @@ def test_missing_key_and_missing_file(tmp_path):
 
 def test_machine_file_without_the_newer_nck_keys_loads_with_the_shipped_values(tmp_path):
     # a user's machine file written before G28 and the peck cycles existed: the NC kernel's own defaults apply,
-    # and they are the shipped file's values (380/225/300 mm, 0.2 mm, 0.5 mm)
+    # and they are the shipped file's values (0.2 mm, 0.5 mm), the reference positions in effect: the kernel's
+    # (380, 225, 300) mm with machine zero at the axis origin are the shipped machine zero (380, 225, 300) mm +
+    # reference position (0, 0, 0)
     from fmus_src.nck import NCKernel
     from orchestrator.machine import OPTIONAL_KEYS
     from orchestrator.twin import nck_parameters
@@ -79,7 +81,12 @@ def test_machine_file_without_the_newer_nck_keys_loads_with_the_shipped_values(t
     defaults = {v.name: v.start for v in NCKernel.variables}
     for key in newer:  # numbers in the key's unit (mm, ms), strings (rigid_tapping_mode, boring_shift) as they are
         name, symbol = split_unit_suffix(key)
-        if isinstance(shipped[key], str):
+        if name.startswith("machine_zero"):
+            assert defaults[name] == 0.0  # machine coordinates = axis frame, as before the key existed
+        elif name.startswith("reference"):
+            shipped_axis = shipped[f"machine_zero_{name[-1]}_mm"] + shipped[key]
+            assert defaults[name] == pytest.approx(to_si(shipped_axis, symbol), rel=1e-12)
+        elif isinstance(shipped[key], str):
             assert defaults[name] == shipped[key]
         else:
             assert defaults[name] == pytest.approx(to_si(shipped[key], symbol), rel=1e-12)

@@ -40,9 +40,18 @@ def run_to_end(k: NCKernel, h: float = 1e-3) -> None:
 def test_defaults_are_the_machine_file_values():
     m = load_machine("default")
     k = NCKernel()
-    for name, value in m.si("nck").items():
+    nck = m.si("nck")
+    for name, value in nck.items():
         got = k.get(name)
+        if name.startswith(("reference", "machine_zero")):
+            continue  # the frame: compared below
         assert (got == value) if isinstance(got, str) else got[0] == pytest.approx(value), name
+    # the kernel's default frame has machine zero at the axis origin, so its reference positions are the default
+    # machine's axis-frame positions: machine zero + reference position
+    for name in [n for n in nck if n.startswith("reference")]:
+        a = name[-1]
+        assert k.get(f"machine_zero_{a}")[0] == 0.0
+        assert k.get(name)[0] == pytest.approx(nck[f"machine_zero_{a}"] + nck[name]), name
     for key, value in m.si("spindle").items():
         assert k.get(f"spindle_{key}")[0] == pytest.approx(value), key
     for a in "xyz":

@@ -269,7 +269,7 @@ O02002 (HAAS HAND PROGRAM - G110 G103 M97)
 G00 G17 G40 G49 G80 G90
 G21
 T1 M06
-G10 L20 P1 X10. Y5. Z0.
+G10 L20 P1 X-370. Y-220. Z-300.
 G110
 S2500 M03
 G187 E0.01
@@ -302,7 +302,7 @@ O03003 (HAAS CLASSIC POST - DRILL G154 P7)
 N10 G90 G17
 N15 G21
 N20 G53 G00 Z0.
-N25 G10 L20 P7 X20. Y10. Z0.
+N25 G10 L20 P7 X-360. Y-215. Z-300.
 (Drill1)
 N30 T3 M06
 N35 S2000 M03
@@ -357,7 +357,8 @@ def test_haas_hand_program_with_g110_and_g103_runs_end_to_end(haas_runs):
     result = haas_runs["hand"]
     assert result.success, result.message
     rec = result.recording
-    # the M97 square (2 mm, G91) starts at work X0 Y0 of G110 = G154 P1 = (10, 5) mm set by G10 L20
+    # the M97 square (2 mm, G91) starts at work X0 Y0 of G110 = G154 P1, set by G10 L20 to machine (-370, -220) mm:
+    # axis frame (recording) (10, 5) mm with the default machine's machine zero at (380, 225, 300) mm
     first = _line(HAAS_HAND, "N100 ")
     square = (rec["line"] >= first) & (rec["line"] <= first + 3)
     assert [rec["x_ref_mm"][square].min(), rec["x_ref_mm"][square].max()] == pytest.approx([10.0, 12.0], abs=1e-9)
@@ -368,7 +369,8 @@ def test_haas_drill_program_with_g154_p7_runs_end_to_end(haas_runs):
     result = haas_runs["drill"]
     assert result.success, result.message
     rec = result.recording
-    # holes at work (5, 5) and (15, 5) of G154 P7 = (20, 10) mm: machine (25, 15) and (35, 15), bottom Z-6
+    # holes at work (5, 5) and (15, 5) of G154 P7 = machine (-360, -215, -300) mm = axis frame (20, 10, 0) mm:
+    # axis (25, 15) and (35, 15), bottom Z-6
     for prefix, x in (("N65 ", 25.0), ("N70 ", 35.0)):
         hole = rec["line"] == _line(HAAS_DRILL, prefix)
         k = int(np.argmin(np.where(hole, rec["z_ref_mm"], np.inf)))

@@ -148,12 +148,12 @@ def test_kernel_parameters_and_machine_file_mapping_of_the_2nd_reference(tmp_pat
     machine = load_machine("default")
     text = "\n".join(l for l in machine.path.read_text().splitlines() if not l.startswith(("reference2", "reference3",
                                                                                           "reference4")))
-    text = text.replace("reference_z_mm = { value = 300.0", "reference_z_mm = { value = 280.0")
+    text = text.replace("reference_z_mm = { value = 0.0", "reference_z_mm = { value = -20.0")
     path = tmp_path / "older.toml"
     path.write_text(text)
     params = nck_parameters(load_machine(path))
-    assert [params[f"reference{n}_z"] for n in (2, 3, 4)] == pytest.approx([0.28] * 3)
-    assert params["reference2_x"] == pytest.approx(0.38)
+    assert [params[f"reference{n}_z"] for n in (2, 3, 4)] == pytest.approx([-0.02] * 3)
+    assert params["reference2_x"] == 0.0
 
 
 def test_g53_moves_in_machine_coordinates_at_rapid():
@@ -194,11 +194,11 @@ def test_errors_name_the_word(text, word, fragment):
 
 def test_default_reference_is_the_machine_files_and_well_above_the_work():
     nck = load_machine("default").si("nck")
-    k = NCKernel()
+    k = NCKernel()  # machine zero at the axis-frame origin: the reference parameter is the axis-frame position
     for a in "xyz":
-        assert k.values[f"reference_{a}"][0] == pytest.approx(nck[f"reference_{a}"])
-    # default work offsets and tool lengths are 0: reference Z is the tool tip height above work Z0
-    assert nck["reference_z"] >= 0.1
+        assert k.values[f"reference_{a}"][0] == pytest.approx(nck[f"machine_zero_{a}"] + nck[f"reference_{a}"])
+    # default work offsets (-machine zero) and tool lengths 0: reference Z is the tool tip height above work Z0
+    assert nck["machine_zero_z"] + nck["reference_z"] >= 0.1
 
 
 def test_planned_reference_ends_at_the_reference_position():
@@ -220,9 +220,9 @@ def test_cam_post_program_air_cut_ends_at_reference(tmp_path: Path):
     assert result.success, result.message
     nck = load_machine("default").si("nck")
     frame = result.recording.member(0)
-    end = [frame[f"{a}_ref_mm"][-1] for a in "xyz"]
-    assert end == pytest.approx([nck[f"reference_{a}"] * 1e3 for a in "xyz"], abs=1e-9)
-    assert frame["z_mm"][-1] == pytest.approx(nck["reference_z"] * 1e3, abs=0.02)
+    end = [frame[f"{a}_ref_mm"][-1] for a in "xyz"]  # the axis frame: machine zero + the reference position
+    assert end == pytest.approx([(nck[f"machine_zero_{a}"] + nck[f"reference_{a}"]) * 1e3 for a in "xyz"], abs=1e-9)
+    assert frame["z_mm"][-1] == pytest.approx((nck["machine_zero_z"] + nck["reference_z"]) * 1e3, abs=0.02)
     # the slot at Z-1 (line 14/15) is cut: the reference went down to Z -1 mm
     assert min(frame["z_ref_mm"]) == pytest.approx(-1.0, abs=1e-9)
 
@@ -234,4 +234,4 @@ def test_cam_post_program_on_the_paper_part_case(tmp_path: Path):
     assert result.success, result.message
     frame = result.recording.member(0)
     nck = load_machine("default").si("nck")
-    assert frame["z_ref_mm"][-1] == pytest.approx(nck["reference_z"] * 1e3, abs=1e-9)
+    assert frame["z_ref_mm"][-1] == pytest.approx((nck["machine_zero_z"] + nck["reference_z"]) * 1e3, abs=1e-9)

@@ -178,7 +178,7 @@ def test_solidcam_incremental_step_down_repeats_with_l():
 SHOP_MACRO = """%
 O2000 (SHOP - BOLT CIRCLE AND POCKETS)
 G17 G21 G40 G49 G80 G90
-G10 L2 P2 X50. Y0 Z0
+G10 L2 P2 X-330. Y-225. Z-300.
 #100=6 (HOLES)
 #101=25. (BC RADIUS)
 T5 M6
@@ -222,10 +222,13 @@ M99
 
 
 def test_hand_written_macro_program_bolt_circle_local_shifts_and_stop_with_message():
-    program = interpret(SHOP_MACRO, "shop.nc", REGISTERS)
+    # the default machine's frame: machine zero at axis (380, 225, 300) mm, so G55 = machine (-330, -225, -300) mm
+    # is axis (50, 0, 0) mm
+    frame = InterpreterSettings(tool_lengths=[0.0] * 20, tool_radii=[0.0] * 20, machine_zero=(0.38, 0.225, 0.3))
+    program = interpret(SHOP_MACRO, "shop.nc", frame)
     holes = [(round(b.end[0] / MM, 3), round(b.end[1] / MM, 3)) for b in program.blocks
              if isinstance(b, Linear) and b.end[2] == pytest.approx(-8 * MM)]
-    # G55 = X 50 (G10 L2 P2): holes at 50 + 25 cos(60 k), 25 sin(60 k)
+    # G55 = axis X 50 (G10 L2 P2): holes at 50 + 25 cos(60 k), 25 sin(60 k)
     expected = [(round(50 + 25 * math.cos(math.radians(60 * k)), 3), round(25 * math.sin(math.radians(60 * k)), 3))
                 for k in range(6)]
     assert holes == expected

@@ -41,8 +41,11 @@ def test_off_is_the_default_and_adds_no_move():
 
 @pytest.mark.parametrize("mode, block", [("G28", "G91 G28 Z0.\nG90\n"), ("G30", "G91 G30 Z0.\nG90\n")])
 def test_the_retract_plans_as_the_macro_block_written_out(mode, block):
+    # the default machine's reference positions are machine coordinates, machine zero at axis (380, 225, 300) mm:
+    # REF2 in the axis frame is machine (0, 0, -50) mm
+    machine_ref2 = (0.0, 0.0, -0.05)
     params = {**nck_parameters(load_machine("default")), "tool_length_1": 0.1,
-              **{f"reference2_{a}": v for a, v in zip("xyz", REF2)}}
+              **{f"reference2_{a}": v for a, v in zip("xyz", machine_ref2)}}
     with_retract = NCKernel(program_text=PROGRAM.format(""), **{**params, "tool_change_retract": mode})
     written = NCKernel(program_text=PROGRAM.format(block), **{**params, "tool_change_retract": "off"})
     with_retract.setup(0.0)

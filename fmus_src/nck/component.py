@@ -9,6 +9,10 @@ periods for Real outputs when ``t + h`` is not on the grid).
 Before planning, the interpreted path is checked against the stored stroke limits of the axes whose
 ``<a>_stroke_check`` is on (:mod:`.stroke`; the machine file's ``[axis.<a>] stroke_min_mm/stroke_max_mm``).
 
+Frames: ``{x,y,z}_initial`` and the outputs ``{x,y,z}_ref`` are in the twin's axis frame; the work offsets
+``g54_x`` … ``g59_z``, the reference positions and the stroke limits are machine coordinates, which are the
+axis frame minus ``machine_zero_{x,y,z}`` (default 0: the same; see :mod:`.settings`).
+
 The program comes from the String parameter ``program_file`` or, in Python,
 from the ``program_text`` keyword of the constructor / :meth:`NCKernel.set_program_text`
 (text wins when both are given).
@@ -75,10 +79,16 @@ def _variables() -> tuple[Variable, ...]:
     for a in "xyz":
         v.append(Variable(f"{a}_rapid_feed", p, "m/s", getattr(_D, f"{a}_rapid_feed"), f"{a.upper()} rapid traverse rate"))
     for a in "xyz":
-        v.append(Variable(f"{a}_initial", p, "m", 0.0, f"{a.upper()} machine position at program start"))
+        v.append(Variable(f"{a}_initial", p, "m", 0.0, f"{a.upper()} tool position at program start, axis frame"))
+    for a in "xyz":
+        v.append(Variable(f"machine_zero_{a}", p, "m", 0.0,
+                          f"{a.upper()} of machine zero in the axis frame: machine coordinates (G53, reference "
+                          "positions, work offsets, stroke limits) = axis frame - machine_zero"))
     for g in WORK_OFFSETS:
         for a in "xyz":
-            v.append(Variable(f"g{g}_{a}", p, "m", 0.0, f"G{g} work offset, {a.upper()}"))
+            v.append(Variable(f"g{g}_{a}", p, "m", 0.0,
+                              f"G{g} work offset, {a.upper()}: machine coordinate of the work zero (the axis-frame "
+                              f"origin is -machine_zero_{a})"))
     for h in range(1, N_TOOL_LENGTHS + 1):
         v.append(Variable(f"tool_length_{h}", p, "m", 0.0, f"tool length offset H{h} (added to Z with G43)"))
     for d in range(1, N_TOOL_RADII + 1):
@@ -248,6 +258,13 @@ class NCKernel(Component):
         except NCParameterError as exc:
             raise NCParameterError(f"{self.name}: {exc}") from None
 
+    def _machine_zero(self) -> tuple[float, float, float]:
+        """``machine_zero_{x,y,z}`` (m), checked finite."""
+        zero = tuple(self._uniform(f"machine_zero_{a}") for a in "xyz")
+        if not all(np.isfinite(zero)):
+            raise NCParameterError(f"{self.name}: machine_zero_x/y/z must be finite, got {zero}")
+        return zero  # type: ignore[return-value]
+
     def _read_program(self) -> tuple[str, str]:
         if self._text is not None:
             return self._text, self._text_file
@@ -301,6 +318,7 @@ class NCKernel(Component):
             m_codes=parse_m_codes(str(self.values["m_codes"]), f"{self.name}.m_codes"),
             decimal_input=_decimal_input(str(self.values["decimal_point_input"]), self.name),
             tool_change_retract=_tool_change_retract(str(self.values["tool_change_retract"]), self.name),
+            machine_zero=self._machine_zero(),
         )
         for n in (1, 2, 3, 4):
             if not all(np.isfinite(settings.reference_position(n))):
@@ -309,7 +327,7 @@ class NCKernel(Component):
                                        f"got {settings.reference_position(n)}")
         self.program_: Program = interpret(text, file, settings)
         check_stroke(self.program_.blocks, settings.initial, self.stroke_limits(), file,
-                     split_lines(without_dos_eof(text)))
+                     split_lines(without_dos_eof(text)), settings.machine_zero)
         blocks: tuple[Block, ...]
         blocks, feeds, speeds = apply_overrides(self.program_, self.batch, self._feed_over, self._spindle_over,
                                                 self._per_rev_over)

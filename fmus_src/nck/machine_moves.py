@@ -24,6 +24,10 @@ Conventions
   offset or tool length (the tool-length vector is left out as after G28).
   FANUC ignores G53 under G91; the twin rejects it (G90 required) so that a
   program cannot silently do something else than it reads.
+* Frames: the reference positions and G53 values are machine coordinates; the blocks are in the axis frame, so
+  each is moved by :attr:`InterpreterSettings.machine_zero` (:meth:`InterpreterSettings.machine_to_axis`). On
+  the default machine machine zero is the G28 reference position: ``G53 Z0`` goes to the top of the Z travel,
+  as on a FANUC or Haas VMC.
 * M6 Z retract (:func:`tool_change_retract`, :attr:`InterpreterSettings.tool_change_retract`): on a vertical
   machining center the tool change first moves Z to the tool-change position at rapid, as the builder's M6
   macro does with ``G91 G28 Z0`` or ``G91 G30 Z0``: "G28" goes to the 1st reference Z, "G30" to the 2nd
@@ -77,8 +81,8 @@ def machine_move(st: ModalState, code: int, vals: ValueWords, line: int, err: Er
     if code == 53:
         if not st.absolute:
             raise err("G53", "G53 in incremental mode G91 (FANUC ignores it there)", "G90 with G53")
-        for i in axes:
-            st.machine[i] = vals["XYZ"[i]].value * scale
+        for i in axes:  # machine coordinates -> the axis frame of the blocks
+            st.machine[i] = st.settings.machine_to_axis(i, vals["XYZ"[i]].value * scale)
         if 2 in axes:
             st.applied_tool = 0.0
         st.sync_prog(axes)
@@ -97,7 +101,7 @@ def machine_move(st: ModalState, code: int, vals: ValueWords, line: int, err: Er
         out.append(Rapid(line, start, mid))
     ref = st.settings.reference_position(number)
     for i in axes:
-        st.machine[i] = ref[i]
+        st.machine[i] = st.settings.machine_to_axis(i, ref[i])
     if 2 in axes:
         st.applied_tool = 0.0  # the reference position is a machine position: no tool length in it
     st.sync_prog(axes)
@@ -142,7 +146,7 @@ def tool_change_retract(st: ModalState, line: int, err: ErrorFactory, out: list[
         raise err("M6", f"M6 with the Z retract to the tool-change position ({mode} Z) while {why}",
                   "G69/G50/G50.1, G80 and G40 (as active) before M6")
     start: Vec3 = tuple(st.machine)  # type: ignore[assignment]
-    st.machine[2] = st.settings.reference_position(1 if mode == "G28" else 2)[2]
+    st.machine[2] = st.settings.machine_to_axis(2, st.settings.reference_position(1 if mode == "G28" else 2)[2])
     st.applied_tool = 0.0
     st.sync_prog([2])
     if abs(st.machine[2] - start[2]) > SAME_POINT:

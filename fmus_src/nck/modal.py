@@ -3,6 +3,9 @@
 Conventions
 -----------
 * Power-on modes: G0, G17, G21, G40, G49, G54, G64, G80, G90, G91.1, G94, G98; H0, D0.
+* Positions (``machine``, the block end points) are in the axis frame; the work offsets are kept as shifts of
+  the axis frame (machine coordinates + :attr:`.settings.InterpreterSettings.machine_zero`), so "machine" below
+  means the axis frame, which is machine coordinates when ``machine_zero`` is 0.
 * An offset change takes effect on the next move of the axis: the machine
   target of a programmed axis is programmed value + work offset (+ tool length
   on Z); axes not programmed do not move. A work-offset change shifts the
@@ -56,8 +59,9 @@ class ModalState:
         self.machine = list(settings.initial)
         self.applied_tool = 0.0  # tool length contained in machine[2]
         self.settings = settings
-        # G10 changes these copies: work offsets by key, tool offsets as (geometry, wear) per number
-        self.offsets: dict[int, Vec3] = {int(k): tuple(v)  # type: ignore[misc]
+        # G10 changes these copies: work offsets by key as shifts of the axis frame (a missing work system, the
+        # default work zero -machine_zero, is 0: see .settings), tool offsets as (geometry, wear) per number
+        self.offsets: dict[int, Vec3] = {int(k): settings.axis_offset(int(k), tuple(v))  # type: ignore[arg-type]
                                          for k, v in settings.work_offsets.items()}
         self.lengths = [[float(v), 0.0] for v in settings.tool_lengths]
         self.radii = [[float(v), 0.0] for v in settings.tool_radii]
@@ -98,7 +102,7 @@ class ModalState:
         return (base[0] + loc[0] + g92[0], base[1] + loc[1] + g92[1], base[2] + loc[2] + g92[2])
 
     def base_work_offset(self) -> Vec3:
-        """Active work offset + external offset (m), without the G52/G92 shifts."""
+        """Active work offset + external offset (m, a shift of the axis frame), without the G52/G92 shifts."""
         zero = (0.0, 0.0, 0.0)
         own, ext = self.offsets.get(self.work, zero), self.offsets.get(EXTERNAL_OFFSET, zero)
         return (own[0] + ext[0], own[1] + ext[1], own[2] + ext[2])

@@ -5,10 +5,10 @@ Conventions
 * Additional work coordinate systems (FANUC 0i-MF/31i-B option):
   ``G54.1 P<n>`` and its alternate form ``G54 P<n>``, n = 1..48, select a
   work offset like G54-G59 (modal, group 14); its value is
-  ``work_offsets[additional_offset_key(n)]`` (key 1000 + n, zero when
-  missing). G54.1 without P, P outside 1..48 or with a decimal point, and
-  G54.1 in a block where P means something else (G4, G10, M98, a canned
-  cycle) are errors (FANUC takes G54.1 without P as P1; the twin asks for
+  ``work_offsets[additional_offset_key(n)]`` (key 1000 + n, the default
+  work zero ``-machine_zero`` when missing, like G54-G59). G54.1 without
+  P, P outside 1..48 or with a decimal point, and G54.1 in a block where
+  P means something else (G4, G10, M98, a canned cycle) are errors (FANUC takes G54.1 without P as P1; the twin asks for
   it). ``G54 P<n>`` in such a block is plain G54 (P keeps its meaning there).
 * Haas additional work offsets (Haas mill operator's manual, G154, group
   12): ``G154 P<n>``, n = 1..99, and its aliases G110..G129 (= G154
@@ -32,7 +32,11 @@ Conventions
   offset used is geometry + wear; :attr:`InterpreterSettings.tool_lengths`
   and ``tool_radii`` are the geometry, the wear starts at 0). Under G90 the
   given values are set, under G91 added; axes not given keep their value;
-  values in the unit in effect (G20/G21). The change takes effect like the
+  values in the unit in effect (G20/G21). The G54..G59/G54.1 values are the
+  machine coordinates of the work zero (FANUC), turned into the axis frame
+  with :attr:`.settings.InterpreterSettings.machine_zero`; a work system not
+  yet set starts from the default work zero ``-machine_zero`` (G91 adds to
+  it). The change takes effect like the
   other offset changes (:mod:`.modal`): a changed active work offset shifts the programmed
   coordinates of the current position, a changed tool length is applied by
   the next Z move, and a changed active D radius is used for the end vector of the
@@ -147,10 +151,14 @@ def program_data(st: ModalState, gs: GWords, vals: ValueWords, err: ErrorFactory
     p = int(pw.value)
     if work:
         key = g154_offset_key(p) if ell == 20 else (EXTERNAL_OFFSET if p == 0 else 53 + p)
-        xyz = list(st.offsets.get(key, (0.0, 0.0, 0.0)))
+        xyz = list(st.offsets.get(key, (0.0, 0.0, 0.0)))  # axis-frame shifts; missing: the default work zero
         for a in given:
+            i = AXIS_INDEX[a]
             v = vals[a].value * st.scale
-            xyz[AXIS_INDEX[a]] = v if st.absolute else xyz[AXIS_INDEX[a]] + v
+            if not st.absolute:
+                xyz[i] += v
+            else:  # G90: a work zero in machine coordinates (the external offset: a shift)
+                xyz[i] = v if key == EXTERNAL_OFFSET else st.settings.machine_to_axis(i, v)
         st.offsets[key] = tuple(xyz)  # type: ignore[assignment]
         if key in (st.work, EXTERNAL_OFFSET):
             st.shift_work()

@@ -10,6 +10,12 @@ Conventions
 * Work-offset keys of :attr:`InterpreterSettings.work_offsets`: 54..59 for G54..G59,
   :func:`additional_offset_key` for G54.1 Pn, :func:`g154_offset_key` for Haas G154 Pn (the same keys),
   :data:`EXTERNAL_OFFSET` for the external offset (what G54.1, G154 and the external offset do: :mod:`.offsets`).
+* Coordinate frames: the interpreter's positions (block end points, :attr:`InterpreterSettings.initial`, the NC
+  kernel's outputs, recordings) are in the twin's *axis frame*. Machine coordinates (G53 positions, the G28/G30
+  reference positions, the work offsets G54.. and the stroke limits, as on FANUC) are axis frame minus
+  :attr:`InterpreterSettings.machine_zero`, the position of machine zero in the axis frame. A work offset not
+  given is the default work zero ``-machine_zero``: its work coordinates are the axis frame. With
+  ``machine_zero`` = 0 (the default) machine coordinates are the axis frame.
 """
 from __future__ import annotations
 
@@ -29,8 +35,10 @@ MM = 1e-3
 INCH = 25.4e-3
 #: One revolution per minute (S word), rad/s.
 RPM = 2.0 * math.pi / 60.0
-#: Reference position (G28) of the default machine, machine coordinates (m): ``reference_*_mm`` of
-#: models/machines/default.toml (assumption, see there).
+#: Reference position (G28) of the default machine in its axis frame (m): ``machine_zero_*_mm`` +
+#: ``reference_*_mm`` of models/machines/default.toml (380, 225, 300 mm; assumption, see there). The NC kernel's
+#: default, with machine zero at the axis-frame origin (:attr:`InterpreterSettings.machine_zero` = 0), so that a
+#: machine file without ``machine_zero_*_mm`` and ``reference_*_mm`` returns there as before.
 DEFAULT_REFERENCE: Vec3 = (0.380, 0.225, 0.300)
 #: Settings of the M6 Z retract (:func:`.machine_moves.tool_change_retract`): none, to the 1st (G28) or the 2nd
 #: (G30 P2) reference position Z.
@@ -80,13 +88,15 @@ class InterpreterSettings:
     Attributes
     ----------
     initial : Vec3
-        Machine position before the program (m).
+        Tool position before the program (m, axis frame; without tool length).
     work_offsets : Mapping[int, Vec3]
-        Work offset → (x, y, z) (m). Keys: 54..59 for G54..G59, :func:`additional_offset_key` ``(n)`` = 1000 + n
+        Work offset → (x, y, z) (m, machine coordinates of the work zero; the external offset a shift).
+        Keys: 54..59 for G54..G59, :func:`additional_offset_key` ``(n)`` = 1000 + n
         for G54.1 Pn (n = 1..48) and :func:`g154_offset_key` ``(n)`` = 1000 + n for Haas G154 Pn (n = 1..99;
         G110..G129 = G154 P1..P20), :data:`EXTERNAL_OFFSET` = 0 for the external workpiece zero point offset,
-        which is added to every work coordinate system. Missing keys are zero. ``G10 L2``/``G10 L20`` in the
-        program change a copy (these stay untouched).
+        which is added to every work coordinate system. A missing work system is the default work zero
+        ``-machine_zero`` (its work coordinates are the axis frame), a missing external offset zero.
+        ``G10 L2``/``G10 L20`` in the program change a copy (these stay untouched).
     tool_lengths : Sequence[float]
         Tool length offsets (m) for H1..Hn (index 0 is H1). H0 is always zero. They are the geometry values
         of ``G10 L10``; the wear values (``G10 L11``) start at zero.
@@ -114,6 +124,10 @@ class InterpreterSettings:
     tool_change_retract : {"off", "G28", "G30"}
         M6 first moves Z at rapid to the 1st ("G28") or 2nd ("G30") reference position Z, as a VMC's tool-change
         macro does; "off" (default): M6 is the tool change time alone (:func:`.machine_moves.tool_change_retract`).
+    machine_zero : Vec3
+        Where machine zero sits in the axis frame (m): machine coordinates = axis frame - machine_zero. Default
+        (0, 0, 0): machine coordinates are the axis frame. The default machine has its machine zero at the G28
+        reference position, (380, 225, 300) mm, so that ``G53 Z0`` is the top of the Z travel.
     """
 
     initial: Vec3 = (0.0, 0.0, 0.0)
@@ -129,6 +143,7 @@ class InterpreterSettings:
     m_codes: Mapping[int, tuple[int, ...]] = field(default_factory=dict)
     decimal_input: str = "calculator"
     tool_change_retract: str = "off"
+    machine_zero: Vec3 = (0.0, 0.0, 0.0)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "m_codes", check_m_codes(self.m_codes, "InterpreterSettings.m_codes"))
@@ -138,8 +153,31 @@ class InterpreterSettings:
         if self.tool_change_retract not in TOOL_CHANGE_RETRACTS:
             raise NCParameterError(f"InterpreterSettings.tool_change_retract must be one of "
                                    f"{list(TOOL_CHANGE_RETRACTS)}, got {self.tool_change_retract!r}")
+        if len(self.machine_zero) != 3 or not all(math.isfinite(v) for v in self.machine_zero):
+            raise NCParameterError(f"InterpreterSettings.machine_zero must be 3 finite numbers (m), "
+                                   f"got {self.machine_zero!r}")
 
     def reference_position(self, n: int) -> Vec3:
         """The n-th reference position (n = 1..4, m, machine coordinates); an unset 2nd-4th is the 1st."""
         other = {2: self.reference2, 3: self.reference3, 4: self.reference4}.get(n)
         return self.reference if other is None else other
+
+    def machine_to_axis(self, axis: int, value: float) -> float:
+        """Axis-frame coordinate (m) of machine coordinate ``value`` (m) of axis 0, 1, 2 (X, Y, Z).
+
+        With machine zero at the axis-frame origin the value itself (no rounding).
+        """
+        zero = self.machine_zero[axis]
+        return value + zero if zero else value
+
+    def axis_offset(self, key: int, offset: Vec3) -> Vec3:
+        """Work offset ``key`` (m, machine coordinates) as a shift of the axis frame (m).
+
+        A work system (G54.., G54.1 Pn) becomes ``offset + machine_zero``, so the default work zero
+        ``-machine_zero`` is exactly 0; the external offset (:data:`EXTERNAL_OFFSET`) is a shift, the same in
+        both frames.
+        """
+        if key == EXTERNAL_OFFSET:
+            return offset
+        return (self.machine_to_axis(0, offset[0]), self.machine_to_axis(1, offset[1]),
+                self.machine_to_axis(2, offset[2]))

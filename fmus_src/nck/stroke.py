@@ -2,9 +2,11 @@
 
 Conventions
 -----------
-* The limits are per axis, in machine coordinates (m): the coordinates of the interpreted blocks, i.e. the
+* The limits are per axis, in machine coordinates (m): the interpreted blocks' axis-frame coordinates (the
   programmed tool-tip (tool-centre under G41/G42) position plus the work offset, G52/G92 shifts and the tool
-  length on Z, and the G28/G30/G53 targets as they are. An axis without limits is not checked.
+  length on Z, and the G28/G30/G53 targets) minus ``machine_zero``, where machine zero sits in the axis frame
+  (:attr:`.settings.InterpreterSettings.machine_zero`; 0: the axis frame is machine coordinates). An axis
+  without limits is not checked.
 * Checked: the machine position before the program, the end point of every move (rapids, feeds, the moves of
   canned cycles, reference returns) and the extremes of every arc inside its sweep (a quarter point
   ``centre ± r`` on an in-plane axis). The acc/dec after interpolation only averages positions of the path
@@ -97,20 +99,22 @@ def _points(block: Block) -> list[Vec3]:
 
 
 def check_stroke(blocks: Sequence[Block], initial: Vec3, limits: StrokeLimits, file: str = "<text>",
-                 lines: Sequence[str] = ()) -> None:
+                 lines: Sequence[str] = (), machine_zero: Vec3 = (0.0, 0.0, 0.0)) -> None:
     """Raise the overtravel alarm at the first block whose path leaves the stroke limits.
 
     Parameters
     ----------
     blocks : sequence of Block
-        Interpreted blocks, machine coordinates (m).
+        Interpreted blocks, axis frame (m).
     initial : Vec3
-        Machine position before the program (m).
+        Position before the program, axis frame (m).
     limits : StrokeLimits
     file : str
         Program name for the message.
     lines : sequence of str
         Source lines (quoted in the message; may be empty).
+    machine_zero : Vec3
+        Where machine zero sits in the axis frame (m): machine coordinates = axis frame - machine_zero.
 
     Raises
     ------
@@ -121,17 +125,22 @@ def check_stroke(blocks: Sequence[Block], initial: Vec3, limits: StrokeLimits, f
         return
     lo = [-math.inf if p is None else p[0] - STROKE_TOLERANCE for p in limits.axes]
     hi = [math.inf if p is None else p[1] + STROKE_TOLERANCE for p in limits.axes]
+    z0, z1, z2 = machine_zero
+
+    def machine(p: Vec3) -> Vec3:
+        return (p[0] - z0, p[1] - z1, p[2] - z2)
 
     def outside(p: Vec3) -> bool:
-        return not (lo[0] <= p[0] <= hi[0] and lo[1] <= p[1] <= hi[1] and lo[2] <= p[2] <= hi[2])
+        m = machine(p)
+        return not (lo[0] <= m[0] <= hi[0] and lo[1] <= m[1] <= hi[1] and lo[2] <= m[2] <= hi[2])
 
     if outside(initial):
-        _alarm(initial, 0, limits, file, "", "the machine position before the program")
+        _alarm(machine(initial), 0, limits, file, "", "the machine position before the program")
     for block in blocks:
         for point in _points(block):
             if outside(point):  # the message only for the first point beyond a limit
                 text = lines[block.line - 1].strip() if 0 < block.line <= len(lines) else ""
-                _alarm(point, block.line, limits, file, text, _what(block))
+                _alarm(machine(point), block.line, limits, file, text, _what(block))
 
 
 def _what(block: Block) -> str:
@@ -143,7 +152,7 @@ def _what(block: Block) -> str:
 
 
 def _alarm(point: Vec3, line: int, limits: StrokeLimits, file: str, text: str, what: str) -> None:
-    """Raise the alarm of the first axis of ``point`` beyond its limit (nothing when none is)."""
+    """Raise the alarm of the first axis of ``point`` (machine coordinates, m) beyond its limit (none: nothing)."""
     for axis, (letter, pair) in enumerate(zip(_AXES, limits.axes)):
         if pair is None:
             continue

@@ -28,7 +28,7 @@ from pythonfmu import FmuBuilder
 import fmus_src
 from fmus_src.component import Component
 
-from ..machine import AXES, Machine, load_machine
+from ..machine import AXES, Machine, frame_parameters, load_machine
 from .errors import FMUError
 from .model_description import annotate_model_description, rewrite_member
 
@@ -47,6 +47,11 @@ def _declared(component_cls: type[Component], mapping: Mapping[str, object]) -> 
 
 def _nck_parameters(machine: Machine, cls: type[Component]) -> dict[str, object]:
     params: dict[str, object] = dict(machine.si("nck"))
+    params.update(frame_parameters(machine))  # machine zero in the axis frame, default work offsets
+    for n in (2, 3, 4):
+        for a in AXES:
+            if f"reference_{a}" in params:
+                params.setdefault(f"reference{n}_{a}", params[f"reference_{a}"])
     params.update({f"spindle_{k}": v for k, v in machine.si("spindle").items()})
     for a in AXES:
         params[f"{a}_rapid_feed"] = machine.si(f"axis.{a}")["rapid_feed"]
