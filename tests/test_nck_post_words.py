@@ -1,10 +1,12 @@
 """Words found by the CAM post sweep (``tests/fixtures/cam_posts``) that leave the tool path alone.
 
 Mazak EIA ``G61.1 [P0..P3]`` (geometry compensation, a continuous cutting mode like G64) and ``G5 P2``
-(high-speed machining mode), read without effect on the path; rotary words at 0 are in
-``test_nck_unseen_programs.py`` (Mastercam), L as a canned cycle's repeat count there too.
+(high-speed machining mode), read without effect on the path; rotary words at 0 (Mastercam's ``A0.``, also in
+G10 and G28 blocks). L as a canned cycle's repeat count: ``test_nck_unseen_programs.py``.
 """
 from __future__ import annotations
+
+import re
 
 import pytest
 
@@ -49,3 +51,12 @@ def test_mazak_high_speed_mode_g5_p2_is_read_like_hpcc():
     assert interpret(f"G5 P2\n{PATH}G5 P0\n", "m.nc").blocks == interpret(f"G5 P10000\n{PATH}G5 P0\n", "m.nc").blocks
     with pytest.raises(GCodeError, match=r"G5 P3 is not a supported mode; expected G5 P0, G5 P2, G5 P10000"):
         interpret("G5 P3\n", "m.nc")
+
+
+@pytest.mark.parametrize("block", ["G90 G10 L2 P1 X1. Y2. Z3. B0.", "G0 G90 G54 X5. Y5. A0. S5000 M3", "G28 X0. Y0. C0.",
+                                   "A0.", "G91 G0 X1. A0."])
+def test_rotary_word_at_zero_changes_nothing(block):
+    """Mastercam's 4-axis-ready 3-axis output: the rotary word at 0 is dropped wherever it stands."""
+    text = f"G0 X1. Y1. Z10.\n{block}\nG90 G1 X10. F300.\nM30\n"
+    without = re.sub(r" ?[ABC]0\.", "", text)
+    assert interpret(text, "m.nc").blocks == interpret(without, "m.nc").blocks
