@@ -60,3 +60,11 @@ def test_rotary_word_at_zero_changes_nothing(block):
     text = f"G0 X1. Y1. Z10.\n{block}\nG90 G1 X10. F300.\nM30\n"
     without = re.sub(r" ?[ABC]0\.", "", text)
     assert interpret(text, "m.nc").blocks == interpret(without, "m.nc").blocks
+
+
+def test_e_word_outside_g187_names_where_e_is_read():
+    """E changes the motion where posts write it outside G187 (Haas G0 rapid rate in percent), so it stays an error."""
+    with pytest.raises(GCodeError, match=r"address E is not supported here \(E is read only in a G187 block: the "
+                                         r"Haas corner rounding; E in other blocks, e\.g\. the Haas rapid rate") as info:
+        interpret("G187 P1 E0.05\nG0 X10. E50.\n", "h.nc")
+    assert (info.value.file, info.value.line, info.value.word) == ("h.nc", 2, "E50.")

@@ -103,6 +103,9 @@ SUPPORTED_M = "M0 M1 M2 M3 M4 M5 M6 M7 M8 M9 M19 M29 M30 M97 M98 M99"
 LETTERS = set("GMXYZIJKRFSTHDPQNOL") | {",C", ",R"}  # ,C / ,R: optional chamfer / corner R (see .corners)
 #: Address letters read only in a block with one of these G codes: E (corner rounding) of Haas G187.
 BLOCK_LETTERS: dict[str, int | float] = {"E": 187}
+#: What each block letter means there, and why it is refused elsewhere (quoted in the error).
+_BLOCK_LETTER_USE = {"E": "the Haas corner rounding; E in other blocks, e.g. the Haas rapid rate in percent of "
+                          "G0 ... E, or the FANUC thread lead, would change the motion and is not modelled"}
 #: Axis addresses of machines with more axes than the twin's X Y Z (rotary A B C, parallel U V W), as in
 #: ``G0 G90 G54 X-5. Y-5. A0.`` of 4-axis posts; named as such in the error.
 _EXTRA_AXES = {"A": "rotary axis about X", "B": "rotary axis about Y", "C": "rotary axis about Z",
@@ -177,7 +180,9 @@ def group_words(words: Sequence[Word], err: ErrorFactory, m_codes: Mapping[int, 
                           f"a {_EXTRA_AXES[w.letter]} (4th/5th axis), and the machine has only X, Y and Z"
                           + at_home, "a 3-axis program (post-process it for a 3-axis machine, without "
                           f"{w.letter} words{', or with ' + w.letter + '0 only' if at_home else ''})")
-            raise err(w.letter + w.text, f"address {w.letter} is not supported",
+            only_in = (f" here ({w.letter} is read only in a G{BLOCK_LETTERS[w.letter]} block: "
+                       f"{_BLOCK_LETTER_USE[w.letter]})" if w.letter in BLOCK_LETTERS else "")
+            raise err(w.letter + w.text, f"address {w.letter} is not supported{only_in}",
                       "one of the addresses " + " ".join(sorted(LETTERS)))
         if w.letter == "G":
             code = g_code(w)
