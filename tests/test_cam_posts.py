@@ -32,9 +32,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fmus_src.nck.writer import rewrite_program
 from fmus_src.nck.blocks import Arc, Dwell, Linear, ProgramEnd, ProgramStop, Rapid, SpindleSpeed, SpindleStop, \
     ToolChange
+from fmus_src.nck.writer import rewrite_program
 from orchestrator.case import load_case
 from orchestrator.optimize import OptimizeSettings, optimize
 from orchestrator.simulate import simulate
@@ -92,10 +92,12 @@ def _read_as_the_twin(name: str, text: str):
 
 @lru_cache(maxsize=None)
 def _original(name: str):
+    """The case's program as the twin reads it."""
     return _read_as_the_twin(name, (POSTS / name / "program.nc").read_text())
 
 
 def _length(b: Linear | Arc) -> float:
+    """Path length of a feed block, m."""
     if isinstance(b, Arc):
         return b.length
     return math.dist(b.start, b.end)
