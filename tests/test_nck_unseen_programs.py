@@ -118,17 +118,20 @@ N110 M30
 """
 
 
-def test_mastercam_fourth_axis_word_is_a_clear_error():
+def test_mastercam_fourth_axis_word_turning_the_axis_is_a_clear_error():
     with pytest.raises(GCodeError) as info:
-        interpret(MASTERCAM, "mcam.nc", REGISTERS)
+        interpret(MASTERCAM.replace(" A0.", " A90."), "mcam.nc", REGISTERS)
     err = info.value
-    assert (err.file, err.line, err.word) == ("mcam.nc", 8, "A0.")
+    assert (err.file, err.line, err.word) == ("mcam.nc", 8, "A90.")
     assert "A is a rotary axis about X" in str(err) and "only X, Y and Z" in str(err)
-    assert str(err).startswith("mcam.nc:8: 'N106 G0 G90 G54 X-5. Y-5. A0. S5000 M3':")
+    assert "A0 is accepted" in str(err)
+    assert str(err).startswith("mcam.nc:8: 'N106 G0 G90 G54 X-5. Y-5. A90. S5000 M3':")
 
 
-def test_mastercam_program_without_the_rotary_word_runs():
-    program = interpret(MASTERCAM.replace(" A0.", ""), "mcam.nc", REGISTERS)
+def test_mastercam_rotary_word_at_zero_runs_as_without_it():
+    """``A0.`` keeps the (absent) rotary table at its home: the blocks are those of the program without it."""
+    program = interpret(MASTERCAM, "mcam.nc", REGISTERS)
+    assert program.blocks == interpret(MASTERCAM.replace(" A0.", ""), "mcam.nc", REGISTERS).blocks
     assert _mm(_moves(program, 8)[0].end) == (-5.0, -5.0, 0.0)
     assert _mm(_moves(program, 9)[0].end) == (-5.0, -5.0, 25.0)
 
@@ -420,13 +423,20 @@ def test_inch_arc_with_four_decimal_rounding_is_accepted():
         interpret("G21 G90 G17\nG0 X0 Y0\nG3 X10. Y9.9975 I10. J0 F100.\nM30\n", "mm.nc")
 
 
-@pytest.mark.parametrize("text, line", [
-    ("G0 X0 Y0 Z10.\nG91 G81 X10. Z-5. R-3. L3 F100.\n", 2),  # the older FANUC form of the repeat count
-    ("G0 X0 Y0 Z10.\nG81 X1. Z-1. R1. F100.\nX2. L3\n", 3),  # in a modal cycle block
+@pytest.mark.parametrize("text", [
+    "G0 X0 Y0 Z10.\nG91 G81 X10. Z-5. R-3. L3 F100.\n",  # Haas (and the older FANUC form): L is the repeat count
+    "G0 X0 Y0 Z10.\nG81 X1. Z-1. R1. F100.\nX2. L3\n",  # in a modal cycle block
+    "G0 X0 Y0 Z10.\nG81 X1. Z-1. R1. F100. L0\nX2.\n",  # L0: the cycle is stored, no hole at X1
 ])
-def test_canned_cycle_repeat_count_written_as_l_names_k(text, line):
-    with pytest.raises(GCodeError, match=r"repeat count of a cycle is K") as info:
-        interpret(text, "a.nc")
-    assert info.value.line == line and info.value.word == "L3"
+def test_canned_cycle_repeat_count_written_as_l_reads_as_k(text):
+    """A Haas reads L in a canned-cycle block as the repeat count (Haas mill manual, G81: L = number of repeats):
+    the blocks are those of the same program with K."""
+    assert interpret(text, "a.nc").blocks == interpret(text.replace(" L", " K"), "a.nc").blocks
+
+
+def test_canned_cycle_with_both_k_and_l_and_l_elsewhere_are_errors():
+    with pytest.raises(GCodeError, match=r"words K and L in one canned-cycle block") as info:
+        interpret("G0 X0 Y0 Z10.\nG81 X1. Z-1. R1. F100. K2 L3\n", "a.nc")
+    assert info.value.line == 2 and info.value.word == "L3"
     with pytest.raises(GCodeError, match=r"word L outside an M98 block"):  # elsewhere the message is unchanged
         interpret("G0 X0 Y0 Z10.\nG81 X1. Z-1. R1. F100.\nG80 L3\n", "a.nc")

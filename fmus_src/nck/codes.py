@@ -15,6 +15,12 @@ Haas words: G187 (accuracy control, accepted without effect: :mod:`.lookahead_co
 in a G187 block), G103 (block buffering limit: :mod:`.block_buffering`), G154 P1..P99 and G110..G129 (additional
 work offsets: :mod:`.offsets`).
 
+Rotary axis words at zero (``A0.``, ``B0.``, ``C0.``; any G90/G91 block, G10, G28 intermediate points) are
+accepted and dropped: 4-axis-ready posts for 3-axis machines write them (Mastercam "Generic Fanuc 3X Mill"
+``G0 G90 G54 X.. Y.. A0. S.. M3``, ``G28 X0. Y0. A0.``, ``G10 L2 P1 ... B0.``), and an axis that the program
+keeps at 0 deg does not change the tool path. A nonzero rotary word and every U V W word are errors naming the
+word. Macro lines (``A#1``) still take only the dialect's addresses.
+
 Machine builders' M codes (M13, M48, M88, ...): the machine file's aliases (:mod:`.m_aliases`), passed to
 :func:`group_words`; each expands to the standard codes it stands for on its block, so M13 M5 is a conflict
 as M3 M5 is. M97 P<n> (Haas local subprogram call): :mod:`.subprograms`.
@@ -56,7 +62,7 @@ G_GROUP: dict[int | float, str] = {
     59: "work offset", 54.1: "work offset",
     # Haas additional work offsets G154 P1..P99 and their aliases G110..G129 = G154 P1..P20 (see offsets)
     154: "work offset", **{c: "work offset" for c in range(110, 130)},
-    61: "path mode", 64: "path mode",
+    61: "path mode", 64: "path mode", 61.1: "path mode",  # G61.1: Mazak geometry compensation (path_blending)
     80: "canned cycle", **{c: "canned cycle" for c in CYCLES},
     90: "distance", 91: "distance",
     90.1: "arc centre", 91.1: "arc centre",  # LinuxCNC: I/J/K absolute / incremental (see motion)
@@ -90,17 +96,24 @@ M_GROUP: dict[int, str] = {
     29: "rigid tapping",
 }
 SUPPORTED_G = ("G0 G1 G2 G3 G4 G5 G5.1 G8 G9 G10 G13.1 G15 G16 G17 G18 G19 G20 G21 G28 G30 G40 G41 G42 G43 G44 "
-               "G49 G50 G50.1 G51 G51.1 G52 G53 G54-G59 G54.1 G61 G64 G67 G68 G69 G73 G74 G76 G80 G81 G82 G83 G84 "
+               "G49 G50 G50.1 G51 G51.1 G52 G53 G54-G59 G54.1 G61 G61.1 G64 G67 G68 G69 G73 G74 G76 G80 G81 G82 G83 G84 "
                "G85 G86 G87 G89 G90 G90.1 G91 G91.1 G92 G92.1 G92.2 G92.3 G94 G95 G98 G99 G103 G110-G129 G154 G187")
 SUPPORTED_M = "M0 M1 M2 M3 M4 M5 M6 M7 M8 M9 M19 M29 M30 M97 M98 M99"
 #: Address letters of the dialect.
 LETTERS = set("GMXYZIJKRFSTHDPQNOL") | {",C", ",R"}  # ,C / ,R: optional chamfer / corner R (see .corners)
 #: Address letters read only in a block with one of these G codes: E (corner rounding) of Haas G187.
 BLOCK_LETTERS: dict[str, int | float] = {"E": 187}
+#: What each block letter means there, and why it is refused elsewhere (quoted in the error).
+_BLOCK_LETTER_USE = {"E": "the Haas corner rounding; E in other blocks, e.g. the Haas rapid rate in percent of "
+                          "G0 ... E, or the FANUC thread lead, would change the motion and is not modelled"}
 #: Axis addresses of machines with more axes than the twin's X Y Z (rotary A B C, parallel U V W), as in
 #: ``G0 G90 G54 X-5. Y-5. A0.`` of 4-axis posts; named as such in the error.
 _EXTRA_AXES = {"A": "rotary axis about X", "B": "rotary axis about Y", "C": "rotary axis about Z",
                "U": "parallel axis to X", "V": "parallel axis to Y", "W": "parallel axis to Z"}
+#: Rotary axes whose word is accepted at 0 (deg) and then has no effect: 4-axis-ready 3-axis posts write ``A0.``
+#: on every positioning line, in ``G10 L2 ... B0.`` and ``G28 X0. Y0. A0.``; the twin's machine has no rotary
+#: table, i.e. one that never leaves its 0 deg home (see :func:`group_words`).
+ROTARY_AT_HOME = ("A", "B", "C")
 
 
 def g_code(w: Word) -> int | float | None:
@@ -158,12 +171,18 @@ def group_words(words: Sequence[Word], err: ErrorFactory, m_codes: Mapping[int, 
     vals: ValueWords = {}
     for w in words:
         if w.letter not in LETTERS and BLOCK_LETTERS.get(w.letter) not in codes:
+            if w.letter in ROTARY_AT_HOME and w.value == 0.0:
+                continue  # the rotary axis stays at its 0 deg home: no motion, no offset (module docstring)
             if w.letter in _EXTRA_AXES:
+                at_home = (f"; {w.letter}0 is accepted (the axis kept at 0 deg, as 3-axis posts write it), "
+                           f"{w.letter}{w.text} would turn it" if w.letter in ROTARY_AT_HOME else "")
                 raise err(w.letter + w.text, f"axis word {w.letter}{w.text} is not supported: {w.letter} is "
-                          f"a {_EXTRA_AXES[w.letter]} (4th/5th axis), and the machine has only X, Y and Z",
-                          "a 3-axis program (post-process it for a 3-axis machine, without "
-                          f"{w.letter} words)")
-            raise err(w.letter + w.text, f"address {w.letter} is not supported",
+                          f"a {_EXTRA_AXES[w.letter]} (4th/5th axis), and the machine has only X, Y and Z"
+                          + at_home, "a 3-axis program (post-process it for a 3-axis machine, without "
+                          f"{w.letter} words{', or with ' + w.letter + '0 only' if at_home else ''})")
+            only_in = (f" here ({w.letter} is read only in a G{BLOCK_LETTERS[w.letter]} block: "
+                       f"{_BLOCK_LETTER_USE[w.letter]})" if w.letter in BLOCK_LETTERS else "")
+            raise err(w.letter + w.text, f"address {w.letter} is not supported{only_in}",
                       "one of the addresses " + " ".join(sorted(LETTERS)))
         if w.letter == "G":
             code = g_code(w)
@@ -203,14 +222,20 @@ def group_words(words: Sequence[Word], err: ErrorFactory, m_codes: Mapping[int, 
 def check_stray_words(gs: GWords, vals: ValueWords, err: ErrorFactory, cycle_mode: bool = False) -> None:
     """L outside M98/G10 and G50 with X/Y/Z/I/J/K/P/S (the lathe's G50) are errors; call after M98 took its P/L.
 
-    ``cycle_mode``: a canned cycle is modal before the block; an L there (or in a cycle block) is read as the
-    older FANUC form of the repeat count, and the message names K.
+    ``cycle_mode``: a canned cycle is modal before the block; an L there (or in a cycle block) is the repeat
+    count as a Haas reads it (Haas mill manual, G81 ``L``: number of repeats; also the older FANUC format, and
+    ``L0`` stores the cycle without drilling): it becomes the block's K word (an L with a K is an error).
     """
     if "L" in vals and gs.get("non-modal", (None,))[0] != 10:
         cycle = gs.get("canned cycle", (None,))[0]
         if (cycle_mode or cycle is not None) and cycle != 80 and "motion" not in gs:
-            raise err("L" + vals["L"].text, "word L in a canned-cycle block: the repeat count of a cycle is K on "
-                      "the FANUC 0i/31i (L is the older form)", "K<n> for the number of repeats, e.g. G81 ... K3")
+            w = vals.pop("L")
+            if "K" in vals:
+                raise err("L" + w.text, "words K and L in one canned-cycle block: both are the repeat count "
+                          "(K on the FANUC 0i/31i, L on a Haas and in the older FANUC format)",
+                          "one repeat count, K<n> or L<n>")
+            vals["K"] = Word("K", w.text, w.value, w.start, w.end, w.variable)  # Haas / older FANUC: L = K
+            return
         raise err("L" + vals["L"].text, "word L outside an M98 block", "L only as the repeat count of M98 P<n> L<k>")
     if gs.get("scaling", (None,))[0] == 50:
         for a in "XYZIJKPS":

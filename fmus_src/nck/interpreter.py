@@ -321,6 +321,7 @@ def _block(st: ModalState, words: tuple[Word, ...], line: int, text: str, file: 
     cutter_compensation(st, gs, vals, err, unit_name)
     if "path mode" in gs:
         st.exact_stop = gs["path mode"][0] == 61
+        st.path_code = float(gs["path mode"][0])
         blending_tolerance_words(gs, vals, st.cycle is not None or "canned cycle" in gs or "non-modal" in gs, err)
     if "arc centre" in gs:
         st.arc_centre_absolute = gs["arc centre"][0] == 90.1

@@ -5,7 +5,8 @@ Conventions
 * Look-ahead / contour-control modes: ``G5.1 Q1`` / ``G5.1 Q0`` (AI contour
   control, also ``G5.1 Q1 R<level>`` with level 1..10 as Fusion 360 posts
   write it), ``G8 P1`` / ``G8 P0`` (advanced preview control), ``G5 P10000``
-  / ``G5 P0`` (high-precision contour control) are accepted alone in their
+  / ``G5 P0`` (high-precision contour control; ``G5 P2``, Mazak EIA's high-speed machining mode as the Mazak
+  posts write it around an operation, is read the same way) are accepted alone in their
   block (an N number allowed), as the FANUC manuals ask. They change
   nothing in the simulation: the twin always plans with its own look-ahead
   (``lookahead_blocks``) and the machine file's acc/dec before and after
@@ -34,7 +35,7 @@ from .errors import ErrorFactory
 from .lexer import Word
 
 #: Allowed modes of the look-ahead / contour-control codes: G code -> (address, values).
-LOOK_AHEAD_MODES = {5.1: ("Q", (0, 1)), 8: ("P", (0, 1)), 5: ("P", (0, 10000))}
+LOOK_AHEAD_MODES = {5.1: ("Q", (0, 1)), 8: ("P", (0, 1)), 5: ("P", (0, 2, 10000))}
 #: Smoothness levels of Haas G187 P (1 rough, 2 medium, 3 finish).
 G187_LEVELS = (1, 2, 3)
 G187_FORMS = "G187, G187 P1/P2/P3, G187 E<corner rounding >= 0> or G187 P<level> E<corner rounding>"

@@ -73,7 +73,8 @@ class ModalState:
         self.feed_per_rev = False  # the modal F was given under G95 (m/rev) rather than G94 (m/s)
         off = self.work_offset()
         self.prog = [self.machine[a] - off[a] for a in range(3)]
-        self.exact_stop = False  # G61 (True) / G64
+        self.exact_stop = False  # G61 (True) / G64 or Mazak G61.1
+        self.path_code = 64.0  # the path mode code in effect: 61, 61.1 (Mazak geometry compensation) or 64
         self.lookahead_limit = 0  # Haas G103 P<n>: blocks read ahead of the executing one, 0: no limit
         self.return_initial = True  # G98 (True) / G99
         self.cycle: int | None = None  # active canned cycle, None under G80

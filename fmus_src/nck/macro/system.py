@@ -6,7 +6,7 @@ Conventions
   4001 G0-G3, 4002 G17-G19, 4003 G90/G91, 4005 G94/G95, 4006 G20/G21, 4007 G40-G42, 4008 G43/G44/G49,
   4009 the canned cycle or G80, 4010 G98/G99, 4014 the work offset code as written (54-59; 54.1 for G54.1 Pn
   and G54 Pn, as FANUC; 154 for Haas G154 Pn and 110-129 for G110-G129, the codes a Haas reports), 4015
-  G61/G64. Groups of
+  G61/G64 (61.1 under Mazak's G61.1). Groups of
   features that are never on read their cancel code: 4012 G67, 4013 G97; 4011 G50/G51, 4016 G68/G69,
   4017 G15/G16, 4022 G50.1/G51.1 (:mod:`..transforms`). Groups 4, 18-21 are errors (the twin does not track
   them).
@@ -51,7 +51,7 @@ def read_system(st: ModalState, n: int, text: str, fail: Fail) -> float | None:
         4009: lambda: float(st.cycle) if st.cycle is not None else 80.0,
         4010: lambda: 98.0 if st.return_initial else 99.0,
         4014: lambda: st.work_code,
-        4015: lambda: 61.0 if st.exact_stop else 64.0,
+        4015: lambda: st.path_code,
         4011: lambda: 51.0 if st.xf.scaling else 50.0,
         4016: lambda: 68.0 if st.xf.rotation is not None else 69.0,
         4017: lambda: 16.0 if st.xf.polar else 15.0,
