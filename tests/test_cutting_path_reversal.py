@@ -95,7 +95,7 @@ def test_a_reversal_inside_material_is_not_skipped():
 PROGRAM = """G21 G17 G90 G94 G54
 S6000 M3
 G0 X14. Y14. Z5.
-G99 G83 X14. Y14. Z-3. R1. Q1. F150
+G99 {cycle}
 G80
 G0 X-4. Y5. Z1.
 G1 Z-1. F300
@@ -109,13 +109,19 @@ M30
 """
 
 
-@pytest.fixture(scope="module")
-def peck_runs(tmp_path_factory):
+#: The drilling cycle of PROGRAM: the G83 of the unseen part (F150, Q1; the servo turns back 0.14-0.40 mm short of
+#: R, 0.03 mm short of each bottom), a deeper and faster one (Q3 to Z-9 at F300: 0.40-0.83 mm short of R, 0.06 mm of
+#: each bottom) and G73 (F150; 0.2 mm retracts between pecks, in the hole).
+CYCLES = ("G83 X14. Y14. Z-3. R1. Q1. F150", "G83 X14. Y14. Z-9. R1. Q3. F300", "G73 X14. Y14. Z-3. R1. Q1. F150")
+
+
+@pytest.fixture(scope="module", params=CYCLES)
+def peck_runs(request, tmp_path_factory):
     folder = tmp_path_factory.mktemp("peck")
     (folder / "case.toml").write_text('program = "program.nc"\n[stock]\nmin = [0.0, 0.0, -10.0]\n'
                                       'max = [20.0, 20.0, 0.0]\n[tool]\ndiameter_mm = 6.0\nflutes = 2\n'
                                       '[machine]\nparameters = "default"\n')
-    (folder / "program.nc").write_text(PROGRAM)
+    (folder / "program.nc").write_text(PROGRAM.format(cycle=request.param))
     case = load_case(folder)
     return case, {mode: simulate(case=case, options=TwinOptions(cutting_mode=mode), plot=False)
                   for mode in ("path", "zmap")}

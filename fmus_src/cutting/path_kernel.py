@@ -77,8 +77,8 @@ TANGENT_CENTRE = 0.25
 #: Distance margin below which two projection candidates tie (smallest s wins), m.
 TIE_TOL = 1e-9
 #: Farthest the first reversal of the path (a segment running against the cursor's) may lie ahead of the
-#: cursor for :func:`across_reversal`, m: the servo lag at a reversal (0.14-0.50 mm at the R plane of the
-#: bundled G83 pecks) with room to spare; it bounds the scan, the material check bounds the jump.
+#: cursor for :func:`across_reversal`, m: the servo lag at a reversal (0.14-0.83 mm at the R plane of the
+#: tested G83 pecks) with room to spare; it bounds the scan, the material check bounds the jump.
 REVERSAL_REACH = 0.01
 
 #: Per-member error kinds written to ``status`` by :func:`path_step`: too many substeps, off the table's
