@@ -842,7 +842,8 @@ max_substeps, status
         kt = par[PAR_KT, m]
         ke = par[PAR_KE, m]
         steps = par[PAR_STEPS, m]
-        z0, ddx, ddy, ddz, move, s0, seg, s1, dist = member_motion(st, m, x1, y1, z1, reach_margin, verts, vs, ds, count)
+        z0, ddx, ddy, ddz, move, s0, seg, s1, dist = member_motion(st, m, x1, y1, z1, reach_margin, verts, vs, ds,
+                                                                   count)
         pitch = TWO_PI / flutes
         n = int(substeps(om, h, pitch, steps, move, radius))
         if n > max_substeps:
