@@ -15,13 +15,16 @@ import math
 import re
 from pathlib import Path
 
+import numpy as np
 import pytest
 
+from fmus_src.cutting.table import EngagementTable
 from fmus_src.nck.blocks import Arc, Linear
 from fmus_src.nck.interpreter import interpret
 from orchestrator.case import load_case
-from orchestrator.optimize import OptimizeError, OptimizeSettings, optimize
+from orchestrator.optimize import OptimizeError, OptimizeSettings, optimize, reference
 from orchestrator.simulate import simulate
+from orchestrator.twin import cutting_parameters, reference_path
 
 PARTS = Path(__file__).resolve().parent / "fixtures" / "unseen_parts"
 MM_PER_MIN_PER_M_S = 60000.0
@@ -94,12 +97,6 @@ def test_two_tools_and_peck_drilling(tmp_path):
 def test_the_search_falls_back_to_the_zmap_model_when_the_path_mode_loses_the_tool(tmp_path, monkeypatch):
     """A table whose path runs 1 mm beside the program's: the path mode loses the tool on the original program,
     so the search runs on the Z-map model, and the report's notes say why, naming the line."""
-    import numpy as np
-
-    from fmus_src.cutting.table import EngagementTable
-    from orchestrator.optimize import reference
-    from orchestrator.twin import cutting_parameters, reference_path
-
     def beside(case, options=None, program_text=None):
         path = reference_path(case, options, program_text) + np.array([0.0, 1e-3, 0.0])
         return EngagementTable.from_parameters(path, cutting_parameters(case))

@@ -116,6 +116,8 @@ def build_reference(case: Case, program_text: str | None = None, ranges: Ranges 
         used: ``context.engagement`` is then None and
         ``context.search_model_note`` says why, naming the line.
     """
+    from ..simulate import failure_message  # names the line executing at a failure, as cnctwin simulate does
+
     if case.stock is None:
         raise OptimizeError(f"{case.source or case.program}: the case has no [stock]; nothing is cut, nothing to optimise")
     if not load_limit_N > 0:
@@ -128,8 +130,6 @@ def build_reference(case: Case, program_text: str | None = None, ranges: Ranges 
                            float(load_limit_N), {}, step, time_limit_s, engagement=engagement)
     run = run_twin(probe, None, None, 1, channels=None)
     search_model_note = ""
-    from ..simulate import failure_message  # names the line executing at a failure, as cnctwin simulate does
-
     if not run.success and engagement is not None and OFF_PATH in run.message:
         # the path mode lost the tool on its own reference path (e.g. a reversal on one line inside material that
         # the servo does not reach): every evaluation removes material from its own Z-map instead
