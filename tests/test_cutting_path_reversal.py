@@ -4,7 +4,8 @@ The forward-only projection of the path mode (:func:`fmus_src.cutting.path_kerne
 that turns back before the commanded motion does: a G83 peck returns to R and the servo turns back 0.14-0.50 mm
 short of it. :func:`~fmus_src.cutting.path_kernel.across_reversal` re-finds the member after the reversal, and
 only across stations where the reference pass met no material. Checked here on the kernel's projection
-(analytic positions on a polyline), on a reversal inside material (no jump: the honest off-path error) and on the
+(analytic positions on a polyline), on a reversal inside material (no jump: the honest off-path error), on the
+compiled replay against the component stepped step by step (bit for bit, baseline and effect kernels) and on the
 whole twin with a G83 program and two slots after it, against the Z-map model (the independent reference) and
 hand calculations: a full slot's peak Fc = Kt a fz sqrt(1 + Ke^2) and its removed volume width x depth x length.
 """
@@ -160,3 +161,63 @@ def test_g83_program_in_path_mode_agrees_with_the_zmap_model_and_hand_calculatio
     assert peak_p[8] == pytest.approx(kt * 1 * MM * fz * math.sqrt(1 + ke * ke), abs=0.05)  # 34.38 N
     # removed volume of slot 1: 6 mm wide x 1 mm deep across the 20 mm block (lines 7-9: plunge, slot, lift)
     assert vol_p[7] + vol_p[8] + vol_p[9] == pytest.approx(6.0 * 1.0 * 20.0, rel=1e-3)
+
+
+def _peck_then_slot(r_top: float) -> list[list[float]]:
+    """Two pecks at (6, 5) mm from Z3 (to Z-1, back up to ``r_top`` [m], to Z-2, out), then a 1 mm deep slot along
+    +x at y = -4 mm through the 12 mm block of :func:`tests.test_cutting_path.params`, m."""
+    hx, hy, top, a = 6e-3, 5e-3, 3e-3, 1e-3
+    x0, x1 = -R - 0.5e-3, 0.012 + R + 0.5e-3
+    return [[hx, hy, top], [hx, hy, -1e-3], [hx, hy, r_top], [hx, hy, -2e-3], [hx, hy, top], [x0, -4e-3, top],
+            [x0, -4e-3, -a], [x1, -4e-3, -a]]
+
+
+@pytest.mark.parametrize("effects", [{}, {"runout_eccentricity": 5e-6, "runout_phase": 0.4, "helix_angle": 0.3}])
+def test_compiled_replay_follows_the_pecks_bit_for_bit_and_the_slot_after_them_matches_zmap(effects):
+    """The commanded path returns to R = Z1 between the pecks; the tool turns back 0.14 mm short of it. The
+    compiled replay (path_replay) and the component stepped step by step (path_step, or path_step_effects with
+    runout and helix) give the same outputs bit for bit; on the baseline kernel the slot after the pecks agrees
+    with the Z-map mode (test_cutting_path's tolerances; the path-mode helix peak is exact where the Z-map mode
+    keeps its bands, see README "Effect terms")."""
+    from fmus_src.cutting.path_component import PathCuttingLoad
+    from fmus_src.cutting.path_replay import compiled_path_steps
+    from fmus_src.cutting.table import EngagementTable
+    from tests.test_cutting_path import NAMES, assert_modes_agree, drive, zmap_run
+
+    c = 5e-5
+    p = params(**effects)
+    pos = along(_peck_then_slot(0.86e-3), c / TOOTH_PERIOD * H)
+    table = EngagementTable.from_parameters(np.asarray(_peck_then_slot(1e-3)), p)
+
+    def component():
+        comp = PathCuttingLoad("cut", batch=1, **p)
+        comp.attach_table(table)
+        return comp
+
+    def set_up():
+        comp = component()
+        for a, name in enumerate(("x_position", "y_position", "z_position")):
+            comp.set(name, pos[0, :, a])
+        comp.set("spindle_speed", OMEGA)
+        comp.setup(0.0)
+        return comp
+
+    t = H * np.arange(pos.shape[0])
+    replay = compiled_path_steps(set_up(), t, pos[:, 0, :], np.full(pos.shape[0] - 1, OMEGA))
+    comp = set_up()
+    names = NAMES + ("axial_depth", "engaged_teeth")
+    stepped = {n: [] for n in names}
+    for k in range(1, pos.shape[0]):  # the replay's steps: t[k - 1] to t[k]
+        for a, name in enumerate(("x_position", "y_position", "z_position")):
+            comp.set(name, pos[k, :, a])
+        comp.do_step(t[k - 1], t[k] - t[k - 1])
+        for n in names:
+            stepped[n].append(comp.get(n))
+    stepped = {n: np.array(v) for n, v in stepped.items()}
+    assert replay is not None
+    for name, col in (("fx", "fx"), ("fy", "fy"), ("spindle_torque", "spindle_torque"), ("axial_depth", "axial_depth"),
+                      ("engaged_teeth", "engaged_teeth")):
+        np.testing.assert_array_equal(replay[name][1:, 0], stepped[col][:, 0], err_msg=name)
+    assert stepped["fc_peak"].max() > 10.0  # the slot cuts (1 mm deep, 50 um per tooth: about 69 N)
+    if not effects:  # the baseline against the Z-map mode (helix peaks differ by design: see the module docstring)
+        assert_modes_agree(zmap_run(p, pos, OMEGA), drive(component(), pos, OMEGA), worst=0.04)
