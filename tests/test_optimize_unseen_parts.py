@@ -15,13 +15,16 @@ import math
 import re
 from pathlib import Path
 
+import numpy as np
 import pytest
 
+from fmus_src.cutting.table import EngagementTable
 from fmus_src.nck.blocks import Arc, Linear
 from fmus_src.nck.interpreter import interpret
 from orchestrator.case import load_case
-from orchestrator.optimize import OptimizeError, OptimizeSettings, optimize
+from orchestrator.optimize import OptimizeError, OptimizeSettings, optimize, reference
 from orchestrator.simulate import simulate
+from orchestrator.twin import cutting_parameters, reference_path
 
 PARTS = Path(__file__).resolve().parent / "fixtures" / "unseen_parts"
 MM_PER_MIN_PER_M_S = 60000.0
@@ -71,15 +74,41 @@ def test_two_tools_and_peck_drilling(tmp_path):
     """T1 end mill, T2 drill (G81, G83), T1 again. The twin's cutting force and removal rate are those of the
     periphery (Eq. 10-13: the chip comes from the XY feed), so the drill's plunges remove nothing and keep
     their F; the two slots are the cutting lines. The pecks of G83 reverse on one line faster than the servo
-    follows, which the path-mode engagement cannot track: the search runs on the Z-map model. The report says
-    that both tools' loads are computed with the case's one [tool]."""
+    follows (it turns back 0.14-0.50 mm short of R): the path-mode engagement re-finds the tool across the
+    reversal, so the search runs in path mode, and its reference run of the original agrees with the Z-map
+    model (within 0.1 N) and with the hand calculation of slot 2. The report says that both tools' loads are
+    computed with the case's one [tool]."""
     result, out = _run("drill_two_tools", tmp_path)
     report = _check_outputs("drill_two_tools", result, out)
     assert [row["line"] for row in report["lines"]] == [9, 23]  # the two slots
     assert report["removed_mm3_by_line"]["14"] == report["removed_mm3_by_line"]["15"] == 0.0  # G81, G83
-    assert report["search_cutting_model"] == "zmap"
+    assert report["search_cutting_model"] == "path"
     assert report["tool_changes"] == [{"line": 5, "tool": 1}, {"line": 12, "tool": 2}, {"line": 19, "tool": 1}]
     assert len(report["notes"]) == 1 and "T1, T2" in report["notes"][0] and "6 mm, 2 flutes" in report["notes"][0]
+    zmap = simulate(case=load_case(PARTS / "drill_two_tools"), plot=False)
+    assert report["before"]["max_cutting_load_N"] == pytest.approx(zmap.summary["max_cutting_load_N"], abs=0.1)
+    # slot 2: full slot 1.2 mm deep, F350, S6000, 2 flutes: Kt a fz sqrt(1 + Ke^2) = 48.13 N (A6061: 1.23e9, 0.5)
+    assert report["before"]["max_cutting_load_N"] == pytest.approx(
+        1.23e9 * 1.2e-3 * 350.0 / (6000 * 2) * 1e-3 * math.sqrt(1.25), abs=0.05)
+    # the slots remove 6 mm x 40 mm x (1.0 + 1.2) mm (their servo-lag tails counted on the lines after them)
+    assert sum(report["removed_mm3_by_line"].values()) == pytest.approx(6.0 * 40.0 * 2.2, rel=1e-3)
+
+
+def test_the_search_falls_back_to_the_zmap_model_when_the_path_mode_loses_the_tool(tmp_path, monkeypatch):
+    """A table whose path runs 1 mm beside the program's: the path mode loses the tool on the original program,
+    so the search runs on the Z-map model, and the report's notes say why, naming the line."""
+    def beside(case, options=None, program_text=None):
+        path = reference_path(case, options, program_text) + np.array([0.0, 1e-3, 0.0])
+        return EngagementTable.from_parameters(path, cutting_parameters(case))
+
+    monkeypatch.setattr(reference, "engagement_table", beside)
+    result, out = _run("all_cut", tmp_path)
+    report = _check_outputs("all_cut", result, out)
+    assert report["search_cutting_model"] == "zmap"
+    assert len(report["notes"]) == 1
+    assert re.search(r"path-mode cutting load loses the tool on the original program \(.*all_cut/program\.nc:\d+: "
+                     r".*farther than path_tolerance.*\): the search ran on the Z-map cutting model",
+                     report["notes"][0])
 
 
 def test_g95_report_gives_the_feed_in_effect(tmp_path):

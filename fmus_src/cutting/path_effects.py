@@ -361,7 +361,8 @@ max_substeps
         wn = epar[E_WN, m]
         chat = wn > 0.0
         nf = passes[m]
-        z0, ddx, ddy, ddz, move, s0, seg, s1, dist = member_motion(st, m, x1, y1, z1, reach_margin, verts, vs)
+        z0, ddx, ddy, ddz, move, s0, seg, s1, dist = member_motion(st, m, x1, y1, z1, reach_margin, verts, vs, ds,
+                                                                   count)
         pitch = TWO_PI / flutes
         n_mode = math.ceil(h * wn / TWO_PI * CHATTER_SUBSTEPS_PER_PERIOD - 1e-9)
         n = int(max(substeps(om, h, pitch, steps, move, radius), n_mode))

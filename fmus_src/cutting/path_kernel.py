@@ -11,6 +11,14 @@ Per member and step ``[t, t + h]``:
    and arc length ``s``) over an arc-length window ``2 |dp| + margin``;
    ``s`` never decreases (a reversal on the same line is not mistaken for the
    way back), among equally near candidates the smallest ``s`` wins.
+   When that finds no point ahead of the cursor and the tool moved away from
+   the path (the servo turned back short of a reversal of the commanded path,
+   as the pecks of G83 do at the R plane), the member is re-found across the
+   reversal (:func:`across_reversal`): on the stretch after the first segment
+   ahead that runs against the cursor's, within :data:`REVERSAL_REACH`. The
+   cursor jumps only to a strictly nearer point, and only when no station from
+   the cursor to that point holds material (:func:`no_material`), so it never
+   passes over a stretch where the reference pass removed material.
    The chip is the tool-centre displacement over the last tooth period (the
    member's chip history in its state rows, :func:`.kernel.chord_feed`).
 2. **Substeps** — as the Z-map mode, per member: the spindle turns at most
@@ -68,6 +76,10 @@ TANGENT_NEAR = 8.0
 TANGENT_CENTRE = 0.25
 #: Distance margin below which two projection candidates tie (smallest s wins), m.
 TIE_TOL = 1e-9
+#: Farthest the first reversal of the path (a segment running against the cursor's) may lie ahead of the
+#: cursor for :func:`across_reversal`, m: the servo lag at a reversal (0.14-0.83 mm at the R plane of the
+#: tested G83 pecks) with room to spare; it bounds the scan, the material check bounds the jump.
+REVERSAL_REACH = 0.01
 
 #: Per-member error kinds written to ``status`` by :func:`path_step`: too many substeps, off the table's
 #: path, fed into material with a stalled spindle (:func:`.kernel.stalled_cut`, a crash).
@@ -517,11 +529,72 @@ def fail_member(status: np.ndarray, out: np.ndarray, engaged: np.ndarray, m: int
 
 
 @njit_inline
+def no_material(s_a: float, s_b: float, ds: float, count: np.ndarray) -> bool:
+    """True when no station of the table that :func:`table_at` reads between arc lengths ``s_a`` and ``s_b``
+    [m] has an engagement interval: the reference pass removed no material there.
+
+    The stations are those :func:`material_near` looks at (``floor(s / ds) - 2 .. floor(s / ds) + 3``).
+    """
+    last = count.shape[0] - 1
+    lo = max(int(math.floor(min(s_a, s_b) / ds)) - 2, 0)
+    hi = min(int(math.floor(max(s_a, s_b) / ds)) + 3, last)
+    for i in range(lo, hi + 1):
+        if count[i] > 0:
+            return False
+    return True
+
+
+@njit_borrowed
+def across_reversal(
+    px: float, py: float, pz: float, seg0: int, s0: float, d0: float, reach: float, verts: np.ndarray,
+    vs: np.ndarray, ds: float, count: np.ndarray,
+) -> tuple[int, float, float]:
+    """The member at ``p`` [m] re-found after the next reversal of the path, or ``seg = -1``.
+
+    For a member whose forward projection (:func:`locate`) stays at its cursor ``(seg0, s0)`` while the tool
+    moves away from the path (``d0`` [m] from it): the servo turned back before the commanded motion did
+    (a G83 peck returns to R before its retract reaches R). The reversal is the first segment after
+    ``seg0`` that runs against it (negative dot product of the directions) and starts within
+    :data:`REVERSAL_REACH` of ``s0``; the tool, ``d0`` back from the cursor, is then near the stretch after it
+    up to ``s_rev + (s_rev - s0) + d0 + reach`` (the mirror image of the cursor plus the window ``reach``
+    [m]), where the nearest point is taken (:func:`locate`).
+
+    Returns
+    -------
+    seg, s, dist : int, float, float
+        That point, when it is nearer than ``d0`` by more than :data:`TIE_TOL` and no station from ``s0`` to
+        it holds material (:func:`no_material`: the jump skips nothing the reference pass cut); otherwise
+        ``(-1, s0, d0)``, the forward projection stands.
+    """
+    nv = verts.shape[0]
+    if seg0 >= nv - 1:
+        return -1, s0, d0
+    tx = verts[seg0 + 1, 0] - verts[seg0, 0]
+    ty = verts[seg0 + 1, 1] - verts[seg0, 1]
+    tz = verts[seg0 + 1, 2] - verts[seg0, 2]
+    k = seg0 + 1
+    while k < nv - 1 and vs[k] <= s0 + REVERSAL_REACH:
+        if ((verts[k + 1, 0] - verts[k, 0]) * tx + (verts[k + 1, 1] - verts[k, 1]) * ty
+                + (verts[k + 1, 2] - verts[k, 2]) * tz) < 0.0:
+            break
+        k += 1
+    if k >= nv - 1 or vs[k] > s0 + REVERSAL_REACH:
+        return -1, s0, d0
+    s_rev = vs[k]
+    seg, s, d = locate(px, py, pz, k, s_rev, (s_rev - s0) + d0 + reach, verts, vs)
+    if d < d0 - TIE_TOL and no_material(s0, s, ds, count):
+        return seg, s, d
+    return -1, s0, d0
+
+
+@njit_inline
 def member_motion(
     st: np.ndarray, m: int, x1: float, y1: float, z1: float, reach_margin: float, verts: np.ndarray,
-    vs: np.ndarray,
+    vs: np.ndarray, ds: float, count: np.ndarray,
 ) -> tuple[float, float, float, float, float, float, int, float, float]:
     """Move of member ``m`` over the step and where its new position ``(x1, y1, z1)`` [m] lies on the path.
+
+    ``ds``, ``count``: the table's station spacing [m] and interval counts (for :func:`across_reversal`).
 
     Returns
     -------
@@ -532,14 +605,21 @@ def member_motion(
     s0 : float
         Arc length at the step start, m.
     seg, s1, dist : int, float, float
-        :func:`locate` of the new position (forward window ``2 |dp| + reach_margin``).
+        :func:`locate` of the new position (forward window ``2 |dp| + reach_margin``); when that stays at
+        the cursor (``s1 - s0 <= TIE_TOL``) while the tool moves away from the path (``dist`` grows by more
+        than :data:`TIE_TOL` over the last step's), :func:`across_reversal` where it finds the member.
     """
     x0, y0, z0 = st[ST_X, m], st[ST_Y, m], st[ST_Z, m]
     ddx, ddy, ddz = x1 - x0, y1 - y0, z1 - z0
     move = math.sqrt(ddx * ddx + ddy * ddy)
     s0 = st[ST_S, m]
     reach = 2.0 * math.sqrt(move * move + ddz * ddz) + reach_margin
-    seg, s1, dist = locate(x1, y1, z1, int(st[ST_SEG, m]), s0, reach, verts, vs)
+    seg0 = int(st[ST_SEG, m])
+    seg, s1, dist = locate(x1, y1, z1, seg0, s0, reach, verts, vs)
+    if s1 - s0 <= TIE_TOL and dist > st[ST_DIST, m] + TIE_TOL:  # no progress, moving away: a reversal ahead?
+        seg_r, s_r, d_r = across_reversal(x1, y1, z1, seg, s0, dist, reach, verts, vs, ds, count)
+        if seg_r >= 0:
+            seg, s1, dist = seg_r, s_r, d_r
     return z0, ddx, ddy, ddz, move, s0, seg, s1, dist
 
 
@@ -762,7 +842,8 @@ max_substeps, status
         kt = par[PAR_KT, m]
         ke = par[PAR_KE, m]
         steps = par[PAR_STEPS, m]
-        z0, ddx, ddy, ddz, move, s0, seg, s1, dist = member_motion(st, m, x1, y1, z1, reach_margin, verts, vs)
+        z0, ddx, ddy, ddz, move, s0, seg, s1, dist = member_motion(st, m, x1, y1, z1, reach_margin, verts, vs, ds,
+                                                                   count)
         pitch = TWO_PI / flutes
         n = int(substeps(om, h, pitch, steps, move, radius))
         if n > max_substeps:

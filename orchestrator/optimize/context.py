@@ -160,6 +160,9 @@ class ProblemContext:
     program : Program or None
         The interpreted original program (the NC kernel's per-run view, :meth:`words_for`); None: interpreted
         on first use.
+    search_model_note : str
+        Why the search runs on the Z-map model although the path mode was asked for (the path mode failed on
+        the original program, naming the line); empty otherwise. ``report.json`` lists it in ``notes``.
     """
 
     case: Case
@@ -179,6 +182,7 @@ class ProblemContext:
     inch_lines: frozenset[int] = frozenset()
     per_rev_lines: frozenset[int] = frozenset()
     program: Program | None = field(default=None, repr=False, compare=False)
+    search_model_note: str = field(default="", compare=False)
 
     @property
     def inch(self) -> bool:

@@ -110,10 +110,14 @@ def build_reference(case: Case, program_text: str | None = None, ranges: Ranges 
         bundled parts, which :func:`~.run.optimize` uses for its final
         re-simulation). ``"zmap"``: every individual removes material from its
         own stock. When the path mode fails on the original program itself
-        (the tool leaves the table's path: a reversal on one line that the
-        servo does not reach, as the pecks of G83), the Z-map mode is used
-        (``context.engagement`` is then None).
+        (the tool leaves the table's path, e.g. a reversal on one line inside
+        material that the servo turns back from short of its end; the pecks
+        of G83, which turn back in air at R, are followed), the Z-map mode is
+        used: ``context.engagement`` is then None and
+        ``context.search_model_note`` says why, naming the line.
     """
+    from ..simulate import failure_message  # names the line executing at a failure, as cnctwin simulate does
+
     if case.stock is None:
         raise OptimizeError(f"{case.source or case.program}: the case has no [stock]; nothing is cut, nothing to optimise")
     if not load_limit_N > 0:
@@ -125,15 +129,17 @@ def build_reference(case: Case, program_text: str | None = None, ranges: Ranges 
     probe = ProblemContext(case, text, np.zeros(0, int), np.zeros(0, int), {}, np.zeros(0), np.zeros(0), ranges,
                            float(load_limit_N), {}, step, time_limit_s, engagement=engagement)
     run = run_twin(probe, None, None, 1, channels=None)
+    search_model_note = ""
     if not run.success and engagement is not None and OFF_PATH in run.message:
-        # the path mode lost the tool on its own reference path (a reversal on one line that the servo does not
-        # reach, e.g. the pecks of G83): every evaluation removes material from its own Z-map instead
+        # the path mode lost the tool on its own reference path (e.g. a reversal on one line inside material that
+        # the servo does not reach): every evaluation removes material from its own Z-map instead
+        lost = failure_message(run.message, run.recording, case.program)
+        search_model_note = (f"the path-mode cutting load loses the tool on the original program ({lost}): the "
+                             "search ran on the Z-map cutting model (slower)")
         engagement = None
         probe.engagement = None
         run = run_twin(probe, None, None, 1, channels=None)
-    if not run.success:  # name the line executing at the failure, as cnctwin simulate does
-        from ..simulate import failure_message
-
+    if not run.success:
         where = failure_message("", run.recording, case.program)
         raise OptimizeError(f"{where or f'{case.program}: '}the original program fails on the twin: {run.message}")
     # the twin has planned the program: reuse its interpretation
@@ -148,7 +154,8 @@ def build_reference(case: Case, program_text: str | None = None, ranges: Ranges 
     inch = frozenset(inch_lines(text, list(lines) + list(pins), file=str(case.program)))  # F words in in/min
     ctx = ProblemContext(case, text, np.asarray(lines, int), np.asarray(s_lines, int), pins, np.asarray(f0, float),
                          np.asarray(s0, float), ranges, float(load_limit_N), removed, step, time_limit_s,
-                         engagement=engagement, inch_lines=inch, per_rev_lines=per_rev, program=twin.nck.program_)
+                         engagement=engagement, inch_lines=inch, per_rev_lines=per_rev, program=twin.nck.program_,
+                         search_model_note=search_model_note)
     check_context(ctx)
     evaluation = figures(ctx, run, 1)
     if not max_cycle_factor > 1.0:

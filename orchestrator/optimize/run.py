@@ -629,7 +629,7 @@ def optimize(program: str | Path | None = None, case: str | Path | Case | None =
     )
     changes = [(b.line, b.tool) for b in ctx.interpreted().blocks if isinstance(b, ToolChange)]
     result.tool_changes, tool_text = tool_notes(changes, True, ctx.case.tool.diameter_mm, ctx.case.tool.flutes)
-    result.notes = tool_text + notes
+    result.notes = tool_text + ([ctx.search_model_note] if ctx.search_model_note else []) + notes
     if out_path is not None:
         result.files = write_outputs(result, ctx, settings, out_path)
     return result

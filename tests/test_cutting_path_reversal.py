@@ -1,0 +1,223 @@
+"""Path mode across a reversal on one line that the servo turns back from short of its end (G83 pecks).
+
+The forward-only projection of the path mode (:func:`fmus_src.cutting.path_kernel.locate`) cannot follow a tool
+that turns back before the commanded motion does: a G83 peck returns to R and the servo turns back 0.14-0.50 mm
+short of it. :func:`~fmus_src.cutting.path_kernel.across_reversal` re-finds the member after the reversal, and
+only across stations where the reference pass met no material. Checked here on the kernel's projection
+(analytic positions on a polyline), on a reversal inside material (no jump: the honest off-path error), on the
+compiled replay against the component stepped step by step (bit for bit, baseline and effect kernels) and on the
+whole twin with a G83 program and two slots after it, against the Z-map model (the independent reference) and
+hand calculations: a full slot's peak Fc = Kt a fz sqrt(1 + Ke^2) and its removed volume width x depth x length.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from fmus_src.cutting import CuttingError
+from fmus_src.cutting import path_kernel as pk
+from orchestrator.case import load_case
+from orchestrator.simulate import simulate
+from orchestrator.twin import TwinOptions
+from tests.test_cutting_path import OMEGA, R, TOOTH_PERIOD, H, along, params, path_run
+
+MM = 1e-3
+
+
+def _state(x: float, y: float, z: float, s: float, seg: int, dist: float) -> np.ndarray:
+    """One member's state (rows ST_*) at (x, y, z) [m], cursor (seg, s [m]), last distance [m]."""
+    st = np.zeros((pk.ST_ROWS, 1))
+    st[pk.ST_X, 0], st[pk.ST_Y, 0], st[pk.ST_Z, 0] = x, y, z
+    st[pk.ST_S, 0], st[pk.ST_SEG, 0], st[pk.ST_DIST, 0] = s, seg, dist
+    return st
+
+
+# a G83 retract and return: up from Z-1 to R = Z1 (s 0..2 mm), back down to Z-0.5 (s 2..3.5 mm); stations 10 um
+VERTS = np.array([[0.0, 0.0, -1.0], [0.0, 0.0, 1.0], [0.0, 0.0, -0.5]]) * MM
+VS = np.array([0.0, 2.0, 3.5]) * MM
+DS = 0.01 * MM
+MARGIN = 0.1 * MM
+
+
+def _motion(z1: float, count: np.ndarray, z0: float = 0.86 * MM, s0: float = 1.86 * MM):
+    """member_motion from the cursor at z0 on the way up (0.14 mm short of R) to z1 [m]: (seg, s, dist)."""
+    st = _state(0.0, 0.0, z0, s0, 0, 0.0)
+    out = pk.member_motion(st, 0, 0.0, 0.0, z1, MARGIN, VERTS, VS, DS, count)
+    return out[6], out[7], out[8]
+
+
+def test_a_member_turning_back_short_of_the_reversal_is_refound_after_it():
+    air = np.zeros(351, dtype=np.int64)
+    # turned back 0.14 mm short of R and moved down 0.01 mm: the return leg's point at z = 0.85 mm is at
+    # s = 2 + (1 - 0.85) = 2.15 mm, 0.29 mm ahead: beyond the forward window (2 x 0.01 + 0.1 mm), found across
+    seg, s, d = _motion(0.85 * MM, air)
+    assert seg == 1 and s == pytest.approx(2.15 * MM, abs=1e-15) and d == pytest.approx(0.0, abs=1e-15)
+    # standing still or moving on towards R: the forward projection, as before
+    seg, s, d = _motion(0.86 * MM, air)
+    assert seg == 0 and s == pytest.approx(1.86 * MM, abs=1e-15) and d == pytest.approx(0.0, abs=1e-15)
+    seg, s, d = _motion(0.87 * MM, air)
+    assert seg == 0 and s == pytest.approx(1.87 * MM, abs=1e-15) and d == pytest.approx(0.0, abs=1e-15)
+
+
+def test_the_cursor_never_jumps_over_a_station_with_material():
+    for station in (186, 200, 215):  # the cursor's, the reversal's, the landing point's station
+        count = np.zeros(351, dtype=np.int64)
+        count[station] = 1
+        seg, s, d = _motion(0.85 * MM, count)
+        assert seg == 0 and s == pytest.approx(1.86 * MM, abs=1e-15) and d == pytest.approx(0.01 * MM)
+    # material beyond the landing point's neighbourhood (station 219 = floor(2.15 / 0.01) + 4) does not hold it
+    count = np.zeros(351, dtype=np.int64)
+    count[219:] = 1
+    assert _motion(0.85 * MM, count)[:2] == (1, pytest.approx(2.15 * MM, abs=1e-15))
+
+
+def test_no_reversal_ahead_no_jump():
+    # a straight path: a tool moving back from its cursor stays projected on it (distance reported)
+    verts = np.array([[0.0, 0.0, -1.0], [0.0, 0.0, 1.0], [0.0, 0.0, 2.0]]) * MM
+    st = _state(0.0, 0.0, 0.86 * MM, 1.86 * MM, 0, 0.0)
+    out = pk.member_motion(st, 0, 0.0, 0.0, 0.85 * MM, MARGIN, verts, np.array([0.0, 2.0, 3.0]) * MM, DS,
+                           np.zeros(301, dtype=np.int64))
+    assert out[6] == 0 and out[7] == pytest.approx(1.86 * MM, abs=1e-15) and out[8] == pytest.approx(0.01 * MM)
+
+
+def test_a_reversal_inside_material_is_not_skipped():
+    """A slot cut out and back on one line whose tool turns back 0.3 mm short of the end, in the material: the
+    stretch to skip holds material, so the cursor stays and the member fails off the path (as before)."""
+    a, c = 2e-3, 5e-5
+    x0, x_end = -R - 0.5e-3, 0.006
+    verts = [[x0, 0.0, -a], [x_end, 0.0, -a], [x0, 0.0, -a]]
+    pos = along([[x0, 0.0, -a], [x_end - 0.3e-3, 0.0, -a], [x0, 0.0, -a]], c / TOOTH_PERIOD * H)
+    with pytest.raises(CuttingError, match="path_tolerance"):
+        path_run(params(), verts, pos, OMEGA)
+
+
+PROGRAM = """G21 G17 G90 G94 G54
+S6000 M3
+G0 X14. Y14. Z5.
+G99 {cycle}
+G80
+G0 X-4. Y5. Z1.
+G1 Z-1. F300
+X24.
+G0 Z1.
+Y14.
+G1 Z-1.
+X-4.
+G0 Z5.
+M30
+"""
+
+
+#: The drilling cycle of PROGRAM: the G83 of the unseen part (F150, Q1; the servo turns back 0.14-0.40 mm short of
+#: R, 0.03 mm short of each bottom), a deeper and faster one (Q3 to Z-9 at F300: 0.40-0.83 mm short of R, 0.06 mm of
+#: each bottom) and G73 (F150; 0.2 mm retracts between pecks, in the hole).
+CYCLES = ("G83 X14. Y14. Z-3. R1. Q1. F150", "G83 X14. Y14. Z-9. R1. Q3. F300", "G73 X14. Y14. Z-3. R1. Q1. F150")
+
+
+@pytest.fixture(scope="module", params=CYCLES)
+def peck_runs(request, tmp_path_factory):
+    folder = tmp_path_factory.mktemp("peck")
+    (folder / "case.toml").write_text('program = "program.nc"\n[stock]\nmin = [0.0, 0.0, -10.0]\n'
+                                      'max = [20.0, 20.0, 0.0]\n[tool]\ndiameter_mm = 6.0\nflutes = 2\n'
+                                      '[machine]\nparameters = "default"\n')
+    (folder / "program.nc").write_text(PROGRAM.format(cycle=request.param))
+    case = load_case(folder)
+    return case, {mode: simulate(case=case, options=TwinOptions(cutting_mode=mode), plot=False)
+                  for mode in ("path", "zmap")}
+
+
+def _per_line(recording) -> tuple[dict[int, float], dict[int, float]]:
+    """Largest Fc (N) and removed volume (mm3) per executing line."""
+    t = np.asarray(recording.t, float)
+    line = np.asarray(recording["line"], float).ravel()
+    fc = np.asarray(recording["fc_peak_N"], float).ravel()
+    mrr = np.asarray(recording["mrr_mm3_per_min"], float).ravel() / 60.0
+    prev = np.concatenate([[line[0]], line[:-1]])  # a step's removal belongs to the line running at its start
+    dt = np.concatenate([[0.0], np.diff(t)])
+    lines = [int(v) for v in np.unique(line[np.isfinite(line)])]
+    return ({n: float(fc[line == n].max()) for n in lines},
+            {n: float(np.sum((mrr * dt)[prev == n])) for n in lines})
+
+
+def test_g83_program_in_path_mode_agrees_with_the_zmap_model_and_hand_calculations(peck_runs):
+    case, runs = peck_runs
+    for mode, run in runs.items():
+        assert run.success, (mode, run.message)  # before: "farther than path_tolerance" after the first peck
+    path, zmap = runs["path"].recording, runs["zmap"].recording
+    assert runs["path"].summary["cycle_time_s"] == runs["zmap"].summary["cycle_time_s"]
+    peak_p, vol_p = _per_line(path)
+    peak_z, vol_z = _per_line(zmap)
+    # slot 1 (line 8, Y5) misses the hole; slot 2 (line 12, Y14) crosses it: both modes within 0.1 N, 0.1 %
+    for n in (8, 12):
+        assert peak_p[n] == pytest.approx(peak_z[n], abs=0.1)
+    assert sum(vol_p.values()) == pytest.approx(sum(vol_z.values()), rel=1e-3)
+    assert vol_p[4] == vol_z[4] == 0.0  # the pecks: a plunge has no periphery chip (Eq. 10-13)
+    # hand calculation, full slot 1 mm deep at F300, S6000, 2 flutes: fz = 0.025 mm
+    kt, ke = case.machine.si(f"material.{case.material}")["kt"], 0.5
+    assert case.machine.si(f"material.{case.material}")["ke"] == ke
+    fz = 300.0 / (6000.0 * 2) * MM
+    assert peak_p[8] == pytest.approx(kt * 1 * MM * fz * math.sqrt(1 + ke * ke), abs=0.05)  # 34.38 N
+    # removed volume of slot 1: 6 mm wide x 1 mm deep across the 20 mm block (lines 7-9: plunge, slot, lift)
+    assert vol_p[7] + vol_p[8] + vol_p[9] == pytest.approx(6.0 * 1.0 * 20.0, rel=1e-3)
+
+
+def _peck_then_slot(r_top: float) -> list[list[float]]:
+    """Two pecks at (6, 5) mm from Z3 (to Z-1, back up to ``r_top`` [m], to Z-2, out), then a 1 mm deep slot along
+    +x at y = -4 mm through the 12 mm block of :func:`tests.test_cutting_path.params`, m."""
+    hx, hy, top, a = 6e-3, 5e-3, 3e-3, 1e-3
+    x0, x1 = -R - 0.5e-3, 0.012 + R + 0.5e-3
+    return [[hx, hy, top], [hx, hy, -1e-3], [hx, hy, r_top], [hx, hy, -2e-3], [hx, hy, top], [x0, -4e-3, top],
+            [x0, -4e-3, -a], [x1, -4e-3, -a]]
+
+
+@pytest.mark.parametrize("effects", [{}, {"runout_eccentricity": 5e-6, "runout_phase": 0.4, "helix_angle": 0.3}])
+def test_compiled_replay_follows_the_pecks_bit_for_bit_and_the_slot_after_them_matches_zmap(effects):
+    """The commanded path returns to R = Z1 between the pecks; the tool turns back 0.14 mm short of it. The
+    compiled replay (path_replay) and the component stepped step by step (path_step, or path_step_effects with
+    runout and helix) give the same outputs bit for bit; on the baseline kernel the slot after the pecks agrees
+    with the Z-map mode (test_cutting_path's tolerances; the path-mode helix peak is exact where the Z-map mode
+    keeps its bands, see README "Effect terms")."""
+    from fmus_src.cutting.path_component import PathCuttingLoad
+    from fmus_src.cutting.path_replay import compiled_path_steps
+    from fmus_src.cutting.table import EngagementTable
+    from tests.test_cutting_path import NAMES, assert_modes_agree, drive, zmap_run
+
+    c = 5e-5
+    p = params(**effects)
+    pos = along(_peck_then_slot(0.86e-3), c / TOOTH_PERIOD * H)
+    table = EngagementTable.from_parameters(np.asarray(_peck_then_slot(1e-3)), p)
+
+    def component():
+        comp = PathCuttingLoad("cut", batch=1, **p)
+        comp.attach_table(table)
+        return comp
+
+    def set_up():
+        comp = component()
+        for a, name in enumerate(("x_position", "y_position", "z_position")):
+            comp.set(name, pos[0, :, a])
+        comp.set("spindle_speed", OMEGA)
+        comp.setup(0.0)
+        return comp
+
+    t = H * np.arange(pos.shape[0])
+    replay = compiled_path_steps(set_up(), t, pos[:, 0, :], np.full(pos.shape[0] - 1, OMEGA))
+    comp = set_up()
+    names = NAMES + ("axial_depth", "engaged_teeth")
+    stepped = {n: [] for n in names}
+    for k in range(1, pos.shape[0]):  # the replay's steps: t[k - 1] to t[k]
+        for a, name in enumerate(("x_position", "y_position", "z_position")):
+            comp.set(name, pos[k, :, a])
+        comp.do_step(t[k - 1], t[k] - t[k - 1])
+        for n in names:
+            stepped[n].append(comp.get(n))
+    stepped = {n: np.array(v) for n, v in stepped.items()}
+    assert replay is not None
+    for name, col in (("fx", "fx"), ("fy", "fy"), ("spindle_torque", "spindle_torque"), ("axial_depth", "axial_depth"),
+                      ("engaged_teeth", "engaged_teeth")):
+        np.testing.assert_array_equal(replay[name][1:, 0], stepped[col][:, 0], err_msg=name)
+    assert stepped["fc_peak"].max() > 10.0  # the slot cuts (1 mm deep, 50 um per tooth: about 69 N)
+    if not effects:  # the baseline against the Z-map mode (helix peaks differ by design: see the module docstring)
+        assert_modes_agree(zmap_run(p, pos, OMEGA), drive(component(), pos, OMEGA), worst=0.04)
