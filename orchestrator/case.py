@@ -58,9 +58,9 @@ class ToolOffsets:
     Attributes
     ----------
     radius_mm : dict int -> float
-        Tool radius offsets D1..D20 (geometry + wear) used by G41/G42; registers not given are 0.
+        Tool radius offsets D1..D200 (geometry + wear) used by G41/G42; registers not given are 0.
     length_mm : dict int -> float
-        Tool length offsets H1..H20 used by G43/G44; registers not given are 0.
+        Tool length offsets H1..H200 used by G43/G44; registers not given are 0.
     """
 
     radius_mm: dict[int, float] = field(default_factory=dict)

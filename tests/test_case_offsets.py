@@ -47,8 +47,8 @@ def test_twin_runs_the_offset_path_of_the_case_registers(tmp_path):
 
 @pytest.mark.parametrize("body, match", [
     (CASE + "wear_mm = { 1 = 0.1 }\n", r"case.toml:6: unknown field 'wear_mm' in \[offsets\]"),
-    (CASE.replace("{ 1 = 3.0 }", "{ 21 = 3.0 }"), r"case.toml:4: \[offsets\] radius_mm: unknown register '21'; "
-                                                    r"expected D numbers 1..20"),
+    (CASE.replace("{ 1 = 3.0 }", "{ 201 = 3.0 }"), r"case.toml:4: \[offsets\] radius_mm: unknown register '201'; "
+                                                    r"expected D numbers 1..200"),
     (CASE.replace("{ 1 = 0.5 }", "{ H1 = 0.5 }"), r"\[offsets\] length_mm: unknown register 'H1'; expected H"),
     (CASE.replace("{ 1 = 3.0 }", '{ 1 = "3" }'), r"case.toml:4: \[offsets\] radius_mm: D1 must be a number in mm"),
     (CASE.replace("{ 1 = 3.0 }", "{ 1 = nan }"), r"D1 must be a number in mm"),

@@ -118,12 +118,12 @@ def test_mastercam_wear_mode_g42_d0_gives_the_tool_centre_path_in_inch():
     assert last_rapid.line == 14 and last_rapid.end[2] == pytest.approx(0.5 * inch)
 
 
-@pytest.mark.parametrize("word", ["D21", "D1.5", "D1.", "D-1"])
+@pytest.mark.parametrize("word", ["D201", "D1.5", "D1.", "D-1"])
 def test_d_out_of_range_is_an_error(word):
     with pytest.raises(GCodeError) as info:
         interpret(f"G0 X0\nG41 {word} G1 X1 F100\n", "a.nc", _settings())
     assert info.value.line == 2 and info.value.word == word
-    assert "does not exist" in str(info.value) and "D0..D20" in str(info.value)
+    assert "does not exist" in str(info.value) and "D0..D200" in str(info.value)
 
 
 def test_d_with_default_settings_has_only_d0():

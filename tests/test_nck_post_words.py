@@ -10,9 +10,11 @@ import re
 
 import pytest
 
-from fmus_src.nck.blocks import Dwell, Linear
+from fmus_src.nck.blocks import Dwell, Linear, Rapid
+from fmus_src.nck.component import N_TOOL_LENGTHS
 from fmus_src.nck.errors import GCodeError
 from fmus_src.nck.interpreter import interpret
+from fmus_src.nck.settings import InterpreterSettings
 
 PATH = "G0 X0 Y0 Z5.\nG1 Z-1. F300.\nX10.\nY10.\nX0.\n"
 
@@ -68,3 +70,15 @@ def test_e_word_outside_g187_names_where_e_is_read():
                                          r"Haas corner rounding; E in other blocks, e\.g\. the Haas rapid rate") as info:
         interpret("G187 P1 E0.05\nG0 X10. E50.\n", "h.nc")
     assert (info.value.file, info.value.line, info.value.word) == ("h.nc", 2, "E50.")
+
+
+def test_a_post_writing_h_equal_to_t_reaches_tool_150():
+    """200 H registers (a Haas NGC's table): G43 H150 adds register 150's length to the commanded Z."""
+    lengths = [0.0] * N_TOOL_LENGTHS
+    lengths[149] = 0.1205  # H150 = 120.5 mm
+    settings = InterpreterSettings(tool_lengths=lengths, tool_radii=[0.0] * N_TOOL_LENGTHS)
+    blocks = interpret("G90 G0 X0 Y0\nG43 H150 Z25.\n", "m.nc", settings).blocks
+    assert N_TOOL_LENGTHS == 200
+    assert [b.end[2] for b in blocks if isinstance(b, Rapid)][-1] == pytest.approx(0.1455)  # 25 + 120.5 mm
+    with pytest.raises(GCodeError, match=r"expected H0\.\.H200 \(integers\)"):
+        interpret("G43 H201 Z25.\n", "m.nc", settings)

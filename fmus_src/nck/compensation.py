@@ -29,7 +29,7 @@ import math
 from .codes import GWords, ValueWords
 from .errors import ErrorFactory, fmt_number
 from .modal import ModalState
-from .settings import INCH, MM
+from .settings import INCH, MM, TWIN_OFFSET_REGISTERS
 
 #: A tool radius offset with an absolute value up to this is zero (the programmed path is the tool centre), m.
 RADIUS_ZERO = 1e-9
@@ -43,11 +43,11 @@ def _register_note(kind: str, setting: str, n: int) -> str:
 
 
 def _register_range(letter: str, setting: str, n: int) -> str:
-    """What a register word may be: ``H0..H20 (integers)``, or with no registers set, how to set them."""
+    """What a register word may be: ``H0..H200 (integers)``, or with no registers set, how to set them."""
     if n:
         return f"{letter}0..{letter}{n} (integers)"
     return (f"{letter}0, or the offsets given in InterpreterSettings.{setting} ({letter}1 is index 0; "
-            "the NCKernel component and cnctwin simulate have 20)")
+            f"the NCKernel component and cnctwin simulate have {TWIN_OFFSET_REGISTERS})")
 
 
 def tool_length_words(st: ModalState, gs: GWords, vals: ValueWords, err: ErrorFactory) -> None:

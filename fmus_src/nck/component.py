@@ -36,12 +36,12 @@ from .overrides import apply_overrides
 from .params import NCParams
 from .planner import BatchPlan, Schedule, build_schedule, plan_batch
 from .sampling import read_plan
-from .settings import DEFAULT_REFERENCE, TOOL_CHANGE_RETRACTS, InterpreterSettings
+from .settings import DEFAULT_REFERENCE, TOOL_CHANGE_RETRACTS, TWIN_OFFSET_REGISTERS, InterpreterSettings
 from .source import read_program
 from .stroke import StrokeLimits, check_stroke
 
 #: Number of tool length offset parameters ``tool_length_1 .. tool_length_N`` (H1..HN).
-N_TOOL_LENGTHS = 20
+N_TOOL_LENGTHS = TWIN_OFFSET_REGISTERS
 #: Number of tool radius offset parameters ``tool_radius_1 .. tool_radius_N`` (D1..DN), as many as H.
 N_TOOL_RADII = N_TOOL_LENGTHS
 WORK_OFFSETS = (54, 55, 56, 57, 58, 59)

@@ -33,6 +33,10 @@ from .m_aliases import check_m_codes
 MM = 1e-3
 #: One inch (G20 program unit), m.
 INCH = 25.4e-3
+#: Tool length (H) and radius (D) offset registers of the twin's NC kernel (its component and ``cnctwin simulate``):
+#: 200, as a Haas NGC's offset table and within a FANUC 0i-F's optional 400, so that a post writing H = T reaches
+#: every tool of a large magazine.
+TWIN_OFFSET_REGISTERS = 200
 #: One revolution per minute (S word), rad/s.
 RPM = 2.0 * math.pi / 60.0
 #: Reference position (G28) of the default machine in its axis frame (m): ``machine_zero_*_mm`` +
