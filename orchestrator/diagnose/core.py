@@ -37,6 +37,7 @@ from ..recording_csv import near_miss_hint
 from .columns import AxisColumns, build
 from .cutting import FORCE_CHANNELS, has_forces
 from .cutting_core import CuttingResult, diagnose_cutting
+from .cutting_load import model_loads
 from .cutting_merge import holdout_cutting, merge_cutting
 from .errors import DiagnosisError
 from .force_only import force_only_recording, needs_force_clock
@@ -495,6 +496,19 @@ def diagnose(
     elif prep.forces_source == "corrected":
         log.append("fx_N/fy_N sampled too coarsely for the tooth load: the replayed drives carry the twin's cutting "
                    "load, corrected by the recorded forces averaged over whole spindle revolutions")
+    cres = None
+    if do_cut and drives and prep.forces_source == "corrected":
+        # forces too coarse for the tooth load: the cutting process first, then the drives carry the force
+        # of the diagnosed cutting model (its spindle angle, coefficients and effects; :mod:`.cutting_load`)
+        cres = _diagnose_cutting(case_m, recording, prep, say)
+        if cres.data is not None:
+            prep.disturbance = model_loads(cres, forces or {}, float(base_machine.si("servo")["velocity_loop_period"]),
+                                           _revolution_s(prep.nc))
+            prep.forces_source = "cutting model"
+            log[:] = [line for line in log if not line.startswith("fx_N/fy_N sampled too coarsely")]
+            log.append("fx_N/fy_N sampled too coarsely for the tooth load: the replayed drives carry the diagnosed "
+                       "cutting model's force (refitted coefficients, effects and spindle angle, averaged over each "
+                       "velocity tick) plus the recorded-minus-model force averaged over whole spindle revolutions")
     if drives:
         d = _diagnose_drives(case, prep, base_machine, holdout, vertical, refit_scales, say, log)
     else:
@@ -502,12 +516,8 @@ def diagnose(
                       base_machine.with_values("machine", name=f"{base_machine.name}-diagnosed"), {}, log=log,
                       case_name=Path(case.folder).name)
     if do_cut:
-        say("diagnosing the cutting process")
-        nc_t, nc_s = np.asarray(prep.nc.t, float), np.asarray(prep.nc["spindle_rpm"], float)
-        offset = prep.offset
-        locator = Locator(prep, {})
-        cres = diagnose_cutting(case_m, recording, spindle_command=lambda t: np.interp(t - offset, nc_t, nc_s),
-                                lines_of=locator.lines_in, unexplained_sigma=UNEXPLAINED_SIGMA, say=say)
+        if cres is None:
+            cres = _diagnose_cutting(case_m, recording, prep, say)
         merge_cutting(d, cres, case)
         if holdout is not None:
             say("re-simulating the held-out case (cutting)")
@@ -522,6 +532,22 @@ def diagnose(
                 d.holdout["rms_before"].update(hold[0])
                 d.holdout["rms_after"].update(hold[1])
     return d
+
+
+def _diagnose_cutting(case_m: Case, recording: Recording, prep: Prepared, say: Callable[[str], None]):
+    """The cutting half of the diagnosis on the aligned recording (:func:`.cutting_core.diagnose_cutting`)."""
+    say("diagnosing the cutting process")
+    nc_t, nc_s = np.asarray(prep.nc.t, float), np.asarray(prep.nc["spindle_rpm"], float)
+    offset = prep.offset
+    locator = Locator(prep, {})
+    return diagnose_cutting(case_m, recording, spindle_command=lambda t: np.interp(t - offset, nc_t, nc_s),
+                            lines_of=locator.lines_in, unexplained_sigma=UNEXPLAINED_SIGMA, say=say)
+
+
+def _revolution_s(nc: Recording) -> float:
+    """One spindle revolution at the program's median running speed, s."""
+    rpm = np.asarray(nc["spindle_rpm"], float)
+    return 60.0 / float(np.median(rpm[rpm > 0])) if np.any(rpm > 0) else 0.01
 
 
 def _cnc_rows(recording: Recording) -> Recording:
