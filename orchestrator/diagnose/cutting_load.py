@@ -27,7 +27,7 @@ import numpy as np
 from .cutting_core import CuttingResult
 from .cutting_replay import ForceInputs, run_force_replay
 from .cutting_library import component_values
-from .prepare import CORRECTION_REVOLUTIONS, SampledForce
+from .prepare import CORRECTION_REVOLUTIONS, SampledForce, TwinLoads, _carried_step_mean
 
 #: Force-model samples per velocity-loop tick.
 SUBSTEPS_PER_TICK = 4
@@ -64,7 +64,8 @@ def fine_inputs(inputs: ForceInputs, step_omega: np.ndarray, substeps: int) -> t
 
 
 def model_loads(cres: CuttingResult, measured: dict[str, SampledForce], tick_s: float,
-                revolution_s: float) -> dict[str, Callable[[np.ndarray], np.ndarray]]:
+                revolution_s: float, steps: TwinLoads | None = None,
+                offset: Callable[[], float] = lambda: 0.0) -> dict[str, Callable[[np.ndarray], np.ndarray]]:
     """``{axis: f(q)}``: the force [N] on the x and y drives at logger times ``q``, from the diagnosed cutting model.
 
     Parameters
@@ -77,6 +78,13 @@ def model_loads(cres: CuttingResult, measured: dict[str, SampledForce], tick_s: 
         Velocity-loop period, s: the load of a tick is the model force averaged over it (``q`` its middle).
     revolution_s : float
         Spindle revolution, s (the correction's averaging window is :data:`CORRECTION_REVOLUTIONS` of them).
+    steps : TwinLoads, optional
+        Carry the model force as the twin's drives carry its own: its mean over each of the twin's
+        communication steps (``steps.t0 + k steps.h``, program clock), the first ``steps.stale`` ticks of a
+        step still on the previous step's mean (:func:`.prepare._carried_step_mean`). Default: the mean over
+        each velocity tick.
+    offset : callable
+        ``offset()`` -> logger clock minus program clock, s (read at every call), for ``steps``.
     """
     data = cres.data
     t = data.inputs.t
@@ -100,11 +108,21 @@ def model_loads(cres: CuttingResult, measured: dict[str, SampledForce], tick_s: 
             window = max(1, int(round(CORRECTION_REVOLUTIONS * revolution_s / interval)))
             slow = np.convolve(diff, np.ones(window) / window, mode="same")
 
-        def load(q, ft=inputs.t, integral=integral, slow=slow):
-            q = np.asarray(q, float)
-            lo = np.interp(q - 0.5 * tick_s, ft, integral)
-            hi = np.interp(q + 0.5 * tick_s, ft, integral)
-            return (hi - lo) / tick_s + np.interp(q, t, slow, left=0.0, right=0.0)
+        if steps is not None and a in steps.rate:
+            def load(q, ft=inputs.t, integral=integral, slow=slow, a=a):
+                q = np.asarray(q, float)
+                off = offset()
+                n = int(np.ceil((ft[-1] - off - steps.t0) / steps.h)) + 2
+                edges = steps.t0 + steps.h * np.arange(-1, n)
+                mean = np.diff(np.interp(edges + off, ft, integral)) / steps.h
+                return (_carried_step_mean(q - off, steps.t0, steps.h, steps.rate[a], steps.stale[a], mean)
+                        + np.interp(q, t, slow, left=0.0, right=0.0))
+        else:
+            def load(q, ft=inputs.t, integral=integral, slow=slow):
+                q = np.asarray(q, float)
+                lo = np.interp(q - 0.5 * tick_s, ft, integral)
+                hi = np.interp(q + 0.5 * tick_s, ft, integral)
+                return (hi - lo) / tick_s + np.interp(q, t, slow, left=0.0, right=0.0)
 
         out[a] = load
     return out

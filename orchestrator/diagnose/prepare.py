@@ -80,6 +80,9 @@ class Prepared:
         The motion of each axis at the recording's first sample (:func:`.identify.start_state.estimate_start`):
         the replays start from it, so that a log started while an axis moves (the usual Servo Guide log) is
         not compared with a replay catching up from rest on the command.
+    twin_loads : TwinLoads or None
+        The twin's own cutting load on its drives (its communication-step grid), when it was run for
+        recorded forces too coarse for the tooth load.
     """
 
     recording: Recording
@@ -103,6 +106,7 @@ class Prepared:
     forces_source: str = "none"
     current_scale: dict[str, float] = field(default_factory=dict)
     start: dict[str, AxisStart] = field(default_factory=dict)
+    twin_loads: "TwinLoads | None" = None
 
     def correct_current_scale(self, axis: str, scale: float) -> None:
         """Divide the measured current of ``axis`` by a scale error of its channel (accumulated)."""
@@ -496,6 +500,7 @@ def prepare(case: Case, recording: Recording, machine: Machine, axes: list[str] 
                     start=starts(recording, list(commands), machine))
     revolution = _coarse_forces(prep.disturbance, case, nc)
     loads = twin_loads(case, machine) if revolution is not None else None
+    prep.twin_loads = loads
     if loads is not None:
         prep.disturbance = corrected_forces(prep.disturbance, loads, lambda: prep.offset, revolution)
         prep.forces_source = "corrected"

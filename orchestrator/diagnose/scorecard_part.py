@@ -77,6 +77,29 @@ flutes = 2
 parameters = "default"
 """
 
+#: The same kinds of cut, shorter (for the tests): one slot 2 mm deep and the contour around the corner of
+#: a 10 x 8 mm block (about 1.7 s of cutting, 5 s in all).
+SHORT_PART_PROGRAM = """%
+O0011 (DIAGNOSIS: SHORT CUTTING PART - A SLOT AND A CONTOUR)
+N10 G21 G17 G90 G94
+N20 S6000 M3
+N30 G0 X-4. Y4. Z1.
+N40 G1 Z-2. F1000
+N50 X3. F450 (FULL SLOT 2 MM DEEP)
+N60 G0 Z1.
+N70 X-2. Y-4.
+N80 G1 Z-2. F1000
+N90 Y6. F900 (CONTOUR 1 MM RADIAL 2 MM DEEP)
+N100 G2 X2. Y10. R4.
+N110 G1 X6.
+N120 G0 Z5.
+N130 M30
+%
+"""
+
+#: The short part's manifest: a 10 x 8 x 6 mm block.
+SHORT_PART_CASE_TOML = PART_CASE_TOML.replace("max = [16.0, 14.0, 0.0]", "max = [10.0, 8.0, 0.0]")
+
 FLUTES = 2
 
 
@@ -141,7 +164,7 @@ SCENARIOS: dict[str, tuple[dict[str, dict[str, dict[str, float]]], dict[str, dic
 
 
 def write_part_case(folder: Path, drive_effects: Mapping, cutting_effects: Mapping, seed: int,
-                    logger: Logger) -> Path:
+                    logger: Logger, program: str = PART_PROGRAM, case_toml: str = PART_CASE_TOML) -> Path:
     """A case folder of :data:`PART_PROGRAM` with hidden effects, logged by ``logger``.
 
     Parameters
@@ -154,6 +177,8 @@ def write_part_case(folder: Path, drive_effects: Mapping, cutting_effects: Mappi
     seed : int
         Noise, jitter (5 % of the period), clock offset (0.1 to 2 s) and initial spindle angle.
     logger : Logger
+    program, case_toml : str
+        The part (:data:`PART_PROGRAM`, or :data:`SHORT_PART_PROGRAM` with :data:`SHORT_PART_CASE_TOML`).
 
     Returns
     -------
@@ -162,8 +187,8 @@ def write_part_case(folder: Path, drive_effects: Mapping, cutting_effects: Mappi
     """
     rec = Recorder(period_s=logger.period_s, jitter_s=0.05 * logger.period_s, drop=tuple(logger.drop))
     write_cutting_case(folder, cutting_effects, seed, drive_effects=drive_effects,
-                       dynamometer=Dynamometer(period_s=logger.period_s), recorder=rec, program=PART_PROGRAM,
-                       case_toml=PART_CASE_TOML, forces_on_cnc_rows=logger.shared_rows)
+                       dynamometer=Dynamometer(period_s=logger.period_s), recorder=rec, program=program,
+                       case_toml=case_toml, forces_on_cnc_rows=logger.shared_rows)
     if logger.keep is not None:
         keep_channels(folder / "recording.csv", logger.keep)
     return folder
