@@ -436,6 +436,12 @@ def _affine_misfit(y: np.ndarray, x: np.ndarray) -> float:
 
 def time_offset_from_forces(t_rec: np.ndarray, f_rec: np.ndarray, t_twin: np.ndarray, f_twin: np.ndarray,
                             window_s: float, grid_s: float = 1e-3) -> float:
+    """Logger clock minus program clock from the cutting load ``|F|`` alone (see :func:`force_clock`), s."""
+    return force_clock(t_rec, f_rec, t_twin, f_twin, window_s, grid_s)[0]
+
+
+def force_clock(t_rec: np.ndarray, f_rec: np.ndarray, t_twin: np.ndarray, f_twin: np.ndarray,
+                window_s: float, grid_s: float = 1e-3) -> tuple[float, float]:
     """Logger clock minus program clock from the cutting load ``|F|`` alone (a dynamometer's own clock).
 
     Both loads are smoothed by :func:`load_envelope`. The level of an envelope within a cut is not
@@ -464,8 +470,9 @@ def time_offset_from_forces(t_rec: np.ndarray, f_rec: np.ndarray, t_twin: np.nda
 
     Returns
     -------
-    float
-        Offset, s.
+    (float, float)
+        Offset, s, and the misfit there (sum of squares of the recorded envelope about its affine maps, N²:
+        comparable between twin loads of the same recording).
     """
     from scipy.optimize import minimize_scalar
 
@@ -502,7 +509,7 @@ def time_offset_from_forces(t_rec: np.ndarray, f_rec: np.ndarray, t_twin: np.nda
         step = grid[1] - grid[0]
         best = minimize_scalar(misfit, method="bounded", bounds=(grid[k] - step, grid[k] + step),
                                options={"xatol": 1e-7})
-    return float(best.x)
+    return float(best.x), float(misfit(float(best.x)))
 
 
 def cutting_indicator(envelope: np.ndarray) -> np.ndarray:
