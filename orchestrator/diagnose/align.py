@@ -528,7 +528,7 @@ def cutting_indicator(envelope: np.ndarray) -> np.ndarray:
 
 
 def cut_groups(t: np.ndarray, cutting: np.ndarray, dilate_s: float) -> list[np.ndarray]:
-    """Sample indices of each run of ``cutting`` samples, widened by ``dilate_s`` either side (merged when they meet)."""
+    """Sample indices of each run of ``cutting`` samples, widened by ``dilate_s`` either side (merged if they meet)."""
     t = np.asarray(t, float)
     idx = np.flatnonzero(np.asarray(cutting, bool))
     if idx.size == 0:

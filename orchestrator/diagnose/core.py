@@ -567,8 +567,9 @@ def _best_load(prep: Prepared, carried: dict[str, dict]) -> tuple[str, str]:
     twin's drives carry their load). The twin's own run is replayed exactly only by its own load (the model
     force leaves 3e-4 A of x current over each step, 7e-3 A over each tick, where a y pitch error and a screw
     compliance were named); the independent truth, whose spindle angle is not the twin's, by the model's
-    tick mean (x current 0.029 A rms at the baseline, against 0.092 A over steps; the twin's load named a
-    -0.03 x feed-forward on a clean 1 ms log of :mod:`.scorecard_part`). The baseline model is replayed with
+    tick mean (x and y current 0.029 A rms at the baseline, against 0.092 A over steps and 0.139 A with the
+    twin's load, which named a -0.03 x feed-forward on that clean 1 ms log of :mod:`.scorecard_part`).
+    The baseline model is replayed with
     each, and the smallest sum of squared current residuals over the loaded axes (x, y) decides.
 
     Returns

@@ -10,10 +10,12 @@ harmonic and the spindle phase is arbitrary). On the part of :mod:`.scorecard_pa
 left up to 0.045 A rms of x current residual while cutting (noise 0.02 A), and a clean recording was named an
 x ``velocity_feedforward`` of -0.03.
 
-Here the drives carry the force of the *diagnosed* cutting model instead: the refitted coefficients, effects
-and spindle angle (:mod:`.cutting_core`), replayed along the recorded tool path on a grid
-:data:`SUBSTEPS_PER_TICK` times finer than the velocity loop and averaged over each velocity tick, as the
-machine's drive integrates the force over its tick. What the model leaves (an effect the sampling cannot
+Here the drives may carry the force of the *diagnosed* cutting model instead (``core._best_load`` takes
+whichever load fits the recorded currents best): the refitted coefficients, effects and spindle angle
+(:mod:`.cutting_core`), replayed along the recorded tool path on a grid :data:`SUBSTEPS_PER_TICK` times
+finer than the velocity loop and averaged over each velocity tick, as the machine's drive integrates the
+force over its tick (or over the twin's communication steps, as the twin's drives carry their load). What
+the model leaves (an effect the sampling cannot
 resolve, a dynamometer offset) is added as before: the recorded-minus-model force averaged over whole
 spindle revolutions.
 """

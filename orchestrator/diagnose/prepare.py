@@ -72,7 +72,9 @@ class Prepared:
         (:func:`predicted_forces`), since the machine's drives carried a cutting load all the same.
     forces_source : str
         Where ``disturbance`` comes from: ``"recorded"``, ``"predicted"``, ``"corrected"`` (recorded forces too
-        coarse for the tooth load: the twin's load corrected by them, :func:`corrected_forces`) or ``"none"``.
+        coarse for the tooth load: the twin's load corrected by them, :func:`corrected_forces`), ``"cutting
+        model"`` (the diagnosed cutting model's force instead, set by :func:`.core.diagnose` when it fits the
+        recorded currents better: :mod:`.cutting_load`) or ``"none"``.
     current_scale : dict axis -> float
         Scale error of a current channel found by the diagnosis (a logger artefact); ``current`` is
         already divided by it.
