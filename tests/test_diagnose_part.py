@@ -14,10 +14,12 @@ import pytest
 
 from orchestrator.case import load_case
 from orchestrator.diagnose import diagnose
+from orchestrator.diagnose.force_only import force_only_recording
 from orchestrator.diagnose.prepare import twin_commands
 from orchestrator.diagnose.scorecard_part import (LOGGERS, SHORT_PART_CASE_TOML, SHORT_PART_PROGRAM, judge_part,
                                                   write_part_case)
 from orchestrator.diagnose.truth import Recorder, record, simulate_truth
+from orchestrator.recording import Recording
 
 DRIVE_CHANNELS = ("_tcmd_A", "_fe_um")
 
@@ -84,3 +86,19 @@ def test_gravity_and_runout_on_a_2ms_logger_without_commands(tmp_path):
     assert found[("gravity", "z")]["force_N"] == pytest.approx(40.0, rel=0.05)
     # a 2-flute tool shows rho cos(lambda) of the runout: 3 µm at 40 deg is 2.30 µm
     assert found[("runout", None)]["eccentricity_um"] == pytest.approx(3.0 * np.cos(np.radians(40.0)), rel=0.05)
+
+
+def test_the_clock_of_a_1khz_dynamometer_file_is_not_pulled_by_the_tooth_phase(tmp_path):
+    """Forces only, 1 kHz: 5 samples per tooth at fixed angles catch a 1 mm side pass's pulses by luck.
+
+    The twin's own 1 ms samples missed the first 90 ms of that pass: its clock came out 21 ms off on this
+    recording. With the twin's step-mean torque, where each load cuts and an affine map per cut it is within
+    a few ms (the truth's first pulses at the corner of the block still come about 30 ms before the twin's).
+    """
+    folder = _part(tmp_path, "dyn", {}, {}, 22, "forces only")
+    case = load_case(folder)
+    rec = Recording.read_csv(folder / "recording.csv")
+    assert set(rec.channels) == {"t_s", "fx_N", "fy_N", "fc_N"}
+    truth = json.loads((folder / "truth.json").read_text())
+    only = force_only_recording(case, rec, case.machine)
+    assert abs(only.offset - truth["time_offset_s"]) < 5e-3
