@@ -73,7 +73,7 @@ def write_cutting_case(folder: Path, effects: Mapping[str, Mapping[str, float]] 
                        drive_effects: Mapping[str, Mapping[str, Mapping[str, float]]] | None = None,
                        dynamometer: Dynamometer | None = None, recorder: Recorder | None = None,
                        offset_range_s: tuple[float, float] = (0.1, 2.0), program: str = PROGRAM,
-                       case_toml: str = CASE_TOML) -> Path:
+                       case_toml: str = CASE_TOML, forces_on_cnc_rows: bool = False) -> Path:
     """A cutting case folder whose recording hides ``effects`` (spec vocabulary, no axis).
 
     Parameters
@@ -91,6 +91,10 @@ def write_cutting_case(folder: Path, effects: Mapping[str, Mapping[str, float]] 
         Range of the seeded logger clock offset, s.
     program, case_toml : str
         The G-code and the case manifest.
+    forces_on_cnc_rows : bool
+        One logger for everything (a controller logging the dynamometer with its servo data): the forces
+        are sampled at the CNC logger's rows (with the dynamometer's noise and hum; empty cells before the
+        dynamometer's start, :data:`LOGGER_START_S`) instead of on the dynamometer's own rows.
 
     Returns
     -------
@@ -131,16 +135,23 @@ def write_cutting_case(folder: Path, effects: Mapping[str, Mapping[str, float]] 
     channels["spindle_ref_rpm"] = np.interp(t_cnc_prog, np.asarray(nc.t, float),
                                             np.asarray(nc["spindle_ref_rpm"], float))
     channels["spindle_rpm"] = spindle_channel(run, t_cnc_prog, dyn, rng)
-    cnc = Recording.from_channels(channels, source="<truth CNC logger>")
-    t_dyn = np.arange(t_f[0] + 0.5 * dyn.period_s, t_f[-1], dyn.period_s)
-    forces = {"t_s": t_dyn + offset, **sample_forces(run, t_dyn, dyn, rng)}
-    merge_recordings(cnc, forces).write_csv(folder / "recording.csv")
-    theta_first = float(np.interp(t_dyn[0], t_f, run.theta))
+    if forces_on_cnc_rows:
+        inside = (t_cnc_prog >= t_f[0]) & (t_cnc_prog <= t_f[-1])
+        channels.update({k: np.where(inside, v, np.nan) for k, v in sample_forces(run, t_cnc_prog, dyn, rng).items()})
+        Recording.from_channels(channels, source="<truth CNC logger>").write_csv(folder / "recording.csv")
+        t_first = float(t_cnc_prog[inside][0])
+    else:
+        cnc = Recording.from_channels(channels, source="<truth CNC logger>")
+        t_dyn = np.arange(t_f[0] + 0.5 * dyn.period_s, t_f[-1], dyn.period_s)
+        forces = {"t_s": t_dyn + offset, **sample_forces(run, t_dyn, dyn, rng)}
+        merge_recordings(cnc, forces).write_csv(folder / "recording.csv")
+        t_first = float(t_dyn[0])
+    theta_first = float(np.interp(t_first, t_f, run.theta))
     atomic_write_json(folder / "truth.json", {
         "cutting_effects": {k: dict(v) for k, v in (effects or {}).items()},
         "drive_effects": drives, "time_offset_s": offset, "seed": seed,
         "spindle_angle_at_first_force_sample_rad": theta_first % (2.0 * math.pi),
         "dynamometer": {"period_s": dyn.period_s, "force_noise_N": dyn.force_noise_N, "hum_N": dyn.hum_N,
-                        "hum_Hz": dyn.hum_Hz},
+                        "hum_Hz": dyn.hum_Hz, "on_cnc_rows": bool(forces_on_cnc_rows)},
     })
     return folder

@@ -16,7 +16,7 @@ from ..case import Case
 from ..machine import Machine
 from ..recording import Recording
 from ..simulate import simulate as simulate_twin
-from .align import ENVELOPE_REVOLUTIONS, time_offset_from_forces
+from .align import ENVELOPE_REVOLUTIONS, force_clock
 from .errors import DiagnosisError
 from .prepare import MIN_STROKE_M
 
@@ -63,6 +63,27 @@ def needs_force_clock(recording: Recording) -> bool:
     return not any(_moves(recording, f"{a}{s}") for a in "xyz" for s in ("_mm", "_ref_mm"))
 
 
+def twin_loads_for_clock(twin: Recording, case: Case) -> dict[str, np.ndarray]:
+    """The twin's cutting loads offered to the clock alignment [N]; the better fit of the recording is taken.
+
+    ``"step-mean torque"``: the step-mean spindle torque over the tool radius, which does not depend on
+    where samples fall. ``"1 ms |F|"``: ``hypot(fx_N, fy_N)`` of the twin's instantaneous 1 ms samples. At a
+    whole number of samples per tooth period (a 2-flute tool at 6000 rpm: 5) those fall at the same few
+    angles of every tooth, so a narrow pulse (a 1 mm side pass: 0.7 ms of the 5 ms) is caught or missed for
+    whole cuts: the twin's samples missed the first 90 ms of such a pass of :mod:`.scorecard_part` that the
+    truth's dynamometer caught, and its clock came out 14 ms off. Its own recording, though, is sampled at
+    the same angles, and the 1 ms ``|F|`` fits it exactly.
+    """
+    out = {}
+    if "spindle_torque_Nm" in twin and case.tool is not None and case.tool.diameter_mm > 0.0:
+        torque = np.nan_to_num(np.abs(np.asarray(twin["spindle_torque_Nm"], float)))
+        out["step-mean torque"] = torque / (0.5e-3 * case.tool.diameter_mm)
+    out["1 ms |F|"] = np.hypot(np.asarray(twin["fx_N"], float), np.asarray(twin["fy_N"], float))
+    if "step-mean torque" not in out:
+        out["step-mean torque"] = out["1 ms |F|"]
+    return out
+
+
 def force_only_recording(case: Case, recording: Recording, machine: Machine) -> ForceOnly:
     """Align a force-only recording by its cutting load and add the twin's tool path, spindle speed and lines.
 
@@ -83,7 +104,8 @@ def force_only_recording(case: Case, recording: Recording, machine: Machine) -> 
     src = recording.source
     twin = simulate_twin(case=replace(case, machine=machine), plot=False).recording
     t_twin = np.asarray(twin.t, float)
-    load_twin = np.hypot(np.asarray(twin["fx_N"], float), np.asarray(twin["fy_N"], float))
+    loads = twin_loads_for_clock(twin, case)
+    load_twin = loads["step-mean torque"]
     cutting = load_twin > 0.0
     if len(twin) < 3 or not cutting.any():
         raise DiagnosisError(f"{src}: the recording has forces only (no 'line', no moving position): its clock is "
@@ -97,10 +119,12 @@ def force_only_recording(case: Case, recording: Recording, machine: Machine) -> 
                              "aligned by its cutting load")
     rpm = float(np.median(np.asarray(twin["spindle_rpm"], float)[cutting]))
     window = ENVELOPE_REVOLUTIONS * 60.0 / max(rpm, 1.0)
-    offset = time_offset_from_forces(t[ok], np.hypot(fx[ok], fy[ok]), t_twin, load_twin, window)
-    method = (f"cutting load |F| = hypot(fx_N, fy_N) against the twin's prediction: cross-correlation of "
-              f"{1e3 * window:.3g} ms moving means ({ENVELOPE_REVOLUTIONS} spindle revolutions), refined by "
-              "least squares")
+    fits = {name: force_clock(t[ok], np.hypot(fx[ok], fy[ok]), t_twin, load, window) for name, load in loads.items()}
+    chosen = min(fits, key=lambda name: fits[name][1])
+    offset = fits[chosen][0]
+    method = (f"cutting load |F| = hypot(fx_N, fy_N) against the twin's prediction ({chosen}, the better fit of "
+              f"{' and '.join(loads)}): where each cuts, cross-correlated, then {1e3 * window:.3g} ms moving means "
+              f"({ENVELOPE_REVOLUTIONS} spindle revolutions) refined by least squares, an affine map per cut")
     t_prog = t - offset
     channels = {c: np.asarray(recording[c], float) for c in recording.channels if c not in CNC_CHANNELS}
     for c in TWIN_CHANNELS:

@@ -72,7 +72,9 @@ class Prepared:
         (:func:`predicted_forces`), since the machine's drives carried a cutting load all the same.
     forces_source : str
         Where ``disturbance`` comes from: ``"recorded"``, ``"predicted"``, ``"corrected"`` (recorded forces too
-        coarse for the tooth load: the twin's load corrected by them, :func:`corrected_forces`) or ``"none"``.
+        coarse for the tooth load: the twin's load corrected by them, :func:`corrected_forces`), ``"cutting
+        model"`` (the diagnosed cutting model's force instead, set by :func:`.core.diagnose` when it fits the
+        recorded currents better: :mod:`.cutting_load`) or ``"none"``.
     current_scale : dict axis -> float
         Scale error of a current channel found by the diagnosis (a logger artefact); ``current`` is
         already divided by it.
@@ -80,6 +82,9 @@ class Prepared:
         The motion of each axis at the recording's first sample (:func:`.identify.start_state.estimate_start`):
         the replays start from it, so that a log started while an axis moves (the usual Servo Guide log) is
         not compared with a replay catching up from rest on the command.
+    twin_loads : TwinLoads or None
+        The twin's own cutting load on its drives (its communication-step grid), when it was run for
+        recorded forces too coarse for the tooth load.
     """
 
     recording: Recording
@@ -103,6 +108,7 @@ class Prepared:
     forces_source: str = "none"
     current_scale: dict[str, float] = field(default_factory=dict)
     start: dict[str, AxisStart] = field(default_factory=dict)
+    twin_loads: "TwinLoads | None" = None
 
     def correct_current_scale(self, axis: str, scale: float) -> None:
         """Divide the measured current of ``axis`` by a scale error of its channel (accumulated)."""
@@ -138,15 +144,31 @@ class Prepared:
         return out
 
     def _coarse_commands(self, a: str) -> bool:
-        """Whether the recorded command of ``a`` has a gap between samples longer than 1.5 twin samples.
+        """Whether the recorded command of ``a`` cannot be interpolated between its samples.
 
-        Interpolated between such samples (PCHIP), a command loses the shape of every acceleration: the twin's
+        That is when it has a gap between samples longer than 1.5 twin samples, or when its samples fall
+        off the twin's interpolation instants (by more than :data:`OFF_GRID` of the interpolation period).
+        Interpolated between such samples, a command loses the shape of every acceleration: the twin's
         own run logged every 4 ms or 10 ms, or a random third of its 1 ms samples, read as friction,
-        reversal-friction, feed-forward and inertia effects.
+        reversal-friction, feed-forward and inertia effects. A logger sampling every 1 ms but a quarter of a
+        period after the interpolator cuts each 1 ms corner of the command by up to ``a T^2 / 8`` (1.2 µm at
+        the 10 m/s^2 of a z rapid): 0.8 µm of z following-error residual on the part of
+        :mod:`.scorecard_part`, named a z feed-forward of 0.008 in every run of its 1 ms loggers.
         """
         measured = np.asarray(self.t, float)[np.isfinite(np.asarray(self.recording[f"{a}_ref_mm"], float))]
-        period = float(np.median(np.diff(np.asarray(self.nc.t, float)))) if len(self.nc) > 1 else 0.0
-        return measured.size > 1 and period > 0.0 and float(np.max(np.diff(measured))) > 1.5 * period
+        t_nc = np.asarray(self.nc.t, float)
+        period = float(np.median(np.diff(t_nc))) if t_nc.size > 1 else 0.0
+        if measured.size < 2 or period <= 0.0:
+            return False
+        if float(np.max(np.diff(measured))) > 1.5 * period:
+            return True
+        phase = (measured - self.offset - t_nc[0]) / period
+        return bool(np.max(np.abs(phase - np.round(phase))) > OFF_GRID)
+
+
+#: Largest distance of recorded command samples from the twin's interpolation instants, as a share of the
+#: interpolation period, for which the recorded command is interpolated between its samples.
+OFF_GRID = 0.01
 
 
 def _finite_fraction(rec: Recording, name: str) -> float:
@@ -480,6 +502,7 @@ def prepare(case: Case, recording: Recording, machine: Machine, axes: list[str] 
                     start=starts(recording, list(commands), machine))
     revolution = _coarse_forces(prep.disturbance, case, nc)
     loads = twin_loads(case, machine) if revolution is not None else None
+    prep.twin_loads = loads
     if loads is not None:
         prep.disturbance = corrected_forces(prep.disturbance, loads, lambda: prep.offset, revolution)
         prep.forces_source = "corrected"
