@@ -140,3 +140,40 @@ def test_drilling_cycle_removes_the_hole_once_with_thrust_and_no_lateral_load(fo
     assert np.nanmax(fz) <= 0.0
     assert np.nanmax(rec["fc_N"]) == 0.0 and np.nanmax(rec["fc_peak_N"]) == 0.0
     assert np.nanmax(rec["spindle_torque_Nm"]) == pytest.approx(TORQUE, rel=0.02)
+
+
+def test_a_ramp_removes_the_swept_volume_with_its_z_share():
+    """A ramp 1 mm down over 10 mm along +X, then 10 mm level (F600, S6000): the removed volume is that of the
+    swept tool below the top face, integrated here on a 10 um grid (118.2 mm3). Without the end edges the
+    Z share (about pi R^2 x 1 mm = 28.3 mm3) was missing; the periphery and the end disc (only where it was
+    already under the disc a step before) count the rest once, to 0.5 %."""
+    saved = CuttingLoad.use_compiled
+    CuttingLoad.use_compiled = True
+    try:
+        cut = CuttingLoad("cut", tool_diameter=2 * R, flutes=N, kt=KT, ke=0.5, ka=KA, stock_x_min=0.0,
+                          stock_x_max=0.04, stock_y_min=-0.01, stock_y_max=0.01, stock_z_min=-0.01)
+        h, v = 1e-3, F_MM_MIN / 60e3
+        cut.set("spindle_speed", S_RPM * 2 * math.pi / 60)
+        cut.set("x_position", 5e-3)
+        cut.setup(0.0)
+        pts = [(5e-3, 0.0), (15e-3, -1e-3), (25e-3, -1e-3)]
+        removed = 0.0
+        t = 0.0
+        for (xa, za), (xb, zb) in zip(pts[:-1], pts[1:]):
+            n = int(round(math.hypot(xb - xa, zb - za) / (v * h)))
+            for k in range(1, n + 1):
+                cut.set("x_position", xa + (xb - xa) * k / n)
+                cut.set("z_position", za + (zb - za) * k / n)
+                cut.do_step(t, h)
+                t += h
+                removed += float(cut.get("mrr")[0]) * h
+    finally:
+        CuttingLoad.use_compiled = saved
+    # swept volume: a point (x, y) is cut to the depth of the furthest tool centre c <= x + sqrt(R^2 - y^2)
+    x, y = np.meshgrid(np.arange(0.0, 30.0, 0.01) + 0.005, np.arange(-3.0, 3.0, 0.01) + 0.005, indexing="ij")
+    w = np.sqrt(9.0 - y * y)
+    c_far, c_near = np.minimum(x + w, 25.0), np.maximum(x - w, 5.0)
+    depth = np.where(c_far >= c_near, np.clip((c_far - 5.0) / 10.0, 0.0, 1.0), 0.0)  # mm
+    exact = float(depth.sum()) * 1e-4  # mm3
+    assert exact == pytest.approx(118.2, abs=0.1)
+    assert removed * 1e9 == pytest.approx(exact, rel=5e-3)
