@@ -385,8 +385,8 @@ class CuttingLoad(Component):
                 self._motion, self._theta, np.ascontiguousarray(self._radius, dtype=np.float64),
                 np.ascontiguousarray(self._flutes, dtype=np.int64),
                 np.array(v["angle_steps_per_tooth"], dtype=np.float64), np.array(v["kt"], dtype=np.float64),
-                np.array(v["ke"], dtype=np.float64), np.array(v["ka"], dtype=np.float64), st.cutting_time, st.torque, st.angle, self._kernel_status,
-                self._kernel_diag, int(MAX_SUBSTEPS))
+                np.array(v["ke"], dtype=np.float64), np.array(v["ka"], dtype=np.float64), st.cutting_time,
+                st.torque, st.angle, self._kernel_status, self._kernel_diag, int(MAX_SUBSTEPS))
 
     def fail_kernel_substeps(self, h: float) -> None:
         """Fail the members :func:`.zmap_numba.zmap_component_step` reported; clear them.
@@ -479,10 +479,11 @@ class CuttingLoad(Component):
         path = self.path
         kt = np.asarray(v["kt"], dtype=np.float64) * self._wear()
         ka = np.asarray(v["ka"], dtype=np.float64)
+        ones = np.ones(self.batch)
         return axial_cuts(z.heights, z.grid, z.cells, *_ring(path), np.ascontiguousarray(self._p_prev),
                           np.ascontiguousarray(p_new), np.ascontiguousarray(self._radius, dtype=np.float64),
-                          np.ascontiguousarray(omega, dtype=np.float64), np.ascontiguousarray(kt * np.ones(self.batch)),
-                          np.ascontiguousarray(ka * np.ones(self.batch)), float(h), np.ascontiguousarray(held))
+                          np.ascontiguousarray(omega, dtype=np.float64), kt * ones, ka * ones, float(h),
+                          np.ascontiguousarray(held))
 
     def _cut(self, p_new: np.ndarray, omega: np.ndarray, h: float, n: np.ndarray, held: np.ndarray,
              feed: np.ndarray) -> StepResult:

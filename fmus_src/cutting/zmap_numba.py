@@ -542,15 +542,14 @@ def zmap_component_step(
     points: np.ndarray, arc: np.ndarray, head: np.ndarray, count: np.ndarray, spacing: np.ndarray, lag: np.ndarray,
     p_prev: np.ndarray, theta: np.ndarray, radius: np.ndarray, flutes: np.ndarray, steps: np.ndarray,
     kt: np.ndarray, ke: np.ndarray, ka: np.ndarray, failed: np.ndarray, cutting_time: np.ndarray,
-    torque: np.ndarray,
-    angle: np.ndarray, status: np.ndarray, diag: np.ndarray, max_substeps: int,
+    torque: np.ndarray, angle: np.ndarray, status: np.ndarray, diag: np.ndarray, max_substeps: int,
 ) -> int:
     """``CuttingLoad._do_step`` with every effect term off and the compiled kernels, for every member.
 
     The same floating-point operations in the same order as the component
     (:meth:`.component.CuttingLoad._step_inputs`, ``_substeps``, the cut through
-    :func:`zmap_step` and :func:`.axial.axial_cut` (the end edges), the outputs, the spindle angle, ``_finish_effects``,
-    ``_commit`` through :func:`commit_rows`, ``_blank``), so the results are its
+    :func:`zmap_step` and :func:`.axial.axial_cut` (the end edges), the outputs, the spindle
+    angle, ``_finish_effects``, ``_commit`` through :func:`commit_rows`, ``_blank``), so the results are its
     own bit for bit. Members with a non-finite input, failed earlier (``failed``)
     or needing more than ``max_substeps`` substeps are held (not cut, spindle
     stopped) and their outputs blanked; the last ones are reported in ``status``
