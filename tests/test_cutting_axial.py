@@ -177,3 +177,29 @@ def test_a_ramp_removes_the_swept_volume_with_its_z_share():
     exact = float(depth.sum()) * 1e-4  # mm3
     assert exact == pytest.approx(118.2, abs=0.1)
     assert removed * 1e9 == pytest.approx(exact, rel=5e-3)
+
+
+def test_python_and_compiled_master_agree_on_the_pecks(folder):
+    """The G83 program with two members (S6000 and S3000: twice the axial chip, twice the thrust at the same
+    feed): the Python master and the compiled loop (one member per core) give the same recording bit for bit,
+    fz_N included."""
+    from orchestrator.case import load_case
+    from orchestrator.master import Master, MasterSettings
+    from orchestrator.twin import TwinOptions, build_twin
+
+    from test_compiled_master import RPM, _assert_same
+
+    def run(compiled):
+        case = load_case(folder)
+        twin = build_twin(case, batch=2, program_text=G83, options=TwinOptions(cutting_mode="zmap"))
+        twin.nck.set_overrides(spindle={2: np.array([6000.0, 3000.0]) * RPM})
+        settings = MasterSettings(step=twin.options.step, time_limit=6.0, stop_when=twin.stop_when,
+                                  limits=twin.limits or {}, check_every=10)
+        settings.compiled, settings.threads = compiled, 2
+        return Master(twin.system, settings, twin.probes).run()
+
+    a, b = run(False), run(True)
+    _assert_same(a, b)
+    fz = np.asarray(a.recording.data["fz_N"])
+    assert np.nanmin(fz[:, 0]) == pytest.approx(-THRUST, rel=0.02)
+    assert np.nanmin(fz[:, 1]) == pytest.approx(-2 * THRUST, rel=0.02)
