@@ -203,3 +203,52 @@ def test_python_and_compiled_master_agree_on_the_pecks(folder):
     fz = np.asarray(a.recording.data["fz_N"])
     assert np.nanmin(fz[:, 0]) == pytest.approx(-THRUST, rel=0.02)
     assert np.nanmin(fz[:, 1]) == pytest.approx(-2 * THRUST, rel=0.02)
+
+
+def test_path_mode_reads_the_axial_chip_from_the_table(folder):
+    """G81 in the path mode: the reference pass stores the end disc's engagement per station (pi R^2 and 2 pi R
+    per unit of descent in solid), so thrust and torque equal the Z-map mode's and the removed volume agrees
+    within the station spacing at the entry (20 um x pi R^2 = 0.57 mm3 at most)."""
+    from orchestrator.twin import TwinOptions
+
+    runs = {}
+    for mode in ("zmap", "path"):
+        result = simulate(program=folder / "g81.nc", case=folder, options=TwinOptions(cutting_mode=mode), plot=False)
+        assert result.success, result.message
+        rec = result.recording
+        t = np.asarray(rec.t)
+        mrr = np.asarray(rec["mrr_mm3_per_min"]).ravel() / 60.0
+        runs[mode] = (float(np.sum(mrr[1:] * np.diff(t))), float(np.nanmin(rec["fz_N"])),
+                      float(np.nanmax(rec["spindle_torque_Nm"])), float(np.nanmax(rec["fc_N"])))
+    (v_z, fz_z, tq_z, fc_z), (v_p, fz_p, tq_p, fc_p) = runs["zmap"], runs["path"]
+    assert fz_p == pytest.approx(fz_z, rel=1e-9) and fz_p == pytest.approx(-THRUST, rel=0.02)
+    assert tq_p == pytest.approx(tq_z, rel=1e-9)
+    assert abs(v_p - v_z) <= math.pi * 9.0 * 0.02
+    assert fc_p == fc_z == 0.0
+
+
+def test_path_mode_python_and_compiled_master_agree_on_a_drilled_hole(folder):
+    """G81 in the path mode, members S6000 and S3000: the Python master and the compiled loop (two threads)
+    give the same recording bit for bit, fz_N included; S3000 doubles the thrust."""
+    from orchestrator.case import load_case
+    from orchestrator.master import Master, MasterSettings
+    from orchestrator.twin import TwinOptions, build_twin, engagement_table
+
+    from test_compiled_master import RPM, _assert_same
+
+    case = load_case(folder)
+    table = engagement_table(case, TwinOptions(), program_text=G81)
+
+    def run(compiled):
+        twin = build_twin(case, batch=2, program_text=G81, options=TwinOptions(cutting_mode="path", engagement=table))
+        twin.nck.set_overrides(spindle={2: np.array([6000.0, 3000.0]) * RPM})
+        settings = MasterSettings(step=twin.options.step, time_limit=6.0, stop_when=twin.stop_when,
+                                  limits=twin.limits or {}, check_every=10)
+        settings.compiled, settings.threads = compiled, 2
+        return Master(twin.system, settings, twin.probes).run()
+
+    a, b = run(False), run(True)
+    _assert_same(a, b)
+    fz = np.asarray(a.recording.data["fz_N"])
+    assert np.nanmin(fz[:, 0]) == pytest.approx(-THRUST, rel=0.02)
+    assert np.nanmin(fz[:, 1]) == pytest.approx(-2 * THRUST, rel=0.02)

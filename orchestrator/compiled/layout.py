@@ -311,13 +311,14 @@ class Layout:
                         np.ascontiguousarray(tb.top, dtype=np.float64), float(tb.z_floor),
                         float(c._margin), float(c._tolerance), int(MAX_SUBSTEPS),  # noqa: SLF001
                         c._effect_state.cutting_time, c._effect_state.torque, c._effect_state.angle,  # noqa: SLF001
-                        c._status)  # noqa: SLF001
+                        c._status, c._ka, np.ascontiguousarray(tb.axial_area, dtype=np.float64),  # noqa: SLF001
+                        np.ascontiguousarray(tb.axial_span, dtype=np.float64), c._z_old)  # noqa: SLF001
         else:
             self._cut = None
             self.cut = (np.zeros((5, B)), np.zeros((7, B)), np.zeros(B, dtype=np.int64), np.zeros((1, 3)),
                         np.zeros(1), 1.0, np.zeros(1, dtype=np.int64), np.zeros((1, 1)), np.zeros((1, 1)),
                         np.zeros((1, 1)), 0.0, 0.0, 0.0, 1, np.zeros(B), np.zeros(B), np.zeros(B),
-                        np.zeros(B, dtype=np.int64))
+                        np.zeros(B, dtype=np.int64), np.zeros(B), np.zeros(1), np.zeros(1), np.zeros(B))
         self._bind_zmap(by_kind[KIND_ZMAP][0] if by_kind[KIND_ZMAP] else None)
         self.bound = True
 
