@@ -28,6 +28,8 @@ start (what enters the disc sideways is the periphery's, :mod:`.force`); it remo
 ``d = max(min(top, z_old) - max(z_new, z_min), 0)``, ``top`` the material there before the step (Z-map minus
 the recent path up to the step's start, as :func:`.engagement.tooth_depth`). A G83 peck re-entering its hole
 thus removes each layer once.
+
+The path mode reads the same quadrature from its engagement table (:mod:`.path_axial`).
 """
 from __future__ import annotations
 

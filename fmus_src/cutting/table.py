@@ -30,6 +30,10 @@ smallest gaps, top length-weighted), sorted by ``alpha``, with
 ``0 <= alpha < 2 pi`` and ``alpha < beta <= alpha + 2 pi``. A member's axial
 depth is ``top - max(z_tip, z_min)`` with its own tip height, so small z
 deviations from the reference pass are honoured.
+
+The end edges (the axial chip of plunges, :mod:`.axial`): per station, the
+end disc's engagement on the move from the previous station, per unit of
+descent (``axial_area``, ``axial_span``; read by :mod:`.path_axial`).
 """
 from __future__ import annotations
 

@@ -66,7 +66,7 @@ _CUT_KNOWN = frozenset((
     "tool_diameter", "flutes", "kt", "ke", "stock_x_min", "stock_y_min", "stock_z_min", "stock_x_max",
     "stock_y_max", "stock_z_max", "stock_cell", "angle_steps_per_tooth", "initial_spindle_angle",
     "engagement_table", "path_tolerance",
-    "ka",  # the end-edge thrust ratio: the path mode has no axial chip (fz stays 0)
+    "ka",  # the end edges' thrust ratio (fmus_src.cutting.path_axial)
 ))
 
 _INTEGRATORS = {"rk4": INTEGRATOR_RK4, "exponential": INTEGRATOR_EXPONENTIAL}
