@@ -84,7 +84,7 @@ SCHEMA: dict[str, set[str]] = {
     **{f"axis.{a}": set(_AXIS_KEYS) for a in AXES},
     **{f"axis.{a}.friction.{d}": set(_FRICTION_KEYS) for a in AXES for d in ("positive", "negative")},
     **{f"axis.{a}.effects": set(_EFFECT_KEYS) for a in AXES},
-    "material.*": {"kt_N_per_m2", "ke"},
+    "material.*": {"kt_N_per_m2", "ke", "ka"},
     "cutting.effects": set(_CUTTING_EFFECT_KEYS),
     "cost": {
         "tool_price_KRW", "tool_change_time_s", "labor_KRW_per_s", "depreciation_KRW_per_s",
@@ -171,6 +171,7 @@ VALUE_RULES: dict[tuple[str, str], tuple[Any, str]] = {
     ("cutting.effects", "helix_deg"): (lambda v: abs(v) < 80.0, "an angle in deg with |helix| < 80"),
     ("cutting.effects", "chatter_damping_ratio"): (lambda v: 0.0 <= v < 1.0, "a damping ratio in [0, 1)"),
     ("material.*", "kt_N_per_m2"): _GE0,
+    ("material.*", "ka"): _GE0,
     **{("cost", k): _GE0 for k in ("tool_price_KRW", "tool_change_time_s", "labor_KRW_per_s",
                                    "depreciation_KRW_per_s")},
     **{("cost", k): _GT0 for k in ("taylor_n", "taylor_C")},

@@ -288,6 +288,7 @@ TWIN_CHANNELS: tuple[tuple[str, str, str], ...] = (
     ("spindle_rpm", "cutting.spindle_speed_actual", "rpm"),   # nck.spindle_speed without cutting (_FALLBACK)
     ("fx_N", "cutting.fx", "N"),
     ("fy_N", "cutting.fy", "N"),
+    ("fz_N", "cutting.fz", "N"),   # the end edges' thrust (axial chip, fmus_src.cutting.axial)
     ("fc_N", "cutting.fc", "N"),
     ("fc_peak_N", "cutting.fc_peak", "N"),
     ("spindle_torque_Nm", "cutting.spindle_torque", "N.m"),

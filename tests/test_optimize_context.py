@@ -67,6 +67,23 @@ def test_a_straight_retract_credited_with_the_cuts_lag_tail_is_not_a_cutting_lin
     assert 5 not in pins  # its own F word (F1000) stays as written
 
 
+def test_a_plunge_that_removes_material_with_its_end_edges_is_not_a_cutting_line():
+    """A G1 straight down -Z into the stock removes pi R^2 depth with the end edges (the axial chip) but gives no
+    lateral load fc, which the search limits: it keeps its F; a ramp (sideways while sinking) is a cutting line."""
+    mm = 1e-3
+    blocks = (
+        SpindleSpeed(2, 600.0, 1, 2),
+        Rapid(3, (0, 0, 0), (0, 0, mm)),
+        Linear(4, (0, 0, mm), (0, 0, -2 * mm), 120 / 60000, 4),  # G1 Z-2. F120 (plunge into solid)
+        Linear(5, (0, 0, -2 * mm), (5 * mm, 0, -2 * mm), 300 / 60000, 5),
+        Linear(6, (5 * mm, 0, -2 * mm), (9 * mm, 0, -3 * mm), 300 / 60000, 5),  # a ramp: sideways while sinking
+    )
+    removed = {4: np.pi * 3.0 ** 2 * 3.0, 5: 10.0, 6: 5.0}  # the plunge: a 6 mm end mill 3 mm down, mm3
+    lines, _, pins, feeds, _ = classify_lines(blocks, removed, 0.1)
+    assert lines == [5, 6] and feeds == [pytest.approx(300.0), pytest.approx(300.0)]
+    assert 4 not in pins  # its own F word (F120) stays as written
+
+
 def test_snap_to_machinist_grid(reference):
     f, s = reference.context.snap(np.array([[123.0, 999.0]]), np.array([[6024.0, 100.0]]))
     assert f.tolist() == [[120.0, 600.0]]

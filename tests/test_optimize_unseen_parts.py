@@ -71,8 +71,9 @@ def test_milling_programs_change_only_f_and_s_and_resimulate_to_after(name, tmp_
 
 
 def test_two_tools_and_peck_drilling(tmp_path):
-    """T1 end mill, T2 drill (G81, G83), T1 again. The twin's cutting force and removal rate are those of the
-    periphery (Eq. 10-13: the chip comes from the XY feed), so the drill's plunges remove nothing and keep
+    """T1 end mill, T2 drill (G81, G83), T1 again. The drill's plunges remove their holes with the end edges
+    (the axial chip: pi R^2 depth, the case's 6 mm tool, a little less than the 3 and 4 mm programmed where
+    the servo lag turns the tool back early) but give no lateral load, so they are not cutting lines and keep
     their F; the two slots are the cutting lines. The pecks of G83 reverse on one line faster than the servo
     follows (it turns back 0.14-0.50 mm short of R): the path-mode engagement re-finds the tool across the
     reversal, so the search runs in path mode, and its reference run of the original agrees with the Z-map
@@ -81,7 +82,10 @@ def test_two_tools_and_peck_drilling(tmp_path):
     result, out = _run("drill_two_tools", tmp_path)
     report = _check_outputs("drill_two_tools", result, out)
     assert [row["line"] for row in report["lines"]] == [9, 23]  # the two slots
-    assert report["removed_mm3_by_line"]["14"] == report["removed_mm3_by_line"]["15"] == 0.0  # G81, G83
+    removed = report["removed_mm3_by_line"]
+    assert removed["14"] == 0.0  # the rapid to the first hole
+    for line, depth_mm in (("15", 3.0), ("16", 4.0)):  # G81 to Z-3, G83 to Z-4 (each layer of the pecks once)
+        assert 0.97 * math.pi * 9.0 * depth_mm < removed[line] <= math.pi * 9.0 * depth_mm * (1 + 1e-9)
     assert report["search_cutting_model"] == "path"
     assert report["tool_changes"] == [{"line": 5, "tool": 1}, {"line": 12, "tool": 2}, {"line": 19, "tool": 1}]
     assert len(report["notes"]) == 1 and "T1, T2" in report["notes"][0] and "6 mm, 2 flutes" in report["notes"][0]
@@ -90,8 +94,9 @@ def test_two_tools_and_peck_drilling(tmp_path):
     # slot 2: full slot 1.2 mm deep, F350, S6000, 2 flutes: Kt a fz sqrt(1 + Ke^2) = 48.13 N (A6061: 1.23e9, 0.5)
     assert report["before"]["max_cutting_load_N"] == pytest.approx(
         1.23e9 * 1.2e-3 * 350.0 / (6000 * 2) * 1e-3 * math.sqrt(1.25), abs=0.05)
-    # the slots remove 6 mm x 40 mm x (1.0 + 1.2) mm (their servo-lag tails counted on the lines after them)
-    assert sum(report["removed_mm3_by_line"].values()) == pytest.approx(6.0 * 40.0 * 2.2, rel=1e-3)
+    # the slots remove 6 mm x 40 mm x (1.0 + 1.2) mm (their servo-lag tails counted on the lines after them),
+    # the holes what their lines removed (checked above)
+    assert sum(removed.values()) == pytest.approx(6.0 * 40.0 * 2.2 + removed["15"] + removed["16"], rel=1e-3)
 
 
 def test_the_search_falls_back_to_the_zmap_model_when_the_path_mode_loses_the_tool(tmp_path, monkeypatch):

@@ -72,12 +72,13 @@ import numpy as np
 from ..component import Component, Variable
 from ..errors import CncTwinError
 from ..jit import NUMBA_AVAILABLE
+from .axial import AX_MRR, AX_THRUST, AX_TORQUE, AXIAL_RATIO_DEFAULT, axial_cuts, stalled_plunges
 from .effect_model import CHATTER_SUBSTEPS_PER_PERIOD, EffectParameters, EffectState
 from .engagement import NearField, SweptPath
 from .kernel import CHIP_HISTORY_WIDTH, StepResult, chord_advance_all, chord_feeds, cut_step, stalled_cuts
 from .kernel_effects import cut_step_effects
 from .stock import ZMapStock
-from .zmap_numba import (ERR_STALLED, ERR_SUBSTEPS, IO_ROWS, ZMapArrays, commit, cut_step_compiled,
+from .zmap_numba import (ERR_STALLED, ERR_SUBSTEPS, IO_ROWS, ZMapArrays, _ring, commit, cut_step_compiled,
                          zmap_component_step)
 
 #: Refuse steps needing more substeps than this (spindle speed or jump far too large).
@@ -89,7 +90,7 @@ PATH_SPACING = 0.1
 #: Parameters of the baseline model (Eq. 10-13 on a Z-map stock); every other parameter is an effect term,
 #: off at 0 (:meth:`CuttingLoad.effects_off`).
 BASELINE_PARAMETERS = frozenset((
-    "tool_diameter", "flutes", "kt", "ke", "stock_x_min", "stock_y_min", "stock_z_min", "stock_x_max",
+    "tool_diameter", "flutes", "kt", "ke", "ka", "stock_x_min", "stock_y_min", "stock_z_min", "stock_x_max",
     "stock_y_max", "stock_z_max", "stock_cell", "angle_steps_per_tooth", "initial_spindle_angle",
 ))
 
@@ -124,6 +125,8 @@ class CuttingLoad(Component):
         _p("flutes", "1", 2, "number of teeth", "Integer"),
         _p("kt", "N/m2", 1.23e9, "tangential cutting coefficient (A6061, Sim & Lee 2023)"),
         _p("ke", "1", 0.5, "radial / tangential force ratio (A6061, Sim & Lee 2023)"),
+        _p("ka", "1", AXIAL_RATIO_DEFAULT,
+           "axial (thrust) / tangential force ratio of the end edges (axial chip of plunges; Altintas Kac/Ktc)"),
         _p("stock_x_min", "m", 0.0, "stock block lower x, work coordinates"),
         _p("stock_y_min", "m", 0.0, "stock block lower y, work coordinates"),
         _p("stock_z_min", "m", 0.0, "stock block lower z, work coordinates"),
@@ -167,6 +170,8 @@ class CuttingLoad(Component):
         Variable("tool_vibration_x", "output", "m", 0.0, "x displacement of the tool mode at t + h (chatter)"),
         Variable("tool_vibration_y", "output", "m", 0.0, "y displacement of the tool mode at t + h (chatter)"),
         Variable("cutting_time", "output", "s", 0.0, "time with material removal since t0 (tool wear clock)"),
+        Variable("fz", "output", "N", 0.0,
+                 "z force on the workpiece (end-edge thrust of the axial chip, <= 0), mean over the last step"),
     )
 
     # ------------------------------------------------------------------ lifecycle
@@ -196,7 +201,7 @@ class CuttingLoad(Component):
         self._kernel_diag = np.zeros((2, self.batch))
         # no motion known at t0: no chip, no force
         for name in ("fx", "fy", "fc", "fc_peak", "fx_mean", "fy_mean", "spindle_torque", "spindle_power",
-                     "mrr", "axial_depth", "chip_thickness"):
+                     "mrr", "axial_depth", "chip_thickness", "fz"):
             v[name][...] = 0.0
         v["engaged_teeth"][...] = 0
         v["spindle_angle"][...] = self._theta
@@ -247,6 +252,7 @@ class CuttingLoad(Component):
             ("flutes", lambda a: a >= 1, "an integer >= 1"),
             ("kt", lambda a: np.isfinite(a) & (a >= 0), "a non-negative coefficient in N/m2"),
             ("ke", lambda a: np.isfinite(a), "a finite ratio"),
+            ("ka", lambda a: np.isfinite(a) & (a >= 0), "a non-negative ratio"),
             ("angle_steps_per_tooth", lambda a: a >= 1, "an integer >= 1"),
             ("initial_spindle_angle", np.isfinite, "a finite angle in rad"),
         )
@@ -379,8 +385,8 @@ class CuttingLoad(Component):
                 self._motion, self._theta, np.ascontiguousarray(self._radius, dtype=np.float64),
                 np.ascontiguousarray(self._flutes, dtype=np.int64),
                 np.array(v["angle_steps_per_tooth"], dtype=np.float64), np.array(v["kt"], dtype=np.float64),
-                np.array(v["ke"], dtype=np.float64), st.cutting_time, st.torque, st.angle, self._kernel_status,
-                self._kernel_diag, int(MAX_SUBSTEPS))
+                np.array(v["ke"], dtype=np.float64), np.array(v["ka"], dtype=np.float64), st.cutting_time,
+                st.torque, st.angle, self._kernel_status, self._kernel_diag, int(MAX_SUBSTEPS))
 
     def fail_kernel_substeps(self, h: float) -> None:
         """Fail the members :func:`.zmap_numba.zmap_component_step` reported; clear them.
@@ -421,15 +427,18 @@ class CuttingLoad(Component):
             held = held | too_many
         feed = chord_feeds(self._motion[:, 3:], dp, h, omega, self._flutes)
         r = self._cut(p_new, omega, h, n, held, feed)
+        ax = self._axial(p_new, omega, h, held)  # the end edges (axial chip), before the commit
+        torque = r.mean[:, 2] + ax[:, AX_TORQUE]
         v["fx"][...] = -r.force[:, 0]
         v["fy"][...] = -r.force[:, 1]
         v["fc"][...] = np.hypot(r.force[:, 0], r.force[:, 1])
         v["fc_peak"][...] = r.fc_peak
         v["fx_mean"][...] = -r.mean[:, 0]
         v["fy_mean"][...] = -r.mean[:, 1]
-        v["spindle_torque"][...] = r.mean[:, 2]
-        v["spindle_power"][...] = r.mean[:, 2] * omega
-        v["mrr"][...] = r.mean[:, 3]
+        v["spindle_torque"][...] = torque
+        v["spindle_power"][...] = torque * omega
+        v["mrr"][...] = r.mean[:, 3] + ax[:, AX_MRR]
+        v["fz"][...] = -ax[:, AX_THRUST]
         v["axial_depth"][...] = r.axial_depth
         v["chip_thickness"][...] = r.chip_thickness
         v["engaged_teeth"][...] = r.engaged_teeth
@@ -441,7 +450,8 @@ class CuttingLoad(Component):
         self._commit(p_new)
         if held.any():
             self._blank(held)
-        stalled = ~held & stalled_cuts(omega, r.fc_peak, r.mean[:, 0], r.mean[:, 1])
+        stalled = ~held & (stalled_cuts(omega, r.fc_peak, r.mean[:, 0], r.mean[:, 1])
+                           | stalled_plunges(omega, ax[:, AX_MRR]))
         if stalled.any():
             self._fail_stalled(stalled, h)
 
@@ -452,11 +462,28 @@ class CuttingLoad(Component):
         for r in range(4):  # inputs
             io[r] = v[IO_ROWS[r]]
         arrays = self.compiled_step_arrays()
-        n_bad = zmap_component_step(h, io, *arrays[:17], self.failed_members, *arrays[17:])
+        n_bad = zmap_component_step(h, io, *arrays[:18], self.failed_members, *arrays[18:])
         for r in range(4, len(IO_ROWS)):  # outputs
             v[IO_ROWS[r]][...] = io[r]
         if n_bad:
             self.fail_kernel_substeps(h)
+
+    def _axial(self, p_new: np.ndarray, omega: np.ndarray, h: float, held: np.ndarray) -> np.ndarray:
+        """End-edge thrust on the tool (N), torque (N.m) and removal rate (m3/s) of every member, shape (B, 3).
+
+        :func:`.axial.axial_cuts` on the stock and the recent path before this step's commit (columns
+        ``AX_THRUST``, ``AX_TORQUE``, ``AX_MRR``); ``Kt`` with tool wear, as the periphery's.
+        """
+        v = self.values
+        z = self._zmap
+        path = self.path
+        kt = np.asarray(v["kt"], dtype=np.float64) * self._wear()
+        ka = np.asarray(v["ka"], dtype=np.float64)
+        ones = np.ones(self.batch)
+        return axial_cuts(z.heights, z.grid, z.cells, *_ring(path), np.ascontiguousarray(self._p_prev),
+                          np.ascontiguousarray(p_new), np.ascontiguousarray(self._radius, dtype=np.float64),
+                          np.ascontiguousarray(omega, dtype=np.float64), kt * ones, ka * ones, float(h),
+                          np.ascontiguousarray(held))
 
     def _cut(self, p_new: np.ndarray, omega: np.ndarray, h: float, n: np.ndarray, held: np.ndarray,
              feed: np.ndarray) -> StepResult:

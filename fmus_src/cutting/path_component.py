@@ -34,6 +34,7 @@ from ..component import Variable
 from . import path_kernel as pk
 from .component import MAX_SUBSTEPS, CuttingError, CuttingLoad
 from .effect_model import HISTORY_PER_PITCH
+from .path_axial import path_axial
 from .path_effects import path_step_effects
 from .table import EngagementTable
 
@@ -134,6 +135,9 @@ class PathCuttingLoad(CuttingLoad):
         ])
         self._st = np.zeros((pk.ST_ROWS, self.batch))  # state rows ST_*, the chip history empty
         self._status = np.zeros(self.batch, dtype=np.int64)  # per-member error kind of the last step
+        self._ka = np.array(np.broadcast_to(np.asarray(v["ka"], dtype=np.float64), (self.batch,)))
+        self._z_old = np.zeros(self.batch)  # tip height at the step's start (the end edges, path_axial)
+        v["fz"][...] = 0.0
         theta = np.mod(np.asarray(v["initial_spindle_angle"], dtype=np.float64), 2.0 * math.pi)
         self._st[pk.ST_THETA] = theta
         self._st[pk.ST_X:pk.ST_Z + 1] = position.T
@@ -172,6 +176,7 @@ class PathCuttingLoad(CuttingLoad):
         if np.any(eff.wear_rate != 0):
             par = self._par.copy()
             par[pk.PAR_KT] *= wear
+        self._z_old[...] = self._st[pk.ST_Z]
         if eff.geometric:
             es = self._effect_state
             coef = np.stack([par[pk.PAR_KT], par[pk.PAR_KE], eff.kte * wear, eff.kre * wear])
@@ -187,6 +192,8 @@ class PathCuttingLoad(CuttingLoad):
                 tb.spacing, tb.count, tb.alpha, tb.beta, tb.top, tb.z_floor, self._margin, self._tolerance,
                 MAX_SUBSTEPS, self._status,
             )
+        path_axial(self._out, self.values["fz"], self._st, self._z_old, inp, par, self._ka, h, tb.axial_area,
+                   tb.axial_span, tb.spacing)  # the end edges (axial chip), from the table's stations
         self._finish_effects(h, np.maximum(actual, 0.0), actual)
         if code:
             self._fail_status(h)

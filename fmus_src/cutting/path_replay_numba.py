@@ -31,9 +31,11 @@ import numpy as np
 
 from ..jit import njit, njit_nogil
 from ..jit_cache import guard_cache
-from . import chip, effect_model, kernel, path_effects, path_kernel
+from . import axial, chip, effect_model, kernel, path_effects, path_kernel
+from . import path_axial as path_axial_module
+from .path_axial import path_axial
 from .path_effects import path_step_effects
-from .path_kernel import OUT_DEPTH, OUT_FX, OUT_FY, OUT_MRR, OUT_TORQUE, PAR_KE, PAR_KT, path_step
+from .path_kernel import OUT_DEPTH, OUT_FX, OUT_FY, OUT_MRR, OUT_TORQUE, PAR_KE, PAR_KT, ST_Z, path_step
 
 #: Rows of the record of :func:`replay_path`, shape ``(N_RECORD_ROWS, n, B)`` (component output names).
 RECORD_ROWS = ("fx", "fy", "spindle_torque", "spindle_speed_actual", "engaged_teeth", "axial_depth")
@@ -57,7 +59,7 @@ def replay_path(
     top: np.ndarray, z_floor: float, stock_top: float, reach_margin: float, tolerance: float, max_substeps: int,
     epar: np.ndarray, toff: np.ndarray, passes: np.ndarray, mode: np.ndarray, ht: np.ndarray, hx: np.ndarray,
     hy: np.ndarray, meta: np.ndarray, angle: np.ndarray, gap: np.ndarray, cutting_time: np.ndarray,
-    torque: np.ndarray, status: np.ndarray, record: np.ndarray, m0: int,
+    torque: np.ndarray, status: np.ndarray, record: np.ndarray, m0: int, ka: np.ndarray, axial: np.ndarray,
 ) -> tuple[int, int]:
     """Steps ``t[k] -> t[k + 1]``, ``k = 0 .. n - 2``, of every member (see the module docstring).
 
@@ -94,6 +96,10 @@ def replay_path(
         so calls for disjoint member blocks may run side by side in threads, writing disjoint columns.
     m0 : int
         Column of this call's first member in ``record``.
+    ka : ndarray, shape (B,)
+        End-edge thrust / tangential force ratio, 1.
+    axial : ndarray, shape (2, S)
+        The table's ``axial_area`` [m2] and ``axial_span`` [m] (:func:`.path_axial.path_axial`, after each step).
 
     Returns
     -------
@@ -110,6 +116,8 @@ def replay_path(
     kpar = par.copy()
     coef = np.empty((4, batch))
     actual = np.empty(batch)
+    z_old = np.empty(batch)
+    fz = np.empty(batch)
     for k in range(n - 1):
         h = t[k + 1] - t[k]
         cmd = step_omega[k]
@@ -131,6 +139,7 @@ def replay_path(
             coef[1, m] = par[PAR_KE, m]
             coef[2, m] = effects[0, m] * wear
             coef[3, m] = effects[1, m] * wear
+            z_old[m] = st[ST_Z, m]
         if geometric:
             code = path_step_effects(
                 h, inp, kpar, st, out, engaged, verts, vs, ds, count, alpha, beta, top, z_floor, stock_top,
@@ -139,6 +148,7 @@ def replay_path(
         else:
             code = path_step(h, inp, kpar, st, out, engaged, verts, vs, ds, count, alpha, beta, top, z_floor,
                              reach_margin, tolerance, max_substeps, status)
+        path_axial(out, fz, st, z_old, inp, kpar, ka, h, axial[0], axial[1], ds)  # the end edges
         if code != 0:
             return REPLAY_MEMBER_FAILED, k
         for m in range(batch):
@@ -156,4 +166,4 @@ def replay_path(
 
 
 # the compiled loop links the kernels' code: recompile it when their modules change
-guard_cache(replay_path, path_kernel, path_effects, kernel, chip, effect_model)
+guard_cache(replay_path, path_kernel, path_effects, kernel, chip, effect_model, path_axial_module, axial)

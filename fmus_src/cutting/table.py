@@ -30,6 +30,10 @@ smallest gaps, top length-weighted), sorted by ``alpha``, with
 ``0 <= alpha < 2 pi`` and ``alpha < beta <= alpha + 2 pi``. A member's axial
 depth is ``top - max(z_tip, z_min)`` with its own tip height, so small z
 deviations from the reference pass are honoured.
+
+The end edges (the axial chip of plunges, :mod:`.axial`): per station, the
+end disc's engagement on the move from the previous station, per unit of
+descent (``axial_area``, ``axial_span``; read by :mod:`.path_axial`).
 """
 from __future__ import annotations
 
@@ -45,6 +49,7 @@ from ..jit_cache import guard_cache
 from .component import PATH_SPACING, CuttingError, CuttingLoad
 from .engagement import RIM_TOL, SweptPath
 from . import engagement, stock
+from .axial import AX_MRR, AX_THRUST, axial_cut
 from .stock import ZMapStock, sweep_cover_z
 
 #: Tops closer than this are one interval, m.
@@ -212,6 +217,10 @@ class EngagementTable:
         Stock block, m.
     stock_cell : float
         Z-map cell edge of the reference pass, m.
+    axial_area, axial_span : ndarray, shape (S,), optional
+        The end edges' engagement per unit of descent (:mod:`.path_axial`): ``sum d dA / dz`` [m2] and
+        ``sum d dA / r / dz`` [m] of the move from the previous station (0 where the path does not move
+        down); zeros when absent (a table saved before they existed: no axial chip).
     """
 
     vertices: np.ndarray
@@ -226,6 +235,13 @@ class EngagementTable:
     stock_lower: np.ndarray
     stock_upper: np.ndarray
     stock_cell: float
+    axial_area: np.ndarray | None = None
+    axial_span: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        for name in ("axial_area", "axial_span"):
+            if getattr(self, name) is None:
+                object.__setattr__(self, name, np.zeros(self.count.shape[0]))
 
     @property
     def length(self) -> float:
@@ -240,7 +256,8 @@ class EngagementTable:
     @property
     def nbytes(self) -> int:
         """Memory held by the table arrays, bytes."""
-        return int(sum(a.nbytes for a in (self.vertices, self.vertex_s, self.count, self.alpha, self.beta, self.top)))
+        return int(sum(a.nbytes for a in (self.vertices, self.vertex_s, self.count, self.alpha, self.beta, self.top,
+                                          self.axial_area, self.axial_span)))
 
     def save(self, path: str | Path) -> None:
         """Write the table to a ``.npz`` file."""
@@ -248,6 +265,7 @@ class EngagementTable:
             path, vertices=self.vertices, vertex_s=self.vertex_s, spacing=self.spacing, count=self.count,
             alpha=self.alpha, beta=self.beta, top=self.top, radius=self.radius, z_floor=self.z_floor,
             stock_lower=self.stock_lower, stock_upper=self.stock_upper, stock_cell=self.stock_cell,
+            axial_area=self.axial_area, axial_span=self.axial_span,
         )
 
     @classmethod
@@ -275,6 +293,7 @@ class EngagementTable:
             count=f["count"].astype(np.int64), alpha=f["alpha"], beta=f["beta"], top=f["top"],
             radius=float(f["radius"]), z_floor=float(f["z_floor"]), stock_lower=f["stock_lower"],
             stock_upper=f["stock_upper"], stock_cell=float(f["stock_cell"]),
+            axial_area=f.get("axial_area"), axial_span=f.get("axial_span"),
         )
 
     @classmethod
@@ -390,6 +409,11 @@ def build_engagement_table(
     reach = radius + float(stock.rho[0])
 
     count = np.zeros(n_st + 1, dtype=np.int64)
+    axial_area = np.zeros(n_st + 1)
+    axial_span = np.zeros(n_st + 1)
+    zgrid = np.array([[stock.lower[0, 0], stock.lower[0, 1], stock.lower[0, 2], stock.dx[0], stock.dy[0]]])
+    zcells = np.array([[stock.nx[0], stock.ny[0]]], dtype=np.int64)
+    ax = np.zeros(3)
     alpha = np.zeros((n_st + 1, max_intervals))
     beta = np.zeros((n_st + 1, max_intervals))
     top = np.zeros((n_st + 1, max_intervals))
@@ -409,6 +433,13 @@ def build_engagement_table(
                 a, b, t = _merge(buf[0][:k], buf[1][:k], buf[2][:k], max_intervals)
                 count[i] = a.size
                 alpha[i, :a.size], beta[i, :a.size], top[i, :a.size] = a, b, t
+            dz = centres[i - 1, 2] - c[2] if i > 0 else 0.0
+            if dz > 0.0:  # the end edges on the move from the previous station (unit Kt, ka, omega, h)
+                p = centres[i - 1]
+                axial_cut(stock.heights, zgrid, zcells, swept.points, swept.head, swept.count, 0, p[0], p[1], p[2],
+                          c[0], c[1], c[2], radius, 1.0, 1.0, 1.0, 1.0, ax)
+                axial_area[i] = ax[AX_MRR] / dz
+                axial_span[i] = ax[AX_THRUST] / dz
         swept.advance(c[None, :])
         while True:
             start, end, mask = swept.pop_ready(force_room=True)
@@ -418,7 +449,7 @@ def build_engagement_table(
     return EngagementTable(
         vertices=vertices, vertex_s=vertex_s, spacing=ds, count=count, alpha=alpha, beta=beta, top=top,
         radius=radius, z_floor=z_floor, stock_lower=lower[0].copy(), stock_upper=upper[0].copy(),
-        stock_cell=float(stock_cell),
+        stock_cell=float(stock_cell), axial_area=axial_area, axial_span=axial_span,
     )
 
 

@@ -34,7 +34,8 @@ import numpy as np
 from ..errors import CncTwinError
 from ..jit import njit
 from ..jit_cache import guard_cache
-from . import engagement, kernel, stock
+from . import axial, engagement, kernel, stock
+from .axial import AX_MRR, AX_THRUST, AX_TORQUE, axial_cut, stalled_plunge
 from .engagement import RIM_TOL, SweptPath
 from .kernel import (H_COUNT, OMEGA_FLOOR, SECTION_ROUNDS, SECTIONS, StepResult, chord_advance, chord_feed,
                      stalled_cut, substep_counts)
@@ -525,9 +526,9 @@ def commit(zmap: ZMapArrays, path: SweptPath, position: np.ndarray, radius: np.n
 #: :class:`.component.CuttingLoad`, in this order (``engaged_teeth`` as a float).
 IO_ROWS = ("x_position", "y_position", "z_position", "spindle_speed", "fx", "fy", "fc", "fc_peak", "fx_mean",
            "fy_mean", "spindle_torque", "spindle_power", "mrr", "spindle_angle", "axial_depth", "chip_thickness",
-           "engaged_teeth", "spindle_speed_actual", "tool_vibration_x", "tool_vibration_y", "cutting_time")
+           "engaged_teeth", "spindle_speed_actual", "tool_vibration_x", "tool_vibration_y", "cutting_time", "fz")
 (IO_X, IO_Y, IO_Z, IO_SPEED, IO_FX, IO_FY, IO_FC, IO_PEAK, IO_MFX, IO_MFY, IO_TORQUE, IO_POWER, IO_MRR, IO_ANGLE,
- IO_DEPTH, IO_CHIP, IO_TEETH, IO_ACTUAL, IO_VIBX, IO_VIBY, IO_TIME) = range(len(IO_ROWS))
+ IO_DEPTH, IO_CHIP, IO_TEETH, IO_ACTUAL, IO_VIBX, IO_VIBY, IO_TIME, IO_FZ) = range(len(IO_ROWS))
 #: ``status`` of :func:`zmap_component_step`: the member needs more than ``max_substeps`` substeps.
 ERR_SUBSTEPS = 1
 #: ``status`` of :func:`zmap_component_step`: the member fed into material with a stalled spindle
@@ -540,15 +541,15 @@ def zmap_component_step(
     h: float, io: np.ndarray, heights: np.ndarray, grid: np.ndarray, cells: np.ndarray, rho: np.ndarray,
     points: np.ndarray, arc: np.ndarray, head: np.ndarray, count: np.ndarray, spacing: np.ndarray, lag: np.ndarray,
     p_prev: np.ndarray, theta: np.ndarray, radius: np.ndarray, flutes: np.ndarray, steps: np.ndarray,
-    kt: np.ndarray, ke: np.ndarray, failed: np.ndarray, cutting_time: np.ndarray, torque: np.ndarray,
-    angle: np.ndarray, status: np.ndarray, diag: np.ndarray, max_substeps: int,
+    kt: np.ndarray, ke: np.ndarray, ka: np.ndarray, failed: np.ndarray, cutting_time: np.ndarray,
+    torque: np.ndarray, angle: np.ndarray, status: np.ndarray, diag: np.ndarray, max_substeps: int,
 ) -> int:
     """``CuttingLoad._do_step`` with every effect term off and the compiled kernels, for every member.
 
     The same floating-point operations in the same order as the component
     (:meth:`.component.CuttingLoad._step_inputs`, ``_substeps``, the cut through
-    :func:`zmap_step`, the outputs, the spindle angle, ``_finish_effects``,
-    ``_commit`` through :func:`commit_rows`, ``_blank``), so the results are its
+    :func:`zmap_step` and :func:`.axial.axial_cut` (the end edges), the outputs, the spindle
+    angle, ``_finish_effects``, ``_commit`` through :func:`commit_rows`, ``_blank``), so the results are its
     own bit for bit. Members with a non-finite input, failed earlier (``failed``)
     or needing more than ``max_substeps`` substeps are held (not cut, spindle
     stopped) and their outputs blanked; the last ones are reported in ``status``
@@ -561,7 +562,7 @@ def zmap_component_step(
     ----------
     h : float
         Step length, s.
-    io : ndarray, shape (21, B)
+    io : ndarray, shape (22, B)
         Inputs (m, rad/s) and outputs (N, N.m, W, m3/s, rad, m, teeth, s) in :data:`IO_ROWS` order;
         inputs read, outputs written.
     heights, grid, cells, rho
@@ -574,8 +575,9 @@ def zmap_component_step(
         members).
     theta : ndarray, shape (B,)
         Spindle angle of tooth 0 in ``[0, 2 pi)``, rad (advanced).
-    radius, flutes, steps, kt, ke : ndarray, shape (B,)
-        Tool radius (m), teeth (int64), angle steps per tooth (float), Kt (N/m2), Ke (1).
+    radius, flutes, steps, kt, ke, ka : ndarray, shape (B,)
+        Tool radius (m), teeth (int64), angle steps per tooth (float), Kt (N/m2), Ke (1), end-edge thrust
+        ratio Ka (1).
     failed : ndarray of bool, shape (B,)
         Members the component failed earlier.
     cutting_time, torque, angle : ndarray, shape (B,)
@@ -598,6 +600,7 @@ def zmap_component_step(
     mp = np.empty((1, 13))
     mi = np.empty((1, 3), dtype=np.int64)
     out = np.empty((1, 10))
+    ax = np.zeros(3)
     n_bad = 0
     for b in range(B):
         # _step_inputs
@@ -635,6 +638,7 @@ def zmap_component_step(
         # _cut: zmap_step of this member alone (held: zero results)
         f0 = f1 = peak = m0 = m1 = m2 = m3 = depth = chip = 0.0
         teeth = 0.0
+        a_thrust = a_torque = a_mrr = 0.0
         if not hold:
             mp[0, MP_X0] = p_prev[b, 0]
             mp[0, MP_Y0] = p_prev[b, 1]
@@ -656,7 +660,10 @@ def zmap_component_step(
             f0, f1, peak = out[0, OUT_FX], out[0, OUT_FY], out[0, OUT_PEAK]
             m0, m1, m2, m3 = out[0, OUT_MFX], out[0, OUT_MFY], out[0, OUT_TORQUE], out[0, OUT_MRR]
             depth, chip, teeth = out[0, OUT_DEPTH], out[0, OUT_CHIP], out[0, OUT_TEETH]
-            if stalled_cut(omega, peak, m0, m1):
+            axial_cut(heights, grid, cells, points, head, count, b, p_prev[b, 0], p_prev[b, 1], p_prev[b, 2],
+                      px, py, pz, radius[b], omega, kt[b], ka[b], h, ax)
+            a_thrust, a_torque, a_mrr = ax[AX_THRUST], ax[AX_TORQUE], ax[AX_MRR]
+            if stalled_cut(omega, peak, m0, m1) or stalled_plunge(omega, a_mrr):
                 status[b] = ERR_STALLED
                 n_bad += 1
         io[IO_FX, b] = -f0
@@ -665,9 +672,12 @@ def zmap_component_step(
         io[IO_PEAK, b] = peak
         io[IO_MFX, b] = -m0
         io[IO_MFY, b] = -m1
+        m2 = m2 + a_torque
+        m3 = m3 + a_mrr
         io[IO_TORQUE, b] = m2
         io[IO_POWER, b] = m2 * omega
         io[IO_MRR, b] = m3
+        io[IO_FZ, b] = -a_thrust
         io[IO_DEPTH, b] = depth
         io[IO_CHIP, b] = chip
         io[IO_TEETH, b] = teeth
@@ -689,7 +699,7 @@ def zmap_component_step(
         p_prev[b, 1] = py
         p_prev[b, 2] = pz
         if hold:  # _blank: NaN outputs, spindle angle kept, no engaged tooth
-            for r in range(IO_FX, IO_TIME + 1):
+            for r in range(IO_FX, IO_FZ + 1):
                 if r != IO_ANGLE:
                     io[r, b] = math.nan
             io[IO_TEETH, b] = 0.0
@@ -700,4 +710,4 @@ def zmap_component_step(
 
 # the cached kernels call stock.sweep_cover_z and hold constants of kernel and engagement: recompile on change
 for _kernel in (_depth, zmap_step, _remove_segment, commit_rows, zmap_component_step):
-    guard_cache(_kernel, stock, kernel, engagement)
+    guard_cache(_kernel, stock, kernel, engagement, axial)

@@ -65,11 +65,13 @@ _NCK = (None, None) + (_Members(0, copy=False),) * 2 + (None,) * 6 + (_Members(0
 _MCU = (_Members(2), _Members(2), _Members(0), None, None, None, None, _COUNTER, _Members(0), _Members(2),
         _Members(0))
 _DRIVES = (_Members(2), _Members(1), _Members(1), _Members(1), _Members(1), None, _Members(1))
-_CUT = (_Members(1), _Members(1), _Members(0)) + (None,) * 11 + (_Members(0),) * 4
+# path mode: par, state, engaged; table and settings (shared); clocks, status; ka; axial table (shared); z at start
+_CUT = ((_Members(1), _Members(1), _Members(0)) + (None,) * 11 + (_Members(0),) * 4
+        + (_Members(0, copy=False), None, None, _Members(0)))
 _RO = _Members(0, copy=False)
 # Z-map heights, grid, cells, rho; ring buffer points, arc, head, count; spacing, lag; start position, angle;
-# radius, flutes, steps, Kt, Ke; clocks (time, torque, angle); status, diag (2, B); max substeps
-_ZMAP = ((_Members(0), _RO, _RO, _RO) + (_Members(0),) * 4 + (_RO, _RO, _Members(0), _Members(0)) + (_RO,) * 5
+# radius, flutes, steps, Kt, Ke, Ka; clocks (time, torque, angle); status, diag (2, B); max substeps
+_ZMAP = ((_Members(0), _RO, _RO, _RO) + (_Members(0),) * 4 + (_RO, _RO, _Members(0), _Members(0)) + (_RO,) * 6
          + (_Members(0),) * 4 + (_Members(1), None))
 HEAD = (None,) * 6 + (_Members(1),) + (None,) * 14 + (_Members(0), _Members(0, copy=False), None, None)
 TAIL = (None, None, _Members(1, copy=False), _HAS_FAILED, _NCK, _MCU, _DRIVES, _CUT, _ZMAP)

@@ -66,6 +66,7 @@ _CUT_KNOWN = frozenset((
     "tool_diameter", "flutes", "kt", "ke", "stock_x_min", "stock_y_min", "stock_z_min", "stock_x_max",
     "stock_y_max", "stock_z_max", "stock_cell", "angle_steps_per_tooth", "initial_spindle_angle",
     "engagement_table", "path_tolerance",
+    "ka",  # the end edges' thrust ratio (fmus_src.cutting.path_axial)
 ))
 
 _INTEGRATORS = {"rk4": INTEGRATOR_RK4, "exponential": INTEGRATOR_EXPONENTIAL}
@@ -310,13 +311,14 @@ class Layout:
                         np.ascontiguousarray(tb.top, dtype=np.float64), float(tb.z_floor),
                         float(c._margin), float(c._tolerance), int(MAX_SUBSTEPS),  # noqa: SLF001
                         c._effect_state.cutting_time, c._effect_state.torque, c._effect_state.angle,  # noqa: SLF001
-                        c._status)  # noqa: SLF001
+                        c._status, c._ka, np.ascontiguousarray(tb.axial_area, dtype=np.float64),  # noqa: SLF001
+                        np.ascontiguousarray(tb.axial_span, dtype=np.float64), c._z_old)  # noqa: SLF001
         else:
             self._cut = None
             self.cut = (np.zeros((5, B)), np.zeros((7, B)), np.zeros(B, dtype=np.int64), np.zeros((1, 3)),
                         np.zeros(1), 1.0, np.zeros(1, dtype=np.int64), np.zeros((1, 1)), np.zeros((1, 1)),
                         np.zeros((1, 1)), 0.0, 0.0, 0.0, 1, np.zeros(B), np.zeros(B), np.zeros(B),
-                        np.zeros(B, dtype=np.int64))
+                        np.zeros(B, dtype=np.int64), np.zeros(B), np.zeros(1), np.zeros(1), np.zeros(B))
         self._bind_zmap(by_kind[KIND_ZMAP][0] if by_kind[KIND_ZMAP] else None)
         self.bound = True
 
@@ -328,7 +330,7 @@ class Layout:
             f, i = np.zeros(B), np.zeros(B, dtype=np.int64)
             self.zmap = (np.zeros((B, 1, 1), dtype=np.float32), np.ones((B, 5)), np.zeros((B, 2), dtype=np.int64),
                          f, np.zeros((B, 3, 3)), np.zeros((B, 3)), i, i.copy(), f, f, np.zeros((B, 3)), f.copy(),
-                         f, i, f, f, f, f.copy(), f.copy(), f.copy(), i.copy(), np.zeros((2, B)), 1)
+                         f, i, f, f, f, f, f.copy(), f.copy(), f.copy(), i.copy(), np.zeros((2, B)), 1)
             return
         path = c.path
         for name, dtype in (("points", np.float64), ("arc", np.float64), ("head", np.int64), ("count", np.int64)):
@@ -337,8 +339,8 @@ class Layout:
                 setattr(path, name, np.array(value, dtype=dtype))
         self.zmap = c.compiled_step_arrays()  # the component's own arrays: it steps them in place too
         for i, name, dtype in ((0, "heights", np.float32), (10, "start position", np.float64),
-                               (11, "spindle angle", np.float64), (17, "cutting_time", np.float64),
-                               (18, "torque", np.float64), (19, "angle", np.float64)):
+                               (11, "spindle angle", np.float64), (18, "cutting_time", np.float64),
+                               (19, "torque", np.float64), (20, "angle", np.float64)):
             arr = self.zmap[i]
             if arr.dtype != dtype or not arr.flags.c_contiguous:
                 raise Unsupported(f"{c.name}: {name} is not a C-contiguous array of the kernel's type")
@@ -373,7 +375,7 @@ class Layout:
         st = c._effect_state  # noqa: SLF001
         own = (c._zmap.heights, c.path.points, c.path.arc, c.path.head, c.path.count,  # noqa: SLF001
                c._motion, c._theta, st.cutting_time, st.torque, st.angle)  # noqa: SLF001
-        shared = tuple(self.zmap[i] for i in (0, 4, 5, 6, 7, 10, 11, 17, 18, 19))
+        shared = tuple(self.zmap[i] for i in (0, 4, 5, 6, 7, 10, 11, 18, 19, 20))
         if any(a is not b for a, b in zip(own, shared)):
             raise CncTwinError(f"compiled loop: {c.name} replaced an array the loop shares with it "
                                "(stock heights, path ring buffer or effect clocks)")

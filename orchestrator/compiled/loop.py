@@ -33,6 +33,8 @@ import numpy as np
 
 from fmus_src.cutting import kernel as cutting_kernel
 from fmus_src.cutting import engagement as cutting_engagement
+from fmus_src.cutting import axial as cutting_axial
+from fmus_src.cutting import path_axial as cutting_path_axial
 from fmus_src.cutting import path_kernel, zmap_numba
 from fmus_src.cutting import stock as cutting_stock
 from fmus_src.jit import njit, njit_borrowed, njit_nogil
@@ -43,7 +45,8 @@ from fmus_src.servo import control_numba, exponential_numba, stick_slip, stick_s
 from fmus_src.servo.control_numba import axis_alarm, axis_member
 from fmus_src.servo.exponential_numba import exponential_member
 from fmus_src.servo.stick_slip_numba import OK, advance_kernel
-from fmus_src.cutting.path_kernel import max_flutes, path_step_into, path_work
+from fmus_src.cutting.path_axial import path_axial
+from fmus_src.cutting.path_kernel import ST_Z, max_flutes, path_step_into, path_work
 from fmus_src.cutting.zmap_numba import IO_ROWS, zmap_component_step
 
 #: Component kinds of the compiled loop.
@@ -68,11 +71,13 @@ CUT_OUTPUTS = ("fx", "fy", "fc", "fc_peak", "fx_mean", "fy_mean", "spindle_torqu
                "spindle_angle", "axial_depth", "chip_thickness")
 #: Outputs of the effect terms (issue 8); with the effects off: the input speed, 0, 0 and the cutting clock.
 CUT_EFFECT_OUTPUTS = ("spindle_speed_actual", "tool_vibration_x", "tool_vibration_y", "cutting_time")
-CUT_ROWS = CUT_INPUTS + CUT_OUTPUTS + ("engaged_teeth",) + CUT_EFFECT_OUTPUTS
+#: ``fz``: the end edges' thrust (axial chip; path mode: :func:`fmus_src.cutting.path_axial.path_axial`).
+CUT_ROWS = CUT_INPUTS + CUT_OUTPUTS + ("engaged_teeth",) + CUT_EFFECT_OUTPUTS + ("fz",)
 #: Rows of the Z-map cutting load (``CuttingLoad``), in the order of ``zmap_component_step``'s ``io``.
 ZMAP_ROWS = IO_ROWS
 _OUT_TORQUE = 4 + CUT_OUTPUTS.index("spindle_torque")
 _OUT_MRR = 4 + CUT_OUTPUTS.index("mrr")
+_ROW_FZ = CUT_ROWS.index("fz")
 
 
 @njit_borrowed
@@ -249,9 +254,9 @@ def _run_chunk(
     (m_gains, m_state, m_width, m_ratio, m_tp, m_tv, m_ticks, m_next, m_inpos, m_limits, m_alarm) = mcu
     (d_params, d_pos, d_vel, d_dir, d_step, d_integ, d_status) = drives
     (c_par, c_st, c_engaged, c_verts, c_vs, c_ds, c_count, c_alpha, c_beta, c_top, c_zfloor, c_margin, c_tol,
-     c_maxsub, c_time, c_torque, c_angle, c_status) = cut
+     c_maxsub, c_time, c_torque, c_angle, c_status, c_ka, c_axa, c_axj, c_zold) = cut
     (z_heights, z_grid, z_cells, z_rho, z_points, z_arc, z_head, z_count, z_spacing, z_lag, z_prev, z_theta,
-     z_radius, z_flutes, z_steps, z_kt, z_ke, z_time, z_torque, z_angle, z_status, z_diag, z_maxsub) = zmap
+     z_radius, z_flutes, z_steps, z_kt, z_ke, z_ka, z_time, z_torque, z_angle, z_status, z_diag, z_maxsub) = zmap
     n_zmap = len(ZMAP_ROWS)
     B = V.shape[1]
     m_tp2 = m_tp * m_tp
@@ -356,14 +361,19 @@ def _run_chunk(
                 elif kind == KIND_ZMAP:  # CuttingLoad._do_step, effect terms off
                     n_bad = zmap_component_step(
                         h_i, V[base:base + n_zmap], z_heights, z_grid, z_cells, z_rho, z_points, z_arc, z_head,
-                        z_count, z_spacing, z_lag, z_prev, z_theta, z_radius, z_flutes, z_steps, z_kt, z_ke,
+                        z_count, z_spacing, z_lag, z_prev, z_theta, z_radius, z_flutes, z_steps, z_kt, z_ke, z_ka,
                         comp_failed[c], z_time, z_torque, z_angle, z_status, z_diag, z_maxsub)
                     if n_bad != 0:  # members needing too many substeps (held, blanked): the component fails them
                         return k, n_rec, EV_FAIL, c, n_bad, j, item
                 else:  # KIND_CUT
+                    for b in range(B):
+                        c_zold[b] = c_st[ST_Z, b]
                     n_bad = path_step_into(h_i, V[base:base + 4], c_par, c_st, V[base + 4:base + 16], c_engaged,
                                            c_verts, c_vs, c_ds, c_count, c_alpha, c_beta, c_top, c_zfloor, c_margin,
                                            c_tol, c_maxsub, c_status, c_intervals, c_acc, c_rot, c_rot_key)
+                    # the end edges (axial chip) from the table's stations, as PathCuttingLoad._do_step
+                    path_axial(V[base + 4:base + 16], V[base + _ROW_FZ], c_st, c_zold, V[base:base + 4], c_par, c_ka,
+                               h_i, c_axa, c_axj, c_ds)
                     if n_bad != 0:  # members off the path or with too many substeps: the component fails them
                         return k, n_rec, EV_FAIL, c, n_bad, j, item
                     for b in range(B):  # engaged teeth, and CuttingLoad._finish_effects with the effects off
@@ -424,5 +434,5 @@ def sample(t: float, V: np.ndarray, probe_rows: np.ndarray, probe_factor: np.nda
 # the cached loop links the kernels' code: recompile it when any of their modules changes
 for _fn in (run_chunk, _run_chunk):
     guard_cache(_fn, control_numba, stick_slip, stick_slip_numba, exponential_numba, path_kernel, cutting_kernel,
-                sampling, zmap_numba, cutting_stock, cutting_engagement)
+                sampling, zmap_numba, cutting_stock, cutting_engagement, cutting_axial, cutting_path_axial)
 guard_cache(_nck_step, sampling)

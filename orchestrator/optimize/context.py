@@ -9,7 +9,11 @@ Rules (documented for machinists)
   executes that line). Air moves, plunges outside the stock and rapids are
   not cutting lines, nor is a straight retract along +Z (a flat end mill
   moving up its own axis meets no material: what the reference run credits
-  to it is the servo lag's tail of the cut before, which it cannot change).
+  to it is the servo lag's tail of the cut before, which it cannot change),
+  nor a straight plunge along -Z (a drilling cycle's feed, ``G1 Z-2.``): its
+  end edges remove material (:mod:`fmus_src.cutting.axial`) but load the tool
+  with thrust and torque only, not with the lateral load ``fc`` the search
+  limits, so a gene there would only run to the top of the feed range.
 * **Genes**: one feed (mm/min) and one spindle speed (rpm) per cutting line,
   keys ``L0042.feed`` and ``L0042.spindle`` (``0042`` = 1-based line of the
   program file), on a grid of ``feed_step`` (10 mm/min) and ``spindle_step``
@@ -481,9 +485,9 @@ def classify_lines(blocks: tuple[Block, ...], removed_mm3: dict[int, float], min
             per_minute.setdefault(b.line, round(b.feed * MM_PER_MIN_PER_M_S, 6))
     feed_lines = {line: (per_minute[line], runs[0][1]) for line, runs in feed_runs.items()}
     tapping = {b.line for b in blocks if isinstance(b, Linear) and b.tap_pitch > 0.0}  # F tied to S: never genes
-    retracts = _straight_retracts(blocks)
+    axial = _axial_lines(blocks)
     cutting = sorted(line for line in feed_lines
-                     if line not in tapping and line not in retracts and removed_mm3.get(line, 0.0) >= min_removed_mm3)
+                     if line not in tapping and line not in axial and removed_mm3.get(line, 0.0) >= min_removed_mm3)
     cut_set = set(cutting)
     # a G94 tapping line with a modal F gets it written (an F override of a cutting line in between would govern it)
     tap_modal = {b.line for b in blocks if isinstance(b, Linear) and b.tap_pitch > 0.0 and b.feed_per_rev == 0.0
@@ -534,19 +538,21 @@ def _governed_feed_lines(program: Program, cutting: list[int]) -> set[int]:
             if isinstance(b, (Linear, Arc)) and not feeds[0, i] == plain[0, i]}
 
 
-def _straight_retracts(blocks: tuple[Block, ...]) -> set[int]:
-    """Lines whose every feed move is a straight move along +Z only (a retract up the tool's axis).
+def _axial_lines(blocks: tuple[Block, ...]) -> set[int]:
+    """Lines whose every feed move is a straight move along Z only (a retract or a plunge on the tool's axis).
 
-    A flat end mill cuts with its periphery and its end face; moving up its own axis neither meets material
-    (the end face leaves it) nor moves the periphery sideways, so such a line removes nothing itself.
+    A flat end mill cuts with its periphery and its end face. Moving up its own axis neither meets material
+    (the end face leaves it) nor moves the periphery sideways, so such a line removes nothing itself. Moving
+    down it removes material with the end edges only (the axial chip): thrust and spindle torque, no lateral
+    load ``fc`` (symmetric engagement), which the search limits; its F is left as written.
     """
     out: dict[int, bool] = {}
     for b in blocks:
         if isinstance(b, (Linear, Arc)):
             d = np.asarray(b.end, float) - np.asarray(b.start, float)
-            up = isinstance(b, Linear) and d[2] > 0.0 and d[0] == 0.0 and d[1] == 0.0
-            out[b.line] = out.get(b.line, True) and up
-    return {line for line, up in out.items() if up}
+            along_z = isinstance(b, Linear) and d[2] != 0.0 and d[0] == 0.0 and d[1] == 0.0
+            out[b.line] = out.get(b.line, True) and along_z
+    return {line for line, z_only in out.items() if z_only}
 
 
 def _spindle_targets(blocks: tuple[Block, ...], cut_set: set[int]) -> dict[int, int]:
