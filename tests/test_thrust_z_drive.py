@@ -48,7 +48,7 @@ def runs(tmp_path_factory):
     folder = tmp_path_factory.mktemp("thrust")
     (folder / "case.toml").write_text(CASE_TOML)
     (folder / "plunge.nc").write_text(PLUNGE)
-    out = {}
+    out = {"folder": folder}
     for cutting in (True, False):
         result = simulate(program=folder / "plunge.nc", case=folder, options=TwinOptions(cutting=cutting),
                           plot=False)
@@ -83,3 +83,17 @@ def test_a_plunge_leaves_the_x_and_y_currents_alone(runs):
     for a in "xy":
         assert np.array_equal(np.asarray(runs[True][f"{a}_tcmd_A"]), np.asarray(runs[False][f"{a}_tcmd_A"]),
                               equal_nan=True)
+
+
+def test_the_diagnosis_replays_carry_the_twins_thrust_on_z(runs):
+    """``prepare.twin_loads`` (the load the replayed drives carry) has the plunge's thrust on Z, the step mean
+    the twin's Z drive carried: -103.32 N at the steady feed."""
+    from orchestrator.case import load_case
+    from orchestrator.diagnose.prepare import twin_loads
+
+    case = load_case(runs["folder"])
+    loads = twin_loads(case, case.machine)
+    assert "z" in loads.mean and "x" not in loads.mean and "y" not in loads.mean   # a plunge: no lateral load
+    z = np.asarray(runs[True]["z_mm"])
+    steady = (z < -1.0) & (z > -3.0) & (np.asarray(runs[True]["feed_mm_per_min"]) == F_MM_MIN)
+    assert loads.mean["z"][steady] == pytest.approx(-THRUST, rel=1e-3)
