@@ -8,6 +8,13 @@ components and wires them by variable name::
     {a}_drive.velocity ──► mcu.{a}_velocity
     nck.spindle_speed ──► cutting.spindle_speed   (spindle_rpm is recorded from cutting.spindle_speed_actual)
     cutting.fx_mean / fy_mean ──► x_drive / y_drive.disturbance_force   (Fd = +F on the workpiece)
+    cutting.fz ──► z_drive.disturbance_force   (the end edges' thrust, a step mean; Fd = +fz, see below)
+
+Sign of the thrust on Z: ``fz`` (<= 0) is the force on the workpiece; the Z slide carries the tool and feels
+the reaction ``-fz`` (>= 0, upward, towards positive z). The drive's ``Fd`` resists positive motion
+(``Ms x'' = u - Ff - Fd``), so ``Fd = -(-fz) = fz``: a plunge (z decreasing) needs a motor force
+``u = Ff + fz``, more downward by the thrust. (On X and Y the table carries the workpiece and the axis
+position is the tool's relative to it, so ``Fd = +F on the workpiece`` there too.)
 
 The servo loop (MCU and drives) runs at the velocity-loop period inside the
 1 ms communication step (rate 4 by default); the NC kernel and the cutting
@@ -258,6 +265,8 @@ def build_twin(
         # step-mean forces: instantaneous samples at 1 ms would alias the tooth frequency
         system.connect("cutting.fx_mean", "x_drive.disturbance_force")
         system.connect("cutting.fy_mean", "y_drive.disturbance_force")
+        # the end edges' thrust (already a step mean): Fd = fz <= 0, the slide pushed up (module docstring)
+        system.connect("cutting.fz", "z_drive.disturbance_force")
 
     # The position loop samples the NC command of the current interpolation period, as a real
     # controller does: the MCU and drives step before the NC kernel advances. (The signal-flow

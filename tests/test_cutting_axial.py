@@ -208,7 +208,9 @@ def test_python_and_compiled_master_agree_on_the_pecks(folder):
 def test_path_mode_reads_the_axial_chip_from_the_table(folder):
     """G81 in the path mode: the reference pass stores the end disc's engagement per station (pi R^2 and 2 pi R
     per unit of descent in solid), so thrust and torque equal the Z-map mode's and the removed volume agrees
-    within the station spacing at the entry (20 um x pi R^2 = 0.57 mm3 at most)."""
+    within the station spacing at the entry (20 um x pi R^2 = 0.57 mm3 at most). The thrust loads the Z drive, so
+    the modes' different entries (the path mode's station spacing) leave slightly different Z speeds after it:
+    peak thrust and torque agree to 1e-4 (measured 1.8e-5), no longer bit for bit."""
     from orchestrator.twin import TwinOptions
 
     runs = {}
@@ -221,8 +223,8 @@ def test_path_mode_reads_the_axial_chip_from_the_table(folder):
         runs[mode] = (float(np.sum(mrr[1:] * np.diff(t))), float(np.nanmin(rec["fz_N"])),
                       float(np.nanmax(rec["spindle_torque_Nm"])), float(np.nanmax(rec["fc_N"])))
     (v_z, fz_z, tq_z, fc_z), (v_p, fz_p, tq_p, fc_p) = runs["zmap"], runs["path"]
-    assert fz_p == pytest.approx(fz_z, rel=1e-9) and fz_p == pytest.approx(-THRUST, rel=0.02)
-    assert tq_p == pytest.approx(tq_z, rel=1e-9)
+    assert fz_p == pytest.approx(fz_z, rel=1e-4) and fz_p == pytest.approx(-THRUST, rel=0.02)
+    assert tq_p == pytest.approx(tq_z, rel=1e-4)
     assert abs(v_p - v_z) <= math.pi * 9.0 * 0.02
     assert fc_p == fc_z == 0.0
 

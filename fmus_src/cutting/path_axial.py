@@ -20,7 +20,7 @@ import numpy as np
 from ..jit import njit
 from ..jit_cache import guard_cache
 from . import kernel, path_kernel
-from .kernel import OMEGA_FLOOR
+from .kernel import OMEGA_FLOOR, OMEGA_STOPPED
 from .path_kernel import OUT_MRR, OUT_POWER, OUT_TORQUE, PAR_KT, ST_S, ST_Z
 
 
@@ -74,6 +74,10 @@ def path_axial(out: np.ndarray, fz: np.ndarray, st: np.ndarray, z_old: np.ndarra
         out[OUT_TORQUE, m] = torque
         out[OUT_POWER, m] = torque * om
         out[OUT_MRR, m] = out[OUT_MRR, m] + mrr
+        if om < OMEGA_STOPPED:
+            # a plunge with the spindle stopped (a crash the path mode does not check): no finite thrust exists;
+            # none is passed on to the Z drive, the periphery's check fails the member (kernel.stalled_cut)
+            continue
         fz[m] = -(ka[m] * kt * span[i] * dz / (h * w))
 
 

@@ -507,6 +507,10 @@ def diagnose(
             carried = {TWIN_LOAD: prep.disturbance, MODEL_TICK: model_loads(*args)}
             if prep.twin_loads is not None:
                 carried[MODEL_STEP] = model_loads(*args, steps=prep.twin_loads, offset=lambda: prep.offset)
+            # the diagnosed model is the periphery's (x, y): the Z drive keeps the twin's thrust in every choice
+            for how in (MODEL_TICK, MODEL_STEP):
+                if how in carried and prep.disturbance and "z" in prep.disturbance:
+                    carried[how] = {**carried[how], "z": prep.disturbance["z"]}
             how, cost = _best_load(prep, carried)
             if how != TWIN_LOAD:
                 prep.disturbance = carried[how]

@@ -14,14 +14,18 @@ from typing import Mapping
 
 import numpy as np
 
+from fmus_src.cutting.axial import AXIAL_RATIO_DEFAULT
+
 from ..atomic import atomic_write_json, atomic_write_text
-from ..case import load_case
+from ..case import Case, load_case
+from ..machine import Machine
 from ..recording import Recording
 from ..twin import engagement_table
 from .prepare import twin_commands
 from .truth import Recorder, record, simulate_truth
-from .truth_cutting import (Dynamometer, cutting_parameters_packed, fine_grid, merge_recordings, sample_forces,
-                            simulate_cutting, spindle_channel, tick_mean)
+from .truth_cutting import (CuttingRun, Dynamometer, cutting_parameters_packed, fine_grid, merge_recordings,
+                            sample_forces, simulate_cutting, spindle_channel, tick_mean)
+from .truth_thrust import truth_thrust
 
 #: Two full slots at 1 and 2 mm depth and a 1 mm side pass 3 mm deep (A6061, 6 mm 3-flute end mill).
 PROGRAM = """%
@@ -123,8 +127,11 @@ def write_cutting_case(folder: Path, effects: Mapping[str, Mapping[str, float]] 
                                        effects, theta0)
     run = simulate_cutting(table, t_f, pos, omega_cmd, packed)
     tv = float(machine.si("servo")["velocity_loop_period"])
-    # the cutting force loads the feed drives (one fixed-point pass: drives, then forces again)
-    dist = {"x": lambda tk: tick_mean(t_f, run.fx, tk, tv), "y": lambda tk: tick_mean(t_f, run.fy, tk, tv)}
+    thrust = _thrust(case, machine, packed, t_f, pos, run)
+    # the cutting force loads the feed drives (one fixed-point pass: drives, then forces again); the Z slide
+    # carries the tool: the end edges' thrust pushes it up, a load -thrust = fz resisting positive motion
+    dist = {"x": lambda tk: tick_mean(t_f, run.fx, tk, tv), "y": lambda tk: tick_mean(t_f, run.fy, tk, tv),
+            "z": lambda tk: tick_mean(t_f, -thrust, tk, tv)}
     truth = simulate_truth(machine, nc, drives, axes=("x", "y", "z"), disturbance=dist)
     # the forces of the loaded motion (the positions move by well under a micrometre more in a third pass)
     pos = np.column_stack([np.interp(t_f, truth.t, truth.table[a]) for a in "xyz"])
@@ -155,3 +162,16 @@ def write_cutting_case(folder: Path, effects: Mapping[str, Mapping[str, float]] 
                         "hum_Hz": dyn.hum_Hz, "on_cnc_rows": bool(forces_on_cnc_rows)},
     })
     return folder
+
+
+def _thrust(case: Case, machine: Machine, packed: np.ndarray, t_f: np.ndarray, pos: np.ndarray,
+            run: CuttingRun) -> np.ndarray:
+    """The truth's end-edge thrust on the tool [N, upward] on the fine grid (:mod:`.truth_thrust`; 0 without a
+    stock). ``packed[2]`` is the truth's Kt (a hidden ``kt_mismatch`` included), N/m2."""
+    if case.stock is None:
+        return np.zeros(t_f.size)
+    mat = machine.si(f"material.{case.material}")
+    ka = float(mat["ka"]) if "ka" in mat else AXIAL_RATIO_DEFAULT
+    return truth_thrust(t_f, pos, run.omega, run.theta, 0.5 * case.tool.diameter_mm * 1e-3, case.tool.flutes,
+                        float(packed[2]), ka, np.asarray(case.stock.min_mm, float) * 1e-3,
+                        np.asarray(case.stock.max_mm, float) * 1e-3)
