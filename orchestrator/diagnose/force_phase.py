@@ -20,6 +20,8 @@ from dataclasses import replace
 
 import numpy as np
 
+from fmus_src.cutting.table import EngagementTable
+
 from ..case import Case
 from ..machine import Machine
 from ..recording import Recording
@@ -81,16 +83,15 @@ def _cut_misfits(fx: np.ndarray, fy: np.ndarray, rx: np.ndarray, ry: np.ndarray,
     return total
 
 
-def _scan(case: Case, table, twin: Recording, t_rec: np.ndarray, fx: np.ndarray, fy: np.ndarray,
+def _scan(case: Case, table: EngagementTable, twin: Recording, t_rec: np.ndarray, fx: np.ndarray, fy: np.ndarray,
           groups: list[np.ndarray], offsets: np.ndarray, angles: np.ndarray, ref: int,
           shapes: int = len(SHAPES)) -> np.ndarray:
     """Misfit [N²] of every (offset, angle) pair, shape (len(offsets), len(angles)).
 
-    ``shapes``: how many of :data:`SHAPES` are replayed (the edge-force members run the slower effect
-    kernel, about 35 ms per member against 2 ms on the short part).
-
     ``angles`` are the spindle angle of tooth 0 at sample ``ref`` (inside a cut, the spindle at speed), not
-    at the first sample, where the spindle may still be running up.
+    at the first sample, where the spindle may still be running up. ``shapes``: how many of :data:`SHAPES`
+    are replayed (the edge-force members run the slower effect kernel, about 35 ms a member against 2 ms for
+    the baseline over the short part's 3500 samples).
     """
     ke = float(cutting_parameters(case).get("ke", 0.5))
     shapes = [{}, {"ke": 1.2 * ke}, {"edge_force_tangential": 1e4}, {"edge_force_radial": 1e4}][:shapes]
@@ -181,15 +182,3 @@ def phase_matched_offset(case: Case, machine: Machine, twin: Recording, t_rec: n
                             "initial_simplex": [start, start + [0.5, 0.0], start + [0.0, 0.5]]})
     best = res.x if res.fun <= found[i0][0] else start
     return float(centre + best[0] * scale[0]), float(min(res.fun, found[i0][0]))
-
-
-def _parabola_min(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
-    """Least value and where it is, by a parabola through the least sample and its neighbours (evenly spaced x)."""
-    k = int(np.argmin(y))
-    if k == 0 or k == y.size - 1:
-        return float(y[k]), float(x[k])
-    den = y[k - 1] - 2.0 * y[k] + y[k + 1]
-    if den <= 0:
-        return float(y[k]), float(x[k])
-    u = float(np.clip(0.5 * (y[k - 1] - y[k + 1]) / den, -0.5, 0.5))
-    return float(y[k] - 0.25 * (y[k - 1] - y[k + 1]) * u), float(x[k] + u * (x[1] - x[0]))
