@@ -2,7 +2,8 @@
 
 A dynamometer on its own DAQ (the paper's Kistler and NI card) records ``t_s``, ``fx_N``, ``fy_N`` (maybe
 ``fc_N``) and nothing of the controller: no ``line``, no positions. Its clock is found by lining up the
-recorded cutting load with the twin's predicted one (:func:`.align.time_offset_from_forces`), and the
+recorded cutting load with the twin's predicted one (:func:`.align.time_offset_from_forces`), refined by the
+twin's forces replayed at the recorded instants (:func:`.force_phase.phase_matched_offset`), and the
 cutting diagnosis then drives the cutting model with the tool path, spindle speed and lines of the twin's
 run (with cutting) at ``t - offset``: the recording is augmented with them (:func:`force_only_recording`).
 """
@@ -18,6 +19,7 @@ from ..recording import Recording
 from ..simulate import simulate as simulate_twin
 from .align import ENVELOPE_REVOLUTIONS, force_clock
 from .errors import DiagnosisError
+from .force_phase import phase_matched_offset
 from .prepare import MIN_STROKE_M
 
 #: Twin channels taken at ``t - offset`` into the augmented recording.
@@ -35,8 +37,8 @@ class ForceOnly:
     ----------
     recording : Recording
         Recorded ``t_s`` and forces (and ``spindle_rpm`` when measured) plus the twin's ``x_mm``,
-        ``y_mm``, ``z_mm``, ``spindle_ref_rpm``, ``spindle_rpm`` (unless measured) and ``line`` at
-        ``t - offset``.
+        ``y_mm``, ``z_mm``, ``spindle_ref_rpm`` (the twin's ramped spindle speed when ``spindle_rpm`` is not
+        measured) and ``line`` at ``t - offset``.
     offset : float
         Recording clock minus program clock, s.
     method : str
@@ -121,17 +123,28 @@ def force_only_recording(case: Case, recording: Recording, machine: Machine) -> 
     window = ENVELOPE_REVOLUTIONS * 60.0 / max(rpm, 1.0)
     fits = {name: force_clock(t[ok], np.hypot(fx[ok], fy[ok]), t_twin, load, window) for name, load in loads.items()}
     chosen = min(fits, key=lambda name: fits[name][1])
-    offset = fits[chosen][0]
+    coarse = fits[chosen][0]
     method = (f"cutting load |F| = hypot(fx_N, fy_N) against the twin's prediction ({chosen}, the better fit of "
               f"{' and '.join(loads)}): where each cuts, cross-correlated, then {1e3 * window:.3g} ms moving means "
               f"({ENVELOPE_REVOLUTIONS} spindle revolutions) refined by least squares, an affine map per cut")
+    try:
+        offset, _ = phase_matched_offset(case, machine, twin, t[ok], fx[ok], fy[ok], coarse, window)
+        method += (f" ({1e3 * coarse:.4g} ms); then the twin's fx, fy replayed at the recorded instants, offset and "
+                   f"spindle angle by least squares sample by sample ({1e3 * (offset - coarse):+.3g} ms)")
+    except DiagnosisError as exc:  # the replay cannot follow the twin's path: keep the envelope's clock
+        offset = coarse
+        method += f"; not refined sample by sample ({exc})"
     t_prog = t - offset
     channels = {c: np.asarray(recording[c], float) for c in recording.channels if c not in CNC_CHANNELS}
     for c in TWIN_CHANNELS:
         channels[c] = np.interp(t_prog, t_twin, np.asarray(twin[c], float))
     measured_rpm = "spindle_rpm" in recording and np.isfinite(recording["spindle_rpm"]).mean() > 0.5
     if not measured_rpm:
-        channels["spindle_rpm"] = np.interp(t_prog, t_twin, np.asarray(twin["spindle_rpm"], float))
+        # the twin's ramped spindle speed is a command, not a measurement: as `spindle_rpm` it was taken for a
+        # measured speed with no noise (droop rows whose noise floor came out 1e-12 rpm, a column of 5e13 that
+        # broke the selection of every cutting effect on some clocks), so it is the speed command here
+        channels.pop("spindle_rpm", None)
+        channels["spindle_ref_rpm"] = np.interp(t_prog, t_twin, np.asarray(twin["spindle_rpm"], float))
     idx = np.clip(np.searchsorted(t_twin, t_prog, side="right") - 1, 0, t_twin.size - 1)
     channels["line"] = np.asarray(twin["line"], float)[idx]
     out = Recording.from_channels(channels, source=src, file_lines=recording.file_lines)
