@@ -41,6 +41,9 @@ from .stock import ZMapStock, disc_sweep_cover
 #: Rim tolerance of the near-field test, m: a point within 1 nm of the rim of
 #: the current tool disc counts as outside it (the front arc is in material).
 RIM_TOL = 1e-9
+#: XY distance within which a lower tool position only lowers the last stored
+#: point of :class:`SweptPath` (the same axis), m.
+SAME_XY_TOL = 1e-9
 
 
 def periphery_points(
@@ -103,9 +106,13 @@ class SweptPath:
     """Recent tool path per member (ring buffer), committed to the Z-map with a lag.
 
     A new point is stored when the tool has moved at least ``spacing`` in XY
-    since the last stored point; otherwise the last point only keeps the
-    lowest tip height. The oldest segment is handed to the Z-map once the
-    stored path after it is at least ``lag`` long (XY path length).
+    since the last stored point, or when it has gone down at least ``spacing``
+    below it at another XY (more than :data:`SAME_XY_TOL` away: a plunge
+    after an approach that ended within ``spacing`` of the last point, so
+    that the hole is recorded on the tool's axis, not up to ``spacing`` off
+    it); otherwise the last point only keeps the lowest tip height. The oldest
+    segment is handed to the Z-map once the stored path after it is at least
+    ``lag`` long (XY path length).
 
     Parameters
     ----------
@@ -148,7 +155,7 @@ class SweptPath:
         last_i = self._index(self.count - 1)
         last = self.points[self._rows, last_i]
         step = np.hypot(position[:, 0] - last[:, 0], position[:, 1] - last[:, 1])
-        append = step >= self.spacing
+        append = (step >= self.spacing) | ((step > SAME_XY_TOL) & (last[:, 2] - position[:, 2] >= self.spacing))
         keep = ~append
         # not moved enough: the last point keeps the lowest tip height reached there
         self.points[self._rows[keep], last_i[keep], 2] = np.minimum(last[keep, 2], position[keep, 2])
