@@ -106,13 +106,14 @@ class SweptPath:
     """Recent tool path per member (ring buffer), committed to the Z-map with a lag.
 
     A new point is stored when the tool has moved at least ``spacing`` in XY
-    since the last stored point, or when it has gone down at least ``spacing``
-    below it at another XY (more than :data:`SAME_XY_TOL` away: a plunge
-    after an approach that ended within ``spacing`` of the last point, so
-    that the hole is recorded on the tool's axis, not up to ``spacing`` off
-    it); otherwise the last point only keeps the lowest tip height. The oldest
-    segment is handed to the Z-map once the stored path after it is at least
-    ``lag`` long (XY path length).
+    since the last stored point, or when it is below that point by at least
+    its XY distance ``s`` to it (``0 < s < spacing``, ``s`` more than
+    :data:`SAME_XY_TOL`: a plunge after an approach that ended short of the
+    last point is stored on the tool's axis, not up to ``spacing`` off it; a
+    ramp shallower than 45 deg still stores a point every ``spacing``). At the
+    last point's XY (within :data:`SAME_XY_TOL`) the last point keeps the
+    lowest tip height. The oldest segment is handed to the Z-map once the
+    stored path after it is at least ``lag`` long (XY path length).
 
     Parameters
     ----------
@@ -155,9 +156,11 @@ class SweptPath:
         last_i = self._index(self.count - 1)
         last = self.points[self._rows, last_i]
         step = np.hypot(position[:, 0] - last[:, 0], position[:, 1] - last[:, 1])
-        append = (step >= self.spacing) | ((step > SAME_XY_TOL) & (last[:, 2] - position[:, 2] >= self.spacing))
-        keep = ~append
-        # not moved enough: the last point keeps the lowest tip height reached there
+        same_xy = step <= SAME_XY_TOL
+        # a plunge beside the last point (down at least as steeply as 45 deg from it) is stored on its own axis
+        append = (step >= self.spacing) | (~same_xy & (last[:, 2] - position[:, 2] >= step))
+        keep = same_xy & ~append
+        # not moved in XY: the last point keeps the lowest tip height reached there
         self.points[self._rows[keep], last_i[keep], 2] = np.minimum(last[keep, 2], position[keep, 2])
         if np.any(append):
             rows = self._rows[append]

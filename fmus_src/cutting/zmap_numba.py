@@ -474,13 +474,13 @@ def commit_rows(heights: np.ndarray, grid: np.ndarray, cells: np.ndarray, rho: n
         last_i = (head[b] + count[b] - 1) % cap
         lx, ly, lz = points[b, last_i, 0], points[b, last_i, 1], points[b, last_i, 2]
         step = math.hypot(position[b, 0] - lx, position[b, 1] - ly)
-        if step >= spacing[b] or (step > SAME_XY_TOL and lz - position[b, 2] >= spacing[b]):
+        if step >= spacing[b] or (step > SAME_XY_TOL and lz - position[b, 2] >= step):
             new_i = (head[b] + count[b]) % cap
             for c in range(3):
                 points[b, new_i, c] = position[b, c]
             arc[b, new_i] = arc[b, last_i] + step
             count[b] += 1
-        else:
+        elif step <= SAME_XY_TOL:
             points[b, last_i, 2] = np.minimum(lz, position[b, 2])
         # pop_ready(force_room=True) until nothing is ready, each popped segment removed from the Z-map
         while True:
