@@ -41,6 +41,9 @@ from .stock import ZMapStock, disc_sweep_cover
 #: Rim tolerance of the near-field test, m: a point within 1 nm of the rim of
 #: the current tool disc counts as outside it (the front arc is in material).
 RIM_TOL = 1e-9
+#: XY distance within which a lower tool position only lowers the last stored
+#: point of :class:`SweptPath` (the same axis), m.
+SAME_XY_TOL = 1e-9
 
 
 def periphery_points(
@@ -103,7 +106,12 @@ class SweptPath:
     """Recent tool path per member (ring buffer), committed to the Z-map with a lag.
 
     A new point is stored when the tool has moved at least ``spacing`` in XY
-    since the last stored point; otherwise the last point only keeps the
+    since the last stored point, or when it is below that point by at least
+    its XY distance ``s`` to it (``0 < s < spacing``, ``s`` more than
+    :data:`SAME_XY_TOL`: a plunge after an approach that ended short of the
+    last point is stored on the tool's axis, not up to ``spacing`` off it; a
+    ramp shallower than 45 deg still stores a point every ``spacing``). At the
+    last point's XY (within :data:`SAME_XY_TOL`) the last point keeps the
     lowest tip height. The oldest segment is handed to the Z-map once the
     stored path after it is at least ``lag`` long (XY path length).
 
@@ -148,9 +156,11 @@ class SweptPath:
         last_i = self._index(self.count - 1)
         last = self.points[self._rows, last_i]
         step = np.hypot(position[:, 0] - last[:, 0], position[:, 1] - last[:, 1])
-        append = step >= self.spacing
-        keep = ~append
-        # not moved enough: the last point keeps the lowest tip height reached there
+        same_xy = step <= SAME_XY_TOL
+        # a plunge beside the last point (down at least as steeply as 45 deg from it) is stored on its own axis
+        append = (step >= self.spacing) | (~same_xy & (last[:, 2] - position[:, 2] >= step))
+        keep = same_xy & ~append
+        # not moved in XY: the last point keeps the lowest tip height reached there
         self.points[self._rows[keep], last_i[keep], 2] = np.minimum(last[keep, 2], position[keep, 2])
         if np.any(append):
             rows = self._rows[append]

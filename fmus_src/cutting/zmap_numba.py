@@ -36,7 +36,7 @@ from ..jit import njit
 from ..jit_cache import guard_cache
 from . import axial, engagement, kernel, stock
 from .axial import AX_MRR, AX_THRUST, AX_TORQUE, axial_cut, stalled_plunge
-from .engagement import RIM_TOL, SweptPath
+from .engagement import RIM_TOL, SAME_XY_TOL, SweptPath
 from .kernel import (H_COUNT, OMEGA_FLOOR, SECTION_ROUNDS, SECTIONS, StepResult, chord_advance, chord_feed,
                      stalled_cut, substep_counts)
 from .stock import StockError, ZMapStock, sweep_cover_z
@@ -474,13 +474,13 @@ def commit_rows(heights: np.ndarray, grid: np.ndarray, cells: np.ndarray, rho: n
         last_i = (head[b] + count[b] - 1) % cap
         lx, ly, lz = points[b, last_i, 0], points[b, last_i, 1], points[b, last_i, 2]
         step = math.hypot(position[b, 0] - lx, position[b, 1] - ly)
-        if step >= spacing[b]:
+        if step >= spacing[b] or (step > SAME_XY_TOL and lz - position[b, 2] >= step):
             new_i = (head[b] + count[b]) % cap
             for c in range(3):
                 points[b, new_i, c] = position[b, c]
             arc[b, new_i] = arc[b, last_i] + step
             count[b] += 1
-        else:
+        elif step <= SAME_XY_TOL:
             points[b, last_i, 2] = np.minimum(lz, position[b, 2])
         # pop_ready(force_room=True) until nothing is ready, each popped segment removed from the Z-map
         while True:
