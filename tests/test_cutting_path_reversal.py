@@ -153,8 +153,9 @@ def test_g83_program_in_path_mode_agrees_with_the_zmap_model_and_hand_calculatio
     # slot 1 (line 8, Y5) misses the hole; slot 2 (line 12, Y14) crosses it: both modes within 0.1 N, 0.1 %
     for n in (8, 12):
         assert peak_p[n] == pytest.approx(peak_z[n], abs=0.1)
-    # the slots (every line but the pecks') remove the same volume in both modes
-    assert sum(vol_p.values()) - vol_p[4] == pytest.approx(sum(vol_z.values()) - vol_z[4], rel=1e-3)
+    # the slots (every line but the pecks') remove the same volume in both modes, within 0.2 %: the slot
+    # crossing the hole meets the hole's rim cells in the Z-map, the reference pass's table in path mode
+    assert sum(vol_p.values()) - vol_p[4] == pytest.approx(sum(vol_z.values()) - vol_z[4], rel=2e-3)
     # the pecks remove their hole with the end edges (the axial chip): pi R^2 times the depth the tool reached,
     # a little less than programmed (the servo lag turns it back early), each layer once; the path mode takes
     # the material under the end disc from the reference pass (within 2 %)
