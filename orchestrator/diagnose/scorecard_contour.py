@@ -181,13 +181,23 @@ def _summary(runs: list[dict], key) -> dict:
     for name, rs in groups.items():
         ok = [r for r in rs if "error" not in r]
         scored = [r for r in ok if r["scenario"] != "clean"]
-        errors = [e for r in ok for e in r["errors"]]
-        rows[name] = {"runs": len(rs), "failed": len(rs) - len(ok),
-                      "detected": (sum(r["found"] for r in scored) / len(scored)) if scored else None,
-                      "false_effects_per_run": (sum(len(r["false"]) for r in ok) / len(ok)) if ok else None,
-                      "median_relative_parameter_error": float(np.median(errors)) if errors else None,
+        rows[name] = {**score_row(rs, ok, scored),
                       "max_offset_error_ms": max((abs(r["offset_error_ms"]) for r in ok), default=None)}
     return rows
+
+
+def score_row(runs: list[dict], ok: list[dict], scored: list[dict]) -> dict:
+    """The columns every diagnosis study tabulates for one group of runs.
+
+    ``runs`` all runs of the group, ``ok`` those that did not fail, ``scored`` those with an effect their logger
+    can show. Returns ``runs``, ``failed``, ``detected`` (share of ``scored`` that found every hidden effect),
+    ``false_effects_per_run`` and ``median_relative_parameter_error`` (None where there is nothing to count).
+    """
+    errors = [e for r in ok for e in r["errors"]]
+    return {"runs": len(runs), "failed": len(runs) - len(ok),
+            "detected": (sum(r["found"] for r in scored) / len(scored)) if scored else None,
+            "false_effects_per_run": (sum(len(r["false"]) for r in ok) / len(ok)) if ok else None,
+            "median_relative_parameter_error": float(np.median(errors)) if errors else None}
 
 
 def _markdown(table: dict) -> str:

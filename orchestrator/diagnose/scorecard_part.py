@@ -32,6 +32,7 @@ from ..recording import Recording
 from .core import diagnose
 from .cutting_case import write_cutting_case
 from .errors import DiagnosisError
+from .scorecard_contour import score_row
 from .scorecard_cutting import parameter_errors
 from .truth import Recorder
 from .truth_cutting import Dynamometer
@@ -304,11 +305,7 @@ def _summary(runs: list[dict], key: str) -> dict:
         scored = [r for r in ok if SCENARIOS[r["scenario"]] != ({}, {})
                   and (LOGGERS[r["logger"]].drives or SCENARIOS[r["scenario"]][1])
                   and (LOGGERS[r["logger"]].cutting or SCENARIOS[r["scenario"]][0])]
-        errors = [e for r in ok for e in r["errors"]]
-        rows[name] = {"runs": len(rs), "failed": len(rs) - len(ok),
-                      "detected": (sum(r["found"] for r in scored) / len(scored)) if scored else None,
-                      "false_effects_per_run": (sum(len(r["false"]) for r in ok) / len(ok)) if ok else None,
-                      "median_relative_parameter_error": float(np.median(errors)) if errors else None,
+        rows[name] = {**score_row(rs, ok, scored),
                       "runs_with_unexplained": (sum(bool(r["unexplained"]) for r in ok) / len(ok)) if ok else None}
     return rows
 
