@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 
 from fmus_src.cutting import CuttingError, CuttingLoad
-from fmus_src.cutting.path_component import PathCuttingLoad
 from fmus_src.cutting import table as table_module
+from fmus_src.cutting.path_component import PathCuttingLoad
 from fmus_src.cutting.path_kernel import locate, table_at
 from fmus_src.cutting.table import EngagementTable, build_engagement_table
 
