@@ -55,6 +55,35 @@ def _numpy_reference(make, monkeypatch):
             return Master(twin.system, settings, twin.probes).run()
 
 
+@pytest.fixture(scope="module")
+def python_runs():
+    """The Python-master runs of each case, shared by its thread counts: ``{key: (python, numpy kernel)}``.
+
+    Neither depends on ``threads`` (only the compiled loop splits members into blocks), so each case's
+    reference pair is run once and every thread count's compiled run is compared with both.
+    """
+    return {}
+
+
+def _compared(make, threads, key, python_runs, monkeypatch):
+    """The compiled run of ``make()`` in ``threads`` threads, checked bit for bit against the Python master
+    (``_runs``' second run) and the numpy-kernel reference, both run once per ``key``."""
+    if key not in python_runs:
+        compiled, python = _runs(make, threads=threads)
+        python_runs[key] = (python, _numpy_reference(make, monkeypatch))
+    else:
+        twin, settings = make()
+        settings.compiled, settings.threads = True, threads
+        master = Master(twin.system, settings, twin.probes)
+        assert compiled_support(master) is None, compiled_support(master)
+        with np.errstate(over="ignore", invalid="ignore"):
+            compiled = master.run()
+    python, numpy_kernel = python_runs[key]
+    _assert_same(compiled, python)
+    _assert_same(compiled, numpy_kernel)
+    return compiled
+
+
 def test_single_zmap_cutting_run_is_bit_identical(case, monkeypatch):
     a, b = _runs(lambda: _zmap_twin(case, seconds=3.0))
     _assert_same(a, b)
@@ -65,7 +94,7 @@ def test_single_zmap_cutting_run_is_bit_identical(case, monkeypatch):
 
 
 @pytest.mark.parametrize("threads", [1, 2])
-def test_batch_with_overrides_and_a_diverging_member(case, threads, monkeypatch):
+def test_batch_with_overrides_and_a_diverging_member(case, threads, python_runs, monkeypatch):
     """Two F/S variants and one unstable member (positive velocity feedback), caught by the limits."""
     # source lines of bench_part.nc: 7 = S6000 M3, 10 = first slot (F300), 14 = second slot (F400)
     feeds = {10: np.array([300.0, 450.0, 300.0]) * MM_PER_MIN, 14: np.array([400.0, 330.0, 400.0]) * MM_PER_MIN}
@@ -74,9 +103,7 @@ def test_batch_with_overrides_and_a_diverging_member(case, threads, monkeypatch)
     def make():
         return _zmap_twin(case, batch=3, feeds=feeds, spindles=spindles, alarms=False,
                           members={2: {("mcu", "x_velocity_p_scale"): -1.0}})
-    a, b = _runs(make, threads=threads)
-    _assert_same(a, b)
-    _assert_same(a, _numpy_reference(make, monkeypatch))
+    a = _compared(make, threads, "diverging", python_runs, monkeypatch)
     assert a.failures[2].startswith("diverged")
     assert all(f.startswith("did not reach") for f in a.failures[:2])
     fc = a.recording["fc_N"]
@@ -85,16 +112,14 @@ def test_batch_with_overrides_and_a_diverging_member(case, threads, monkeypatch)
 
 
 @pytest.mark.parametrize("threads", [1, 2])
-def test_member_held_on_non_finite_inputs(case, threads, monkeypatch):
+def test_member_held_on_non_finite_inputs(case, threads, python_runs, monkeypatch):
     """A member failed by its x drive (break-away running backwards): NaN table position into the cutting load.
 
     The cutting load holds that member (spindle stopped, NaN outputs) without failing it; the others cut on.
     """
     def make():
         return _zmap_twin(case, batch=2, members={1: {("x_drive", "coulomb_positive"): 1e9}})
-    a, b = _runs(make, threads=threads)
-    _assert_same(a, b)
-    _assert_same(a, _numpy_reference(make, monkeypatch))
+    a = _compared(make, threads, "held", python_runs, monkeypatch)
     assert a.failures[0].startswith("did not reach")  # 2.5 s of a 36 s program
     assert "x_drive: stick/slip integrator" in a.failures[1]
     assert np.nanmax(a.recording["fc_N"][:, 0]) > 10.0
@@ -102,7 +127,7 @@ def test_member_held_on_non_finite_inputs(case, threads, monkeypatch):
 
 
 @pytest.mark.parametrize("threads", [1, 2])
-def test_member_needing_too_many_substeps_fails_alone(case, threads, monkeypatch):
+def test_member_needing_too_many_substeps_fails_alone(case, threads, python_runs, monkeypatch):
     """10**9 angle steps per tooth: once the spindle turns, a 1 ms step needs far more than MAX_SUBSTEPS.
 
     Expected: that member fails with the cutting load's own message (the Python master's, bit for bit);
@@ -110,9 +135,7 @@ def test_member_needing_too_many_substeps_fails_alone(case, threads, monkeypatch
     """
     def make():
         return _zmap_twin(case, batch=2, members={1: {("cutting", "angle_steps_per_tooth"): 10**9}})
-    a, b = _runs(make, threads=threads)
-    _assert_same(a, b)
-    _assert_same(a, _numpy_reference(make, monkeypatch))
+    a = _compared(make, threads, "substeps", python_runs, monkeypatch)
     assert a.failures[0].startswith("did not reach")  # 2.5 s of a 36 s program
     assert "cutting: step of 0.001 s of member 1 needs more than 100000 substeps" in a.failures[1]
     assert np.nanmax(a.recording["fc_N"][:, 0]) > 10.0

@@ -134,8 +134,28 @@ def _run(folder, mode, speeds_rpm, compiled, threads=1):
         return Master(twin.system, settings, twin.probes).run()
 
 
+@pytest.fixture(scope="module")
+def python_runs():
+    """Runs that do not depend on the compiled loop's thread count, made once per cutting mode and shared
+    by its parametrisations: ``{mode: (Python master, numpy Z-map kernel or None, compiled solo run)}``."""
+    return {}
+
+
+def _shared_runs(folder, mode, python_runs, monkeypatch):
+    """The Python master's run of the pair, (Z-map only) the numpy kernel's, and member 1's solo run."""
+    if mode not in python_runs:
+        python = _run(folder, mode, [SPEED_RPM, 0.0], False)
+        numpy_kernel = None
+        if mode == "zmap":
+            with monkeypatch.context() as m:
+                m.setattr(CuttingLoad, "use_compiled", False)
+                numpy_kernel = _run(folder, mode, [SPEED_RPM, 0.0], False)
+        python_runs[mode] = (python, numpy_kernel, _run(folder, mode, [0.0], True))
+    return python_runs[mode]
+
+
 @pytest.mark.parametrize("mode,threads", [("zmap", 1), ("zmap", 2), ("path", 1)])
-def test_a_member_that_never_starts_its_spindle_fails_alone(folder, fc_on, mode, threads, monkeypatch):
+def test_a_member_that_never_starts_its_spindle_fails_alone(folder, fc_on, mode, threads, python_runs, monkeypatch):
     """Member 1 runs S0 (the spindle never turns): it crashes in the plunge; member 0 cuts as alone.
 
     Plunging with a stopped spindle is a crash too; the model has no chip for a purely axial feed, so it
@@ -145,19 +165,17 @@ def test_a_member_that_never_starts_its_spindle_fails_alone(folder, fc_on, mode,
     Compiled loop (1 or 2 threads) and Python master give the same run bit for bit, and the same
     reason as member 1's solo run; the numpy Z-map kernel gives it too.
     """
-    both, python = (_run(folder, mode, [SPEED_RPM, 0.0], compiled, threads) for compiled in (True, False))
+    both = _run(folder, mode, [SPEED_RPM, 0.0], True, threads)
+    python, numpy_kernel, solo = _shared_runs(folder, mode, python_runs, monkeypatch)
     _assert_same(both, python)
     if mode == "zmap":
-        with monkeypatch.context() as m:
-            m.setattr(CuttingLoad, "use_compiled", False)
-            _assert_same(both, _run(folder, mode, [SPEED_RPM, 0.0], False))
+        _assert_same(both, numpy_kernel)
     assert both.success and both.failed.tolist() == [False, True]
     assert both.failures[1].startswith("failed at t = ")
     assert "cutting: the tool feeds into the stock with the spindle stopped (0 rpm)" in both.failures[1]
     z_mm = float(re.search(r"tool at X10\.000 Y10\.000 Z(-?[0-9.]+) mm: a crash; start the spindle \(M3\) before the "
                            r"cut$", both.failures[1]).group(1))
     assert -DEPTH_MM < z_mm <= 0.0  # printed to 1 um: "Z-0.000" on the first step below the top
-    solo = _run(folder, mode, [0.0], True)
     assert not solo.success
     assert solo.message.replace("simulation failed at", "failed at", 1) == both.failures[1]
     fc = both.recording["fc_N"]
