@@ -91,6 +91,9 @@ MIN_LENGTH = 1e-12
 #: per period and member in a batch plan, about 200 bytes while one member is planned; 1e7 periods are
 #: 2.8 h of program at Ts = 1 ms).
 MAX_PLAN_SAMPLES = 10_000_000
+#: The servo check before a rapid (:mod:`.servo_settle`) models the last SERVO_MEMORY / (Kv Ts) periods of the feed
+#: before it, starting there at rest on the reference: an earlier lag has decayed by exp(-40) < 1e-17 by the end.
+SERVO_MEMORY = 40.0
 
 
 @dataclass(frozen=True)
@@ -271,13 +274,14 @@ class MemberPlan:
     done_index: int
 
 
-def _filtered_path(seg: Segment, boxes: list[int]) -> np.ndarray:
-    """The segment's own reference after acc/dec after interpolation (m), ``n + ext + 1`` rows (``seg.n >= 1``)."""
-    n = seg.n
+def _filtered_path(position: np.ndarray, boxes: list[int]) -> np.ndarray:
+    """The reference after acc/dec after interpolation (m) of pre-filter samples ``position`` (n + 1, 3), n >= 1, as
+    if the motion started at the first row: ``n + ext + 1`` rows."""
+    n = position.shape[0] - 1
     ext = filter_extension(boxes)
     inc = np.zeros((n + ext + 1, 3))
-    inc[1 : n + 1] = np.diff(seg.position, axis=0)
-    return seg.position[0] + np.cumsum(apply_fir(inc, boxes), axis=0)
+    inc[1 : n + 1] = np.diff(position, axis=0)
+    return position[0] + np.cumsum(apply_fir(inc, boxes), axis=0)
 
 
 def _in_position(seg: Segment, boxes: list[int], width: float) -> int:
@@ -285,7 +289,7 @@ def _in_position(seg: Segment, boxes: list[int], width: float) -> int:
     n = seg.n
     if n == 0:
         return 0
-    pos = _filtered_path(seg, boxes)
+    pos = _filtered_path(seg.position, boxes)
     dist = np.linalg.norm(pos - seg.position[-1], axis=1)
     out = np.nonzero(dist > width)[0]
     last_out = int(out[-1]) if len(out) else -1
@@ -407,14 +411,20 @@ def plan_member(schedule: Schedule, params: NCParams, feeds: np.ndarray, speeds:
             count = functools.partial(_in_position, seg, boxes, params.in_position_width)
         return count() if reuse is None else reuse.in_position(seg, boxes, params.in_position_width, count)
 
+    # the servo model runs on the last SERVO_MEMORY / (Kv Ts) periods of the feed (+ the filter's length) only:
+    # what came before has decayed by exp(-SERVO_MEMORY) (below 1e-17 of any lag) by the end
+    servo_tail = int(math.ceil(SERVO_MEMORY / (min(gains) * ts))) + filter_extension(cut_boxes)
+
     def servo_count(seg: Segment, boxes: list[int]) -> int:
         if seg.n == 0:
             return 0
+        start = max(seg.n - servo_tail, 0)
+        tail = np.ascontiguousarray(seg.position[start:])
         if compiled:
-            path = filtered_path_compiled(seg.position, np.asarray(boxes, dtype=np.int64))
+            path = filtered_path_compiled(tail, np.asarray(boxes, dtype=np.int64))
         else:
-            path = _filtered_path(seg, boxes)
-        return max(seg.n, servo_in_position(path, seg.position[-1], gains, params.in_position_width, ts))
+            path = _filtered_path(tail, boxes)
+        return max(seg.n, start + servo_in_position(path, seg.position[-1], gains, params.in_position_width, ts))
 
     def servo_settled(k_now: int) -> int:
         """In-position check before a rapid that follows cutting feed (FANUC): on the modelled servo."""
