@@ -94,6 +94,8 @@ def nck_parameters(machine: Machine) -> dict[str, object]:
     limits of ``[axis.<a>]`` switch on the stored stroke check of that axis (:func:`stroke_parameters`). A file
     with ``machine_zero_*_mm`` also sets the default work offsets G54..G59 to -machine zero
     (:func:`~orchestrator.machine.frame_parameters`).
+    The in-position check before a rapid that follows cutting feed (``[nck] in_position_before_rapid``, "on" when
+    left out) models the servo with each axis's ``position_gain_per_s`` x ``position_scale``.
     """
     params: dict[str, object] = dict(machine.si("nck"))
     params.update(frame_parameters(machine))
@@ -103,7 +105,12 @@ def nck_parameters(machine: Machine) -> dict[str, object]:
                 params.setdefault(f"reference{n}_{a}", params[f"reference_{a}"])
     params.update({f"spindle_{k}": v for k, v in machine.si("spindle").items()})
     for a in AXES:
-        params[f"{a}_rapid_feed"] = machine.si(f"axis.{a}")["rapid_feed"]
+        axis = machine.si(f"axis.{a}")
+        params[f"{a}_rapid_feed"] = axis["rapid_feed"]
+        params[f"{a}_position_gain"] = float(axis["position_gain"]) * float(axis["position_scale"])
+    # [nck] in_position_before_rapid: "on" or "off"; left out, the kernel's default (on, FANUC's behaviour) applies
+    if "in_position_before_rapid" in params:
+        params["in_position_before_rapid"] = params["in_position_before_rapid"] == "on"
     params["m_codes"] = format_m_codes(machine.m_codes())  # [nck.m_codes]; none in the file: no aliases
     params.update(stroke_parameters(machine))
     return _declared(NCKernel, params)

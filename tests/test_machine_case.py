@@ -86,6 +86,8 @@ def test_machine_file_without_the_newer_nck_keys_loads_with_the_shipped_values(t
         elif name.startswith("reference"):
             shipped_axis = shipped[f"machine_zero_{name[-1]}_mm"] + shipped[key]
             assert defaults[name] == pytest.approx(to_si(shipped_axis, symbol), rel=1e-12)
+        elif name == "in_position_before_rapid":  # the file's "on"/"off", the kernel's Boolean
+            assert defaults[name] is (shipped[key] == "on")
         elif isinstance(shipped[key], str):
             assert defaults[name] == shipped[key]
         else:

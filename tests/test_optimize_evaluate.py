@@ -49,8 +49,13 @@ def test_spindle_change_costs_its_ramp(tmp_path, short_ref, spindle_params, seco
     a, tc = nck["accel_before_interp"], nck["accel_change_time_before_interp"]
     v1, v2 = 250.0 / 60000.0, 500.0 / 60000.0
     stop = np.sqrt(v1 * tc / a) + np.sqrt(v2 * tc / a)  # 19.7 ms
+    # Line 2 ends at the rapid G0 Z1., which waits until the servo's lag e at the stop has decayed into the
+    # in-position width w: ln(e / w) / Kv. The lag is at most v / Kv and shrinks with the deceleration, which lasts
+    # longer at 500 than at 250 mm/min, so doubling the feed at most doubles it: member 1 waits longer by between
+    # 0 and ln(2) / Kv (13.9 ms at Kv = 50/s).
+    kv = load_machine("default").si("axis.x")["position_gain"]
     # rounding to the interpolation period at each item boundary: a few ms
-    assert delta == pytest.approx(wait - saving + stop, abs=0.006)
+    assert wait - saving + stop - 0.006 <= delta <= wait - saving + stop + np.log(2.0) / kv + 0.006
     assert (delta < 0) == worth_it
     # same feed per tooth on line 2: the same load level
     assert ev.line_max_load_N[1, 1] == pytest.approx(ev.line_max_load_N[0, 1], rel=0.1)

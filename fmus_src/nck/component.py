@@ -70,6 +70,9 @@ def _variables() -> tuple[Variable, ...]:
         Variable("rapid_time_constant", p, "s", _D.rapid_time_constant, "time constant of rapid acc/dec (No. 1620)"),
         Variable("rapid_filter", p, "1", _D.rapid_filter, "after-interpolation filter in rapid: linear|bell", "String"),
         Variable("in_position_width", p, "m", _D.in_position_width, "in-position width (No. 1826)"),
+        Variable("in_position_before_rapid", p, "1", _D.in_position_before_rapid,
+                 "a rapid after cutting feed waits until the modelled servo deviation is within in_position_width "
+                 "on every axis (FANUC in-position check before a positioning block)", "Boolean"),
         Variable("spindle_max_speed", p, "rad/s", _D.spindle_max_speed, "maximum spindle speed (S is clamped)"),
         Variable("spindle_ramp", p, "rad/s2", _D.spindle_ramp, "spindle acceleration"),
         Variable("spindle_speed_arrival_tolerance", p, "1", _D.spindle_speed_arrival_tolerance,
@@ -78,6 +81,9 @@ def _variables() -> tuple[Variable, ...]:
     ]
     for a in "xyz":
         v.append(Variable(f"{a}_rapid_feed", p, "m/s", getattr(_D, f"{a}_rapid_feed"), f"{a.upper()} rapid traverse rate"))
+    for a in "xyz":
+        v.append(Variable(f"{a}_position_gain", p, "1/s", getattr(_D, f"{a}_position_gain"),
+                          f"{a.upper()} position loop gain Kv x scale of the servo model of in_position_before_rapid"))
     for a in "xyz":
         v.append(Variable(f"{a}_initial", p, "m", 0.0, f"{a.upper()} tool position at program start, axis frame"))
     for a in "xyz":

@@ -19,6 +19,10 @@ class NCParams:
     Defaults are the values of ``models/machines/default.toml`` ([nck], [spindle],
     [axis.*] rapid_feed); ``tool_change_time`` (3 s) is an assumption. ``rigid_tapping_time_constant`` (s,
     FANUC No. 5261): linear acc/dec time of rigid tapping to ``spindle_max_speed`` (see :mod:`.tapping`).
+    ``in_position_before_rapid``: a rapid after cutting feed waits until the servo's modelled deviation is within
+    ``in_position_width`` on every axis (FANUC's in-position check before a positioning block; False: the rapid
+    starts as soon as the feed's interpolation ends); ``{x,y,z}_position_gain`` (1/s): the position loop gains
+    Kv of that model (:mod:`.servo_settle`), default.toml's 50/s x scale 1.
     """
 
     interpolation_period: float = 1e-3
@@ -41,11 +45,16 @@ class NCParams:
     z_rapid_feed: float = 30000.0 * MM_PER_MIN
     tool_change_time: float = 3.0
     rigid_tapping_time_constant: float = 2.0
+    in_position_before_rapid: bool = True
+    x_position_gain: float = 50.0
+    y_position_gain: float = 50.0
+    z_position_gain: float = 50.0
 
     def __post_init__(self) -> None:
         positive = ("interpolation_period", "max_cutting_feed", "accel_before_interp", "corner_velocity_difference",
                     "arc_accel", "in_position_width", "spindle_max_speed", "spindle_ramp",
-                    "x_rapid_feed", "y_rapid_feed", "z_rapid_feed")
+                    "x_rapid_feed", "y_rapid_feed", "z_rapid_feed", "x_position_gain", "y_position_gain",
+                    "z_position_gain")
         for name in positive:
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):

@@ -390,6 +390,12 @@ def last_outside(position: np.ndarray, target: np.ndarray, width: float) -> int:
         upto = k
 
 
+def filtered_path_compiled(position: np.ndarray, boxes: np.ndarray) -> np.ndarray:
+    """:func:`.planner._filtered_path` of a segment with pre-filter ``position`` (n + 1, 3), ``n >= 1``, and
+    filter ``boxes`` (int64), compiled (bit-identical)."""
+    return _in_position_path(position, boxes)
+
+
 def in_position_compiled(position: np.ndarray, boxes: np.ndarray, width: float) -> int:
     """:func:`.planner._in_position` of a segment with pre-filter ``position`` (n + 1, 3) and filter ``boxes``."""
     n = position.shape[0] - 1

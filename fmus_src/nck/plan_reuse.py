@@ -26,7 +26,7 @@ class PlanReuse:
         self._seen: set[Hashable] = set()
         self._segments: dict[Hashable, Segment] = {}
         self._kept: set[int] = set()  # id() of the kept segments (alive as long as this object)
-        self._settle: dict[tuple[int, tuple[int, ...], float], int] = {}
+        self._settle: dict[tuple, int] = {}
 
     def segment(self, key: Hashable, make: Callable[[], Segment]) -> Segment:
         """The segment of ``key``: made by ``make()``, kept from the second request of ``key`` on.
@@ -49,7 +49,8 @@ class PlanReuse:
             self._seen.add(key)
         return seg
 
-    def in_position(self, seg: Segment, boxes: list[int], width: float, count: Callable[[], int]) -> int:
+    def in_position(self, seg: Segment, boxes: list[int], width: float, count: Callable[[], int],
+                    servo: Hashable = None) -> int:
         """Samples after ``seg``'s start until its own filtered reference is in position (kept for kept segments).
 
         Parameters
@@ -62,10 +63,13 @@ class PlanReuse:
             In-position width (m).
         count : callable
             Computes the count (:func:`.planner._in_position`).
+        servo : hashable, optional
+            The servo model of the count when it is the servo's check before a rapid (position gains and period,
+            :func:`.servo_settle.servo_in_position`); None: the filtered reference's check.
         """
         if id(seg) not in self._kept:
             return count()
-        key = (id(seg), tuple(boxes), float(width))
+        key = (id(seg), tuple(boxes), float(width), servo)
         n = self._settle.get(key)
         if n is None:
             n = self._settle[key] = count()

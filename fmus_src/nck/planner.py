@@ -21,7 +21,12 @@ kernel plans everything at setup, sampled at the interpolation period Ts:
    tool change, M0 and program end and after a chain that ends in an exact
    stop (FANUC G61/G9: deceleration to rest, then the in-position check
    before the next block), spindle speed arrival before the next chain
-   of feed blocks, ``tool_change_time`` for M6.
+   of feed blocks, ``tool_change_time`` for M6; a rapid after cutting feed
+   (also after a dwell or spindle command that follows it, as in G82 and
+   G86) waits until the servo following the feed's filtered reference is
+   within ``in_position_width`` on every axis (:mod:`.servo_settle`,
+   ``in_position_before_rapid``), so a drilling cycle reaches its hole
+   bottom before the rapid retract.
 
 A rigid-tapping stroke (:attr:`Linear.rigid_tap`) is an item of its own: it
 waits for the axes in position and the spindle at rest, then runs Z
@@ -71,10 +76,12 @@ from .interpolator import Segment, chain_pieces, interpolate_chain, interpolate_
 from .lookahead import block_windows, plan_chain_speeds
 from .params import NCParams
 from .plan_assembly import (
-    assemble_positions, in_position_compiled, last_outside, sample_spindle_compiled, step_values,
+    assemble_positions, filtered_path_compiled, in_position_compiled, last_outside, sample_spindle_compiled,
+    step_values,
 )
 from .plan_reuse import PlanReuse
 from .profiles import SpeedChange
+from .servo_settle import servo_in_position
 from .spindle import arrival_time, sample_spindle, speed_after
 from .tapping import rigid_tap_accel, rigid_tap_stroke
 
@@ -84,6 +91,9 @@ MIN_LENGTH = 1e-12
 #: per period and member in a batch plan, about 200 bytes while one member is planned; 1e7 periods are
 #: 2.8 h of program at Ts = 1 ms).
 MAX_PLAN_SAMPLES = 10_000_000
+#: The servo check before a rapid (:mod:`.servo_settle`) models the last SERVO_MEMORY / (Kv Ts) periods of the feed
+#: before it, starting there at rest on the reference: an earlier lag has decayed by exp(-40) < 1e-17 by the end.
+SERVO_MEMORY = 40.0
 
 
 @dataclass(frozen=True)
@@ -264,15 +274,22 @@ class MemberPlan:
     done_index: int
 
 
+def _filtered_path(position: np.ndarray, boxes: list[int]) -> np.ndarray:
+    """The reference after acc/dec after interpolation (m) of pre-filter samples ``position`` (n + 1, 3), n >= 1, as
+    if the motion started at the first row: ``n + ext + 1`` rows."""
+    n = position.shape[0] - 1
+    ext = filter_extension(boxes)
+    inc = np.zeros((n + ext + 1, 3))
+    inc[1 : n + 1] = np.diff(position, axis=0)
+    return position[0] + np.cumsum(apply_fir(inc, boxes), axis=0)
+
+
 def _in_position(seg: Segment, boxes: list[int], width: float) -> int:
     """Samples after the segment start at which its own filtered reference is within ``width`` of its end."""
     n = seg.n
-    ext = filter_extension(boxes)
     if n == 0:
         return 0
-    inc = np.zeros((n + ext + 1, 3))
-    inc[1 : n + 1] = np.diff(seg.position, axis=0)
-    pos = seg.position[0] + np.cumsum(apply_fir(inc, boxes), axis=0)
+    pos = _filtered_path(seg.position, boxes)
     dist = np.linalg.norm(pos - seg.position[-1], axis=1)
     out = np.nonzero(dist > width)[0]
     last_out = int(out[-1]) if len(out) else -1
@@ -379,6 +396,8 @@ def plan_member(schedule: Schedule, params: NCParams, feeds: np.ndarray, speeds:
     sp_last = (0, 0.0, 0.0)  # (sample, speed at that sample, command)
     ready = 0
     last: tuple[int, Segment, list[int]] | None = None
+    last_cut = False  # the last motion was cutting feed (a chain): a rapid waits for the servo (servo_settled)
+    gains = (params.x_position_gain, params.y_position_gain, params.z_position_gain)
     end_reason = "end of file"
     stop_spindle_at_end = False
     synced: list[tuple[int, np.ndarray]] = []  # (first sample, signed spindle speed) of rigid-tapping strokes
@@ -391,6 +410,31 @@ def plan_member(schedule: Schedule, params: NCParams, feeds: np.ndarray, speeds:
         else:
             count = functools.partial(_in_position, seg, boxes, params.in_position_width)
         return count() if reuse is None else reuse.in_position(seg, boxes, params.in_position_width, count)
+
+    # the servo model runs on the last SERVO_MEMORY / (Kv Ts) periods of the feed (+ the filter's length) only:
+    # what came before has decayed by exp(-SERVO_MEMORY) (below 1e-17 of any lag) by the end
+    servo_tail = int(math.ceil(SERVO_MEMORY / (min(gains) * ts))) + filter_extension(cut_boxes)
+
+    def servo_count(seg: Segment, boxes: list[int]) -> int:
+        if seg.n == 0:
+            return 0
+        start = max(seg.n - servo_tail, 0)
+        tail = np.ascontiguousarray(seg.position[start:])
+        if compiled:
+            path = filtered_path_compiled(tail, np.asarray(boxes, dtype=np.int64))
+        else:
+            path = _filtered_path(tail, boxes)
+        return max(seg.n, start + servo_in_position(path, seg.position[-1], gains, params.in_position_width, ts))
+
+    def servo_settled(k_now: int) -> int:
+        """In-position check before a rapid that follows cutting feed (FANUC): on the modelled servo."""
+        if not (params.in_position_before_rapid and last_cut and last is not None):
+            return k_now
+        k0, seg, boxes = last
+        count = functools.partial(servo_count, seg, boxes)
+        n = count() if reuse is None else reuse.in_position(seg, boxes, params.in_position_width, count,
+                                                            servo=(gains, ts))
+        return max(k_now, k0 + n)
 
     def shared(key: tuple, make: Callable[[], Segment]) -> Segment:
         return make() if reuse is None else reuse.segment(key, make)
@@ -431,6 +475,7 @@ def plan_member(schedule: Schedule, params: NCParams, feeds: np.ndarray, speeds:
                 line_cp.append((k0 + _ceil_periods(tb, ts), blocks[bi].line))
             segments.append((k0, "cut", seg))
             last = (k0, seg, cut_boxes)
+            last_cut = True
             k = k0 + seg.n
             if item.exact_stop:
                 k = settled(k)
@@ -441,14 +486,17 @@ def plan_member(schedule: Schedule, params: NCParams, feeds: np.ndarray, speeds:
             segments.append((k0, "sync", seg))
             synced.append((k0, omega))
             last = (k0, seg, [])
+            last_cut = False
             k = k0 + seg.n
             sp_last = (k, 0.0, 0.0)
         elif item.kind == "rapid":
+            k = servo_settled(k)
             line_cp.append((k, b.line))
             seg = shared(("rapid", params, item.blocks), functools.partial(
                 interpolate_rapid, np.array(b.start), np.array(b.end), params.rapid_feed, ts))  # type: ignore[union-attr]
             segments.append((k, "rapid", seg))
             last = (k, seg, rapid_boxes)
+            last_cut = False
             k = settled(k)
         elif item.kind == "dwell":
             k = settled(k)
