@@ -41,11 +41,16 @@ def test_a_1ms_logger_off_the_interpolation_instants_names_no_feedforward(tmp_pa
     (folder / "case.toml").write_text('program = "program.nc"\nrecording = "recording.csv"\n')
     case = load_case(folder)
     truth = simulate_truth(case.machine, twin_commands(case, case.machine), {}, axes=("x", "y", "z"))
-    record(truth, Recorder(period_s=1e-3, jitter_s=0.0, time_offset_s=0.5), seed=3).write_csv(
-        folder / "recording.csv")
+    logger = Recorder(period_s=1e-3, jitter_s=0.0, time_offset_s=0.5)
+    record(truth, logger, seed=3).write_csv(folder / "recording.csv")
     d = diagnose(folder)
     assert d.effects == [] and d.unexplained == [], d.log
-    assert d.rms_after["z_fe_um"] < 1.2 * d.noise["z_fe_um"]
+    # what a perfect model leaves in a following error: the logger's own error on the actual position (the
+    # command is not quantised), Gaussian noise plus the encoder's uniform quantisation error, 0.416 um here.
+    # The interpolation corners the test is about added up to T^2/8 a ~ 1 um at every z corner.
+    measurement_um = np.hypot(logger.position_noise_um, logger.position_quantum_um / np.sqrt(12.0))
+    for a in "xyz":
+        assert d.rms_after[f"{a}_fe_um"] < measurement_um, (a, d.rms_after, measurement_um)
 
 
 def test_clean_part_on_one_1ms_logger_names_nothing(tmp_path):
