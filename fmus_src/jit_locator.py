@@ -158,7 +158,7 @@ def install() -> bool:
     """
     if _caching is None:  # pragma: no cover
         return False
-    impl = getattr(_caching, "CacheImpl", None) or getattr(_caching, "_CacheImpl", None)  # renamed in numba 0.59
+    impl = getattr(_caching, "CacheImpl", None) or getattr(_caching, "_CacheImpl", None)  # older numba: _CacheImpl
     classes = getattr(impl, "_locator_classes", None)
     if not isinstance(classes, list):  # pragma: no cover - numba reorganised
         return False
