@@ -8,7 +8,10 @@ reference implementation.
 
 Compiled code is cached next to the source (``__pycache__``); when no cache
 location is writable numba refuses ``cache=True`` at decoration time, and the
-function is then compiled without a cache (once per process).
+function is then compiled without a cache (once per process). Inside an
+unpacked FMU the cache lives outside the FMU, keyed by the content of the
+shipped package (:mod:`fmus_src.jit_locator`), so that a master unpacking the
+FMU into a new folder at every instantiation does not recompile.
 """
 from __future__ import annotations
 
@@ -18,6 +21,10 @@ try:
     import numba
 except ImportError:  # pragma: no cover - numba is a declared dependency
     numba = None
+else:
+    from .jit_locator import install as _install_locator
+
+    _install_locator()
 
 F = TypeVar("F", bound=Callable)
 
