@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from orchestrator.case import load_case
-from orchestrator.diagnose import core, diagnose
+from orchestrator.diagnose import core, diagnose, force_phase
 from orchestrator.diagnose.align import load_envelope
 from orchestrator.diagnose.errors import DiagnosisError
 from orchestrator.diagnose.force_only import force_only_recording, needs_force_clock
@@ -49,6 +49,17 @@ def test_load_envelope_is_the_moving_mean():
     env = load_envelope(t, t, 0.1)
     np.testing.assert_allclose(env(np.array([0.2, 0.5, 0.9])), [0.2, 0.5, 0.9], atol=1e-12)
     assert env(np.array([2.0]))[0] == 0.0
+
+
+def test_the_force_clock_replays_the_cuts_with_their_history_in_pieces():
+    # 1 ms samples; cuts at samples 20-29, 32-40 and 80-89; 5 ms (5 samples) of history before each: the first
+    # two windows overlap and merge, 15-40 and 75-89 (26 + 15 samples); in 2 pieces of at most 21 kept samples,
+    # the second piece of the first window again starts 5 samples before the first sample it keeps
+    t = np.arange(100) * 1e-3
+    groups = [np.arange(20, 30), np.arange(32, 41), np.arange(80, 90)]
+    windows = force_phase._windows(t, groups, 5e-3 + 1e-9)
+    assert windows == [(15, 41), (75, 90)]
+    assert force_phase._pieces(t, windows, 5e-3 + 1e-9, 2) == [(15, 15, 36), (31, 36, 41), (75, 75, 90)]
 
 
 @pytest.fixture(scope="module")
@@ -93,7 +104,7 @@ def test_clock_of_a_force_only_recording_comes_from_the_cutting_load(clean_case,
         float(twin["x_mm"][k]), abs=0.01)
 
     assert d.alignment["time_offset_s"] == pytest.approx(SHIFT_S, abs=1e-3)   # 0.72 ms late, as above
-    assert d.alignment["time_offset_s"] == pytest.approx(only.offset, abs=1e-12)
+    assert d.alignment["time_offset_s"] == pytest.approx(only.offset, abs=1e-6)   # reported to 1 µs
     assert d.effects == [] and d.unexplained == [], d.log
     assert any("twin's run with cutting" in line for line in d.log)
     assert any("drive diagnosis skipped" in line for line in d.log)
