@@ -268,7 +268,7 @@ def phase_matched_offset(case: Case, machine: Machine, twin: Recording, t_rec: n
 
     replayer = _Replayer(c, table, twin, t_rec, groups, ref, HISTORY_WINDOWS * window_s)
     try:
-        if len(replayer.pieces) > 1:   # the pieces must give the whole replay's forces where the fit looks
+        if replayer.pieces != [(0, 0, t_rec.size)]:   # they must give the whole replay's forces where it looks
             rows = np.concatenate(groups)
             whole = _Replayer(c, table, twin, t_rec, groups, ref, 0.0)
             whole.whole()
