@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from orchestrator.case import load_case
-from orchestrator.diagnose import diagnose
+from orchestrator.diagnose import core, diagnose, force_phase
 from orchestrator.diagnose.align import load_envelope
 from orchestrator.diagnose.errors import DiagnosisError
 from orchestrator.diagnose.force_only import force_only_recording, needs_force_clock
@@ -51,22 +51,60 @@ def test_load_envelope_is_the_moving_mean():
     assert env(np.array([2.0]))[0] == 0.0
 
 
-def test_clock_of_a_force_only_recording_comes_from_the_cutting_load(tmp_path):
-    folder = _dynamometer_case(tmp_path / "clean", {}, seed=7)
-    case = load_case(folder)
-    rec = Recording.read_csv(case.recording)
+def test_the_force_clock_replays_the_cuts_with_their_history_in_pieces():
+    # 1 ms samples; cuts at samples 20-29, 32-40 and 80-89; 5 ms (5 samples) of history before each: the first
+    # two windows overlap and merge, 15-40 and 75-89 (26 + 15 samples); in 2 pieces of at most 21 kept samples,
+    # the second piece of the first window again starts 5 samples before the first sample it keeps
+    t = np.arange(100) * 1e-3
+    groups = [np.arange(20, 30), np.arange(32, 41), np.arange(80, 90)]
+    windows = force_phase._windows(t, groups, 5e-3 + 1e-9)
+    assert windows == [(15, 41), (75, 90)]
+    assert force_phase._pieces(t, windows, 5e-3 + 1e-9, 2) == [(15, 15, 36), (31, 36, 41), (75, 75, 90)]
+
+
+@pytest.fixture(scope="module")
+def clean_case(tmp_path_factory) -> Path:
+    """The clean dynamometer case (seed 7), shared: the tests only read it."""
+    return _dynamometer_case(tmp_path_factory.mktemp("clean"), {}, seed=7)
+
+
+@pytest.fixture(scope="module")
+def clean_diagnosis(clean_case, tmp_path_factory):
+    """The clean case's diagnosis with a held-out dynamometer file (seed 9), and the clocks it found.
+
+    The held-out file is evaluated after the case's diagnosis is complete (``core.diagnose``), so this is
+    the clean case's own diagnosis too. Returns ``(diagnosis, clocks, held-out folder)``, ``clocks`` the
+    diagnosis's own calls of :func:`force_only_recording` (each clock is found once) by case folder:
+    ``(case, recording, machine, ForceOnly)``.
+    """
+    hold = _dynamometer_case(tmp_path_factory.mktemp("hold"), {}, seed=9)
+    clocks = {}
+
+    def spy(case, recording, machine):
+        only = force_only_recording(case, recording, machine)
+        clocks[Path(case.folder).resolve()] = (case, recording, machine, only)
+        return only
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(core, "force_only_recording", spy)
+        d = diagnose(clean_case, holdout=hold)
+    return d, clocks, hold
+
+
+def test_clock_of_a_force_only_recording_comes_from_the_cutting_load(clean_case, clean_diagnosis):
+    d, clocks, _ = clean_diagnosis
+    case, rec, machine, only = clocks[clean_case.resolve()]   # force_only_recording(case, rec, case.machine)
     assert needs_force_clock(rec)
-    only = force_only_recording(case, rec, case.machine)
     assert only.offset == pytest.approx(SHIFT_S, abs=1e-3)   # the twin's run lags its own replay by 0.72 ms here (see README)
     # the path added is the twin's at t - offset: its x at the first slot's end (X14) is reached on the
     # recording's clock SHIFT_S later than on the program's
-    twin = simulate(case=case, plot=False).recording
+    twin = simulate(case=load_case(clean_case), plot=False).recording
     k = int(np.argmax(np.asarray(twin["x_mm"]) > 13.9))
     assert np.interp(twin.t[k] + SHIFT_S, only.recording.t, only.recording["x_mm"]) == pytest.approx(
         float(twin["x_mm"][k]), abs=0.01)
 
-    d = diagnose(folder)
     assert d.alignment["time_offset_s"] == pytest.approx(SHIFT_S, abs=1e-3)   # 0.72 ms late, as above
+    assert d.alignment["time_offset_s"] == pytest.approx(only.offset, abs=1e-6)   # reported to 1 µs
     assert d.effects == [] and d.unexplained == [], d.log
     assert any("twin's run with cutting" in line for line in d.log)
     assert any("drive diagnosis skipped" in line for line in d.log)
@@ -92,11 +130,10 @@ def test_runout_in_a_force_only_recording_is_named(tmp_path):
         assert d.rms_after[c] <= 1.1 * NOISE_N, (c, d.rms_after, d.log)
 
 
-def test_a_force_only_holdout_is_aligned_by_its_cutting_load(tmp_path):
+def test_a_force_only_holdout_is_aligned_by_its_cutting_load(clean_diagnosis):
     # the held-out dynamometer file is on its own clock too: it gets the same force clock as the case
-    case = _dynamometer_case(tmp_path / "case", {}, seed=7)
-    hold = _dynamometer_case(tmp_path / "hold", {}, seed=9)
-    d = diagnose(case, holdout=hold)
+    d, clocks, hold = clean_diagnosis
+    assert clocks[hold.resolve()][3].offset == pytest.approx(SHIFT_S, abs=1e-3)
     assert d.effects == []
     # the twin is the truth here: before = after = the noise on the held-out file
     for c in ("fx_N", "fy_N"):
@@ -104,8 +141,8 @@ def test_a_force_only_holdout_is_aligned_by_its_cutting_load(tmp_path):
         assert d.holdout["rms_after"][c] <= 1.1 * NOISE_N
 
 
-def test_a_force_only_recording_without_the_cutting_diagnosis_says_why(tmp_path):
-    folder = _dynamometer_case(tmp_path / "clean", {}, seed=7)
+def test_a_force_only_recording_without_the_cutting_diagnosis_says_why(clean_case):
+    folder = clean_case
     with pytest.raises(DiagnosisError, match=r"recording.csv: the recording has no line and no moving position "
                                              r"or command, so the feed drives cannot be diagnosed"):
         diagnose(folder, cutting=False)

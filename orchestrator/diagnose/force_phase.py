@@ -12,15 +12,23 @@ clock ``t - offset``) and compared with the recorded ``fx``, ``fy`` sample by sa
 free: a clock error ``d`` moves the pulses by ``omega d``, which the angle takes up, and the tool path by
 ``v d``, which it cannot. Per cut a scale, the changes by a radial/tangential ratio and by edge forces, and
 an offset per channel are fitted (what the cutting diagnosis names later must not pull the clock).
+
+Cost: only the recorded cuts enter the misfit, so only they are replayed, each from two envelope windows
+(4 spindle revolutions) before it, cut into one piece per core that run side by side (each piece again with
+that history); the edge-force members run the effect kernel in a call of their own, the others the plain
+kernel. Checked once per clock against the whole replay at the coarse offset (the whole replay is used when
+they differ, or when wear or spindle droop make the state depend on all that came before).
 """
 from __future__ import annotations
 
 import math
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import replace
 
 import numpy as np
 
 from fmus_src.cutting.table import EngagementTable
+from fmus_src.threads import usable_cores
 
 from ..case import Case
 from ..machine import Machine
@@ -45,6 +53,13 @@ CHEAP_SHAPES = 2
 REFINE_SPAN_S = 2e-3
 #: Most replays of the final simplex search.
 SIMPLEX_EVALUATIONS = 40
+#: Replayed time before each recorded cut, in envelope windows (``window_s``: 2 spindle revolutions), enough
+#: for the chip's last tooth period and a revolution of surfaces (runout).
+HISTORY_WINDOWS = 2.0
+#: Largest difference of the pieced replay from the whole replay at the coarse offset, relative to the largest
+#: force; above it (a path that passes the same place twice, a state the pieces cannot start from) the
+#: whole replay is used.
+PIECE_TOLERANCE = 1e-6
 
 
 def _twin_inputs(twin: Recording, t_prog: np.ndarray) -> ForceInputs:
@@ -83,25 +98,127 @@ def _cut_misfits(fx: np.ndarray, fy: np.ndarray, rx: np.ndarray, ry: np.ndarray,
     return total
 
 
-def _scan(case: Case, table: EngagementTable, twin: Recording, t_rec: np.ndarray, fx: np.ndarray, fy: np.ndarray,
-          groups: list[np.ndarray], offsets: np.ndarray, angles: np.ndarray, ref: int,
-          shapes: int = len(SHAPES)) -> np.ndarray:
+def _windows(t: np.ndarray, groups: list[np.ndarray], history_s: float) -> list[tuple[int, int]]:
+    """Sample ranges ``[a, b)`` replayed: each cut group from ``history_s`` before it, overlapping ones merged."""
+    spans = sorted((int(np.searchsorted(t, t[int(g.min())] - history_s)), int(g.max()) + 1) for g in groups)
+    merged: list[list[int]] = []
+    for a, b in spans:
+        if merged and a <= merged[-1][1]:
+            merged[-1][1] = max(merged[-1][1], b)
+        else:
+            merged.append([a, b])
+    return [(a, b) for a, b in merged]
+
+
+def _pieces(t: np.ndarray, windows: list[tuple[int, int]], history_s: float,
+            count: int) -> list[tuple[int, int, int]]:
+    """The windows cut into about ``count`` pieces ``(a, keep, b)`` of equal length, to replay side by side.
+
+    Piece ``(a, keep, b)`` replays samples ``a .. b - 1`` and keeps ``keep .. b - 1``: a piece cut out of a
+    window starts ``history_s`` before the samples it keeps.
+    """
+    length = -(-sum(b - a for a, b in windows) // max(count, 1))
+    out = []
+    for a, b in windows:
+        for keep in range(a, b, max(length, 1)):
+            start = a if keep == a else min(int(np.searchsorted(t, t[keep] - history_s)), keep)
+            out.append((max(start, a), keep, min(keep + length, b)))
+    return out
+
+
+class _Replayer:
+    """The twin's forces at the recorded instants for (offset, spindle angle) pairs, replayed in windows.
+
+    Only the samples of the recorded cuts enter the misfit, so only they and ``history_s`` before each cut
+    (the chip's last tooth period, a revolution of surfaces for runout) are replayed: each window's
+    component is set up at its first sample with the spindle angle the whole replay would have there.
+
+    Parameters
+    ----------
+    case : Case
+        With the twin's machine.
+    table : EngagementTable
+    twin : Recording
+        The twin's run (program clock).
+    t_rec : ndarray, shape (n,)
+        Recorded sample times [s].
+    groups : list of ndarray
+        Sample indices of the recorded cuts.
+    ref : int
+        Sample at which the angles are given.
+    history_s : float
+        Replayed time before each cut, s.
+    """
+
+    def __init__(self, case: Case, table: EngagementTable, twin: Recording, t_rec: np.ndarray,
+                 groups: list[np.ndarray], ref: int, history_s: float) -> None:
+        self.case, self.table, self.twin, self.t_rec, self.ref = case, table, twin, t_rec, ref
+        params = cutting_parameters(case)
+        ke = float(params.get("ke", 0.5))
+        self.shapes = [{}, {"ke": 1.2 * ke}, {"edge_force_tangential": 1e4}, {"edge_force_radial": 1e4}]
+        stateful = any(float(params.get(k, 0.0)) != 0.0 for k in ("wear_rate", "spindle_droop"))
+        self.pieces = [(0, 0, t_rec.size)] if stateful else _pieces(t_rec, _windows(t_rec, groups, history_s),
+                                                                   history_s, usable_cores())
+        self._pool: ThreadPoolExecutor | None = None
+
+    def whole(self) -> None:
+        """Replay every sample from the first in one piece (the check of the pieces failed)."""
+        self.pieces = [(0, 0, self.t_rec.size)]
+        self.close()
+
+    def forces(self, offset: float, angles: np.ndarray, shapes: int) -> tuple[np.ndarray, np.ndarray]:
+        """``fx``, ``fy`` [N], shape (n, len(angles) * shapes): ``shapes`` of the shapes per angle, 0 outside pieces.
+
+        ``angles`` are the spindle angle of tooth 0 at sample ``ref`` [rad]. The pieces run side by side in
+        threads (the compiled replay releases the GIL).
+        """
+        inputs = _twin_inputs(self.twin, self.t_rec - offset)
+        turned = np.r_[0.0, np.cumsum(step_speeds(inputs) * np.diff(inputs.t))]   # spindle angle from sample 0
+        members = [shape for _ in angles for shape in self.shapes[:shapes]]
+        n = self.t_rec.size
+        fx, fy = np.zeros((n, len(members))), np.zeros((n, len(members)))
+
+        # the edge-force members need the effect kernel; the others run apart on the plain one (the same
+        # forces to 1e-13 N, several times cheaper)
+        kinds = [list(range(min(shapes, CHEAP_SHAPES))), list(range(CHEAP_SHAPES, shapes))]
+        calls = [[(j * shapes + i) for j in range(len(angles)) for i in kind] for kind in kinds if kind]
+
+        def piece(a: int, keep: int, b: int) -> None:
+            window = ForceInputs(inputs.t[a:b], inputs.position[a:b], inputs.omega[a:b], inputs.omega_source)
+            theta = angles - (turned[self.ref] - turned[a])
+            for cols in calls:
+                rep = run_force_replay(self.case, self.table, window, [members[k] for k in cols],
+                                       theta[np.asarray(cols) // shapes])
+                fx[keep:b, cols], fy[keep:b, cols] = rep.fx[keep - a:], rep.fy[keep - a:]
+
+        if len(self.pieces) == 1:
+            piece(*self.pieces[0])
+        else:
+            if self._pool is None:
+                self._pool = ThreadPoolExecutor(max_workers=len(self.pieces))
+            list(self._pool.map(lambda p: piece(*p), self.pieces))
+        return fx, fy
+
+    def close(self) -> None:
+        """End the threads of the pieces."""
+        if self._pool is not None:
+            self._pool.shutdown()
+            self._pool = None
+
+
+def _scan(replayer: _Replayer, fx: np.ndarray, fy: np.ndarray, groups: list[np.ndarray], offsets: np.ndarray,
+          angles: np.ndarray, shapes: int = len(SHAPES)) -> np.ndarray:
     """Misfit [N²] of every (offset, angle) pair, shape (len(offsets), len(angles)).
 
-    ``angles`` are the spindle angle of tooth 0 at sample ``ref`` (inside a cut, the spindle at speed), not
-    at the first sample, where the spindle may still be running up. ``shapes``: how many of :data:`SHAPES`
-    are replayed (the edge-force members run the slower effect kernel, about 35 ms a member against 2 ms for
-    the baseline over the short part's 3500 samples).
+    ``angles`` are the spindle angle of tooth 0 at the replayer's sample ``ref`` (inside a cut, the spindle at
+    speed), not at the first sample, where the spindle may still be running up. ``shapes``: how many of
+    :data:`SHAPES` are replayed (the edge-force members run the slower effect kernel, about 35 ms a member
+    against 2 ms for the baseline over the short part's 3500 samples).
     """
-    ke = float(cutting_parameters(case).get("ke", 0.5))
-    shapes = [{}, {"ke": 1.2 * ke}, {"edge_force_tangential": 1e4}, {"edge_force_radial": 1e4}][:shapes]
-    members = [shape for _ in angles for shape in shapes]
     out = np.empty((offsets.size, angles.size))
     for i, o in enumerate(offsets):
-        inputs = _twin_inputs(twin, t_rec - o)
-        turned = float(np.sum(step_speeds(inputs)[:ref] * np.diff(inputs.t)[:ref]))
-        rep = run_force_replay(case, table, inputs, members, np.repeat(angles - turned, len(shapes)))
-        out[i] = _cut_misfits(fx, fy, rep.fx, rep.fy, groups, len(shapes))
+        rx, ry = replayer.forces(float(o), angles, shapes)
+        out[i] = _cut_misfits(fx, fy, rx, ry, groups, shapes)
     return out
 
 
@@ -115,7 +232,8 @@ def phase_matched_offset(case: Case, machine: Machine, twin: Recording, t_rec: n
     angle at ``coarse`` on a grid of :data:`ANGLE_STEP_RAD` over a tooth pitch; then offsets every
     :data:`COARSE_STEP_S` outwards within :data:`SPAN_S` of ``coarse``, each with :data:`TRACK_ANGLES`
     angles about the neighbour's best (the valley drifts in angle); then a simplex search in (offset, angle)
-    from the best of those.
+    from the best of those. Every replay covers only the recorded cuts and :data:`HISTORY_WINDOWS` windows
+    before each (:class:`_Replayer`).
 
     Parameters
     ----------
@@ -148,37 +266,51 @@ def phase_matched_offset(case: Case, machine: Machine, twin: Recording, t_rec: n
     ref = int(longest[longest.size // 2])
     pitch = 2.0 * math.pi / max(int(c.tool.flutes), 1)
 
-    def scan(offset: float, angles: np.ndarray, shapes: int) -> np.ndarray:
-        return _scan(c, table, twin, t_rec, fx, fy, groups, np.array([offset]), angles, ref, shapes)[0]
+    replayer = _Replayer(c, table, twin, t_rec, groups, ref, HISTORY_WINDOWS * window_s)
+    try:
+        if replayer.pieces != [(0, 0, t_rec.size)]:   # they must give the whole replay's forces where it looks
+            rows = np.concatenate(groups)
+            whole = _Replayer(c, table, twin, t_rec, groups, ref, 0.0)
+            whole.whole()
+            checks = [r.forces(coarse, np.zeros(1), len(SHAPES)) for r in (replayer, whole)]
+            worst = max(float(np.max(np.abs(checks[0][i][rows] - checks[1][i][rows]))) for i in range(2))
+            peak = max(float(np.max(np.abs(checks[1][i][rows]))) for i in range(2))
+            if not worst <= PIECE_TOLERANCE * peak + 1e-9:
+                replayer.whole()
 
-    def track(centre: float, angle: float, steps: int, shapes: int) -> dict[int, tuple[float, float]]:
-        """Best (misfit, angle) at offsets ``centre + i COARSE_STEP_S``, |i| <= steps, angles tracked outwards."""
-        window = (np.arange(TRACK_ANGLES) - TRACK_ANGLES // 2) * ANGLE_STEP_RAD
-        found: dict[int, tuple[float, float]] = {}
-        for direction in (-1, 1):
-            for i in range(0 if direction < 0 else 1, steps + 1):
-                centre_angle = angle if i == 0 else found[direction * (i - 1)][1]
-                trial = centre_angle + window
-                row = scan(centre + direction * i * COARSE_STEP_S, trial, shapes)
-                k = int(np.argmin(row))
-                found[direction * i] = (float(row[k]), float(trial[k]))
-        return found
+        def scan(offset: float, angles: np.ndarray, shapes: int) -> np.ndarray:
+            return _scan(replayer, fx, fy, groups, np.array([offset]), angles, shapes)[0]
 
-    angles = np.arange(0.0, pitch, ANGLE_STEP_RAD)
-    row = scan(coarse, angles, CHEAP_SHAPES)
-    found = track(coarse, float(angles[int(np.argmin(row))]), int(round(SPAN_S / COARSE_STEP_S)), CHEAP_SHAPES)
-    i0 = min(found, key=lambda i: found[i][0])
-    centre = coarse + i0 * COARSE_STEP_S
-    found = track(centre, found[i0][1], int(round(REFINE_SPAN_S / COARSE_STEP_S)), len(SHAPES))
-    i0 = min(found, key=lambda i: found[i][0])
-    scale = np.array([COARSE_STEP_S, ANGLE_STEP_RAD])
+        def track(centre: float, angle: float, steps: int, shapes: int) -> dict[int, tuple[float, float]]:
+            """Best (misfit, angle) at offsets ``centre + i COARSE_STEP_S``, |i| <= steps, angles tracked outwards."""
+            window = (np.arange(TRACK_ANGLES) - TRACK_ANGLES // 2) * ANGLE_STEP_RAD
+            found: dict[int, tuple[float, float]] = {}
+            for direction in (-1, 1):
+                for i in range(0 if direction < 0 else 1, steps + 1):
+                    centre_angle = angle if i == 0 else found[direction * (i - 1)][1]
+                    trial = centre_angle + window
+                    row = scan(centre + direction * i * COARSE_STEP_S, trial, shapes)
+                    k = int(np.argmin(row))
+                    found[direction * i] = (float(row[k]), float(trial[k]))
+            return found
 
-    def cost(u: np.ndarray) -> float:
-        return float(scan(centre + u[0] * scale[0], np.array([u[1] * scale[1]]), len(SHAPES))[0])
+        angles = np.arange(0.0, pitch, ANGLE_STEP_RAD)
+        row = scan(coarse, angles, CHEAP_SHAPES)
+        found = track(coarse, float(angles[int(np.argmin(row))]), int(round(SPAN_S / COARSE_STEP_S)), CHEAP_SHAPES)
+        i0 = min(found, key=lambda i: found[i][0])
+        centre = coarse + i0 * COARSE_STEP_S
+        found = track(centre, found[i0][1], int(round(REFINE_SPAN_S / COARSE_STEP_S)), len(SHAPES))
+        i0 = min(found, key=lambda i: found[i][0])
+        scale = np.array([COARSE_STEP_S, ANGLE_STEP_RAD])
 
-    start = np.array([float(i0), found[i0][1] / scale[1]])
-    res = minimize(cost, start, method="Nelder-Mead",
-                   options={"xatol": 0.01, "fatol": 1e-3, "maxfev": SIMPLEX_EVALUATIONS,
-                            "initial_simplex": [start, start + [0.5, 0.0], start + [0.0, 0.5]]})
-    best = res.x if res.fun <= found[i0][0] else start
-    return float(centre + best[0] * scale[0]), float(min(res.fun, found[i0][0]))
+        def cost(u: np.ndarray) -> float:
+            return float(scan(centre + u[0] * scale[0], np.array([u[1] * scale[1]]), len(SHAPES))[0])
+
+        start = np.array([float(i0), found[i0][1] / scale[1]])
+        res = minimize(cost, start, method="Nelder-Mead",
+                       options={"xatol": 0.01, "fatol": 1e-3, "maxfev": SIMPLEX_EVALUATIONS,
+                                "initial_simplex": [start, start + [0.5, 0.0], start + [0.0, 0.5]]})
+        best = res.x if res.fun <= found[i0][0] else start
+        return float(centre + best[0] * scale[0]), float(min(res.fun, found[i0][0]))
+    finally:
+        replayer.close()
