@@ -20,8 +20,8 @@ import numpy as np
 
 T = TypeVar("T")
 
-#: Results kept per kind (least recently used dropped first). Few: a long program's table or run holds
-#: hundreds of MB (a 595 s log's twin run at 1 ms: about 0.6 M rows), and a diagnosis reuses the last one.
+#: Results kept per kind (least recently used dropped first). Few: a long program's table or run is large
+#: (a 595 s log's twin run at 1 ms has about 0.6 M rows), and a diagnosis reuses the last one.
 KEEP = 2
 
 _store: dict[str, OrderedDict[str, Any]] = {}
