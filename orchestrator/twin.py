@@ -40,6 +40,7 @@ from .case import Case
 from .errors import CncTwinError, SystemDescriptionError
 from .machine import AXES, Machine, frame_parameters
 from .master import Probe
+from .memo import digest, remember
 from .system import System
 
 #: Default start position of the tool tip in work coordinates, mm (safe height above work zero).
@@ -404,7 +405,15 @@ def reference_path(case: Case, options: TwinOptions | None = None, program_text:
 
 
 def engagement_table(case: Case, options: TwinOptions | None = None, program_text: str | None = None) -> EngagementTable:
-    """Engagement along the nominal program's path, computed once (for ``cutting_mode="path"``)."""
+    """Engagement along the nominal program's path, computed once (for ``cutting_mode="path"``).
+
+    The table depends only on the reference path and the tool and stock parameters: an earlier table of the
+    same content is returned (:func:`orchestrator.memo.remember`; the reference pass takes about 3 s on the
+    diagnosis tests' short programs, a diagnosis of a dynamometer file needed it three times).
+    """
     if case.stock is None:
         raise SystemDescriptionError(f"{case.program}: an engagement table needs a stock (the case has none)")
-    return EngagementTable.from_parameters(reference_path(case, options, program_text), cutting_parameters(case))
+    path = reference_path(case, options, program_text)
+    params = cutting_parameters(case)
+    key = digest(path, {k: v for k, v in params.items() if k == "tool_diameter" or k.startswith("stock_")})
+    return remember("engagement_table", key, lambda: EngagementTable.from_parameters(path, params))

@@ -66,14 +66,19 @@ def test_a_hold_is_split_into_its_rests_and_the_creep_between_them():
     assert stuck_stretches(t, k * 1.7e-6) == []
 
 
-def test_truth_and_twin_hold_the_same_current_under_the_same_cutting_load(tmp_path):
+@pytest.fixture(scope="module")
+def clean_seed3(tmp_path_factory):
+    """The clean truth recording of seed 3 (shared: the held-current check and a clean diagnosis read it)."""
+    return write_cutting_case(tmp_path_factory.mktemp("clean3") / "c", {}, 3, program=SHORT_PROGRAM, dynamometer=DYN)
+
+
+def test_truth_and_twin_hold_the_same_current_under_the_same_cutting_load(clean_seed3):
     """The independent truth (Karnopp, Euler substeps) and the twin's exact stick agree when loaded alike.
 
     The held current of y while x slots differs by far more than the logger's 0.01 A only when the replay
     is loaded by a noisy force: the baseline physics of both is the same.
     """
-    folder = write_cutting_case(tmp_path / "c", {}, 3, program=SHORT_PROGRAM, dynamometer=DYN)
-    case = load_case(folder)
+    case = load_case(clean_seed3)
     machine = case.machine
     nc = twin_commands(case, machine)
     first = simulate_truth(machine, nc, {}, axes=("x", "y", "z"))
@@ -96,8 +101,9 @@ def test_truth_and_twin_hold_the_same_current_under_the_same_cutting_load(tmp_pa
 
 
 @pytest.mark.parametrize("seed", [3, 5])
-def test_clean_cutting_recording_with_drives_on_has_no_effects(seed, tmp_path):
-    folder = write_cutting_case(tmp_path / f"clean{seed}", {}, seed, program=SHORT_PROGRAM, dynamometer=DYN)
+def test_clean_cutting_recording_with_drives_on_has_no_effects(seed, tmp_path, clean_seed3):
+    folder = clean_seed3 if seed == 3 else write_cutting_case(tmp_path / f"clean{seed}", {}, seed,
+                                                              program=SHORT_PROGRAM, dynamometer=DYN)
     d = diagnose(folder)
     assert d.effects == [], d.log
     spurious = [u for u in d.unexplained if any(ch.endswith(("_tcmd_A", "_fe_um")) for ch in u["channels"])]

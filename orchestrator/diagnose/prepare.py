@@ -1,7 +1,9 @@
 """Step 1 of a diagnosis: read, align and put the recording and the twin's commands side by side."""
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass, field, replace
+from pathlib import Path
 from typing import Callable
 
 import numpy as np
@@ -11,6 +13,7 @@ from ..machine import Machine
 from ..recording import Recording, RecordingError
 from ..simulate import simulate as simulate_twin
 from ..master import Master, MasterSettings, Probe
+from ..memo import digest, remember
 from ..twin import TwinOptions, build_twin, nck_parameters
 from ..validation import validate_recording
 from .align import (
@@ -19,6 +22,7 @@ from .align import (
 )
 from ..identify.start_state import AxisStart, estimate_start, start_window
 from .errors import DiagnosisError
+from .thrust_gate import thrust_bound
 
 #: Recorded commands within this RMS of the twin's NC kernel (mm) are taken as the same interpolation.
 SAME_COMMANDS_MM = 1e-3
@@ -186,12 +190,32 @@ def _has_commands(recording: Recording, nc: Recording) -> bool:
     return bool(_moving_axes(recording, nc, "_ref_mm"))
 
 
+def run_key(case: Case, machine: Machine, *extra: object) -> str | None:
+    """Digest of what the twin's run of ``case`` on ``machine`` depends on (program text, machine values, stock,
+    tool, material, offsets; :func:`orchestrator.memo.digest`), None when the program cannot be read (the run
+    then raises its own error)."""
+    try:
+        text = Path(case.program).read_bytes()
+    except OSError:
+        return None
+    return digest(text.decode("utf-8", errors="replace"), machine.values, str(machine.path), case.stock,
+                  case.tool, case.material, case.extra, case.offsets, *extra)
+
+
 def twin_commands(case: Case, machine: Machine) -> Recording:
-    """The twin's run of the case's program without cutting (its NC commands, lines, servo response)."""
-    result = simulate_twin(case=replace(case, machine=machine), plot=False, options=TwinOptions(cutting=False))
-    if len(result.recording) < 3:
-        raise DiagnosisError(f"{case.program}: the twin could not run the program: {result.message}")
-    return result.recording
+    """The twin's run of the case's program without cutting (its NC commands, lines, servo response).
+
+    Runs of the same content (:func:`run_key`) are done once (:func:`orchestrator.memo.remember`); each call
+    gets its own copy of the recording.
+    """
+    def run() -> Recording:
+        result = simulate_twin(case=replace(case, machine=machine), plot=False, options=TwinOptions(cutting=False))
+        if len(result.recording) < 3:
+            raise DiagnosisError(f"{case.program}: the twin could not run the program: {result.message}")
+        return result.recording
+
+    key = run_key(case, machine)
+    return copy.deepcopy(run() if key is None else remember("twin_commands", key, run))
 
 
 @dataclass(frozen=True)
@@ -293,7 +317,15 @@ def twin_loads(case: Case, machine: Machine) -> TwinLoads | None:
     """Run the twin with cutting and keep the loads on its drives (:data:`DRIVE_LOADS`); None when nothing is cut.
 
     An axis whose load stays below :data:`NEGLIGIBLE_LOAD_N` throughout (z without a plunge into the stock) is
-    left out."""
+    left out. Runs of the same content (:func:`run_key`) are done once (:func:`orchestrator.memo.remember`):
+    the result is shared, not to be modified."""
+    key = run_key(case, machine)
+    if key is None:
+        return _twin_loads(case, machine)
+    return remember("twin_loads", key, lambda: _twin_loads(case, machine))
+
+
+def _twin_loads(case: Case, machine: Machine) -> TwinLoads | None:
     twin = build_twin(replace(case, machine=machine), batch=1)
     if twin.cutting is None:
         return None
@@ -522,8 +554,10 @@ def prepare(case: Case, recording: Recording, machine: Machine, axes: list[str] 
         prep.forces_source = "corrected"
     elif prep.disturbance is not None:
         prep.forces_source = "recorded"
-        if "z" not in prep.disturbance and "z" in commands and case.stock is not None:
-            # a dynamometer without fz_N: the Z drive carries the twin's thrust (plunges, drilling), not nothing
+        if "z" not in prep.disturbance and "z" in commands and case.stock is not None \
+                and thrust_bound(case, machine, nc) >= 0.1 * NEGLIGIBLE_LOAD_N:
+            # a dynamometer without fz_N: the Z drive carries the twin's thrust (plunges, drilling), not nothing;
+            # the twin's run with cutting only when its run without descends over the stock (:mod:`.thrust_gate`)
             thrust = predicted_forces(case, machine, lambda: prep.offset)
             if thrust is not None and "z" in thrust:
                 prep.disturbance = {**prep.disturbance, "z": thrust["z"]}
