@@ -14,6 +14,8 @@ import numpy as np
 import pytest
 
 from orchestrator.optimize import OptimizeSettings, backends, optimize
+from orchestrator.optimize.checkpoint import latest_checkpoint
+from orchestrator.optimize.reference import OFF_PATH
 
 PROGRAM = """G21 G17 G90 G94 G54
 S6000 M3
@@ -38,8 +40,8 @@ def slot_case(tmp_path):
     return folder
 
 
-def _settings():
-    return OptimizeSettings(objective="time", pop=3, gens=1, seed=1, progress=False, plot=False, check_front=False,
+def _settings(gens: int = 1):
+    return OptimizeSettings(objective="time", pop=3, gens=gens, seed=1, progress=False, plot=False, check_front=False,
                             tidy=False)
 
 
@@ -64,14 +66,17 @@ def test_a_slot_out_and_back_optimises_in_path_mode(slot_case, tmp_path):
 
 
 def test_members_losing_the_path_move_the_search_to_the_zmap_model(slot_case, tmp_path, monkeypatch):
-    """The path mode follows the original; members whose feed differs from it are made to fail as a member
-    losing the path does (the master's message, the line named by the figures): the search restarts on the
-    Z-map model and the report's note names the line, instead of ending with every member failed."""
+    """The path mode follows the original; from the second generation on, members whose feed differs from it
+    are made to fail as a member losing the path does (the master's message, the line named by the figures):
+    the search restarts on the Z-map model and the report's note names the line, instead of ending with every
+    member failed."""
     real = backends.evaluate_population
+    calls = []
 
     def losing(ctx, feeds, spindles):
         ev = real(ctx, feeds, spindles)
-        if ctx.engagement is None:
+        calls.append(ctx.engagement is not None)
+        if ctx.engagement is None or len(calls) < 2:  # the first generation follows the path; the second loses it
             return ev
         for b in np.flatnonzero(np.any(np.asarray(feeds) != ctx.original_feed, axis=1)):
             ev.success[b] = ev.feasible[b] = False
@@ -83,9 +88,14 @@ def test_members_losing_the_path_move_the_search_to_the_zmap_model(slot_case, tm
 
     monkeypatch.setattr(backends, "evaluate_population", losing)
     out = tmp_path / "out"
-    optimize(case=slot_case, settings=_settings(), out=out)
+    optimize(case=slot_case, settings=_settings(gens=2), out=out)
     report = json.loads((out / "report.json").read_text())
-    assert report["search_cutting_model"] == "zmap"
+    assert calls[:2] == [True, True] and not any(calls[2:])  # restarted on the Z-map model after generation 2
+    assert report["search_cutting_model"] == "zmap" and len(report["history"]) == 2
+    # the checkpoints left are the Z-map search's (a resume does not mix in the path-mode generations)
+    state = latest_checkpoint(out)
+    assert state["generation"] == 2 and len(list((out / "checkpoints").glob("gen_*.pkl"))) == 2
+    assert not any(OFF_PATH in r for ev in state["cache"].values() for r in ev.reason)
     assert len(report["notes"]) == 1
     assert re.search(r"a member of the search loses the path-mode cutting load's path although the original "
                      r"program follows it \(.*slot/program\.nc:6: .*farther than path_tolerance.*\): the search ran "

@@ -546,6 +546,8 @@ def optimize(program: str | Path | None = None, case: str | Path | Case | None =
                 search_on_zmap(ctx, lost)
                 if ref_file is not None:
                     write_pickle(ref_file, reference)  # a resumed job searches on the Z-map model as well
+                    for old in ref_file.parent.glob("gen_*.pkl"):  # the path-mode generations: not resumed
+                        old.unlink()
                 evaluator = CachedEvaluator(ctx, backend)
                 problem = LineProblem(ctx, settings.objective, settings.method, settings.penalty_weight)
                 problem.evaluator = evaluator
