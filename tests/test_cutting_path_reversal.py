@@ -2,9 +2,10 @@
 
 The forward-only projection of the path mode (:func:`fmus_src.cutting.path_kernel.locate`) cannot follow a tool
 that turns back before the commanded motion does: a G83 peck returns to R and the servo turns back 0.14-0.50 mm
-short of it. :func:`~fmus_src.cutting.path_kernel.across_reversal` re-finds the member after the reversal, and
-only across stations where the reference pass met no material. Checked here on the kernel's projection
-(analytic positions on a polyline), on a reversal inside material (no jump: the honest off-path error), on the
+short of it. :func:`~fmus_src.cutting.path_kernel.across_reversal` re-finds the member after the reversal: across
+stations where the reference pass met no material, or where the tool retraces its line within the servo's
+shortfall of the reversal (a slot cut out and back). Checked here on the kernel's projection (analytic positions
+on a polyline), on a slot cut out and back on one line (hand calculation, no load on the way back), on the
 compiled replay against the component stepped step by step (bit for bit, baseline and effect kernels) and on the
 whole twin with a G83 program and two slots after it, against the Z-map model (the independent reference) and
 hand calculations: a full slot's peak Fc = Kt a fz sqrt(1 + Ke^2) and its removed volume width x depth x length.
@@ -17,12 +18,12 @@ import re
 import numpy as np
 import pytest
 
-from fmus_src.cutting import CuttingError
 from fmus_src.cutting import path_kernel as pk
 from orchestrator.case import load_case
 from orchestrator.simulate import simulate
 from orchestrator.twin import TwinOptions
-from tests.test_cutting_path import OMEGA, R, TOOTH_PERIOD, H, along, params, path_run
+from tests.test_cutting_path import KE, KT, OMEGA, R, TOOTH_PERIOD, H, along, assert_modes_agree, params, path_run, \
+    zmap_run
 
 MM = 1e-3
 
@@ -62,16 +63,50 @@ def test_a_member_turning_back_short_of_the_reversal_is_refound_after_it():
     assert seg == 0 and s == pytest.approx(1.87 * MM, abs=1e-15) and d == pytest.approx(0.0, abs=1e-15)
 
 
-def test_the_cursor_never_jumps_over_a_station_with_material():
+def test_a_retracing_tool_is_refound_across_material_a_sideways_one_only_across_air():
+    # the move down (-z) retraces the cursor's segment (+z), 0.14 mm short of the reversal (<= REVERSAL_LAG):
+    # re-found after it even where the stretch holds material (the servo never reaches it)
     for station in (186, 200, 215):  # the cursor's, the reversal's, the landing point's station
         count = np.zeros(351, dtype=np.int64)
         count[station] = 1
-        seg, s, d = _motion(0.85 * MM, count)
-        assert seg == 0 and s == pytest.approx(1.86 * MM, abs=1e-15) and d == pytest.approx(0.01 * MM)
-    # material beyond the landing point's neighbourhood (station 219 = floor(2.15 / 0.01) + 4) does not hold it
+        assert _motion(0.85 * MM, count)[:2] == (1, pytest.approx(2.15 * MM, abs=1e-15))
+    # from 0.24 mm short of the reversal, a move 0.02 mm sideways and 0.01 mm down (cosine with the segment
+    # -0.45 > -RETRACE_COS): not a retrace; the return leg's point at z = 0.75 mm (s = 2.25 mm, beyond the forward
+    # window 2 x 0.022 + 0.1 mm) is 0.02 mm away, nearer than the cursor (sqrt(0.02^2 + 0.01^2) mm): taken
+    # across air only
+    def sideways(count):
+        st = _state(0.0, 0.0, 0.76 * MM, 1.76 * MM, 0, 0.0)
+        return pk.member_motion(st, 0, 0.02 * MM, 0.0, 0.75 * MM, MARGIN, VERTS, VS, DS, count)[6:]
+    seg, s, d = sideways(np.zeros(351, dtype=np.int64))
+    assert seg == 1 and s == pytest.approx(2.25 * MM, abs=1e-15) and d == pytest.approx(0.02 * MM, abs=1e-15)
+    for station in (176, 200, 225):  # the cursor's, the reversal's, the landing point's station
+        count = np.zeros(351, dtype=np.int64)
+        count[station] = 1
+        seg, s, d = sideways(count)
+        assert seg == 0 and s == pytest.approx(1.76 * MM, abs=1e-15)
+        assert d == pytest.approx(math.hypot(0.02, 0.01) * MM, abs=1e-15)
+    # material beyond the landing point's neighbourhood (station 229 = floor(2.25 / 0.01) + 4) does not hold it
     count = np.zeros(351, dtype=np.int64)
-    count[219:] = 1
-    assert _motion(0.85 * MM, count)[:2] == (1, pytest.approx(2.15 * MM, abs=1e-15))
+    count[229:] = 1
+    assert sideways(count)[:2] == (1, pytest.approx(2.25 * MM, abs=1e-15))
+
+
+def test_a_retrace_farther_than_the_servo_lag_from_the_reversal_jumps_only_across_air():
+    # up from Z-5 to Z1 (s 0..6 mm), back down to Z-3 (s 6..10 mm); the tool turns back 2.5 mm short of the
+    # reversal (> REVERSAL_LAG = 2 mm: not a servo's shortfall) and moves down 0.01 mm to Z-1.51
+    verts = np.array([[0.0, 0.0, -5.0], [0.0, 0.0, 1.0], [0.0, 0.0, -3.0]]) * MM
+    vs = np.array([0.0, 6.0, 10.0]) * MM
+    assert pk.REVERSAL_LAG == pytest.approx(2.0 * MM)
+
+    def motion(count):
+        st = _state(0.0, 0.0, -1.5 * MM, 3.5 * MM, 0, 0.0)
+        return pk.member_motion(st, 0, 0.0, 0.0, -1.51 * MM, MARGIN, verts, vs, DS, count)[6:]
+    seg, s, d = motion(np.zeros(1001, dtype=np.int64))  # across air: s = 6 + 2.51 mm
+    assert seg == 1 and s == pytest.approx(8.51 * MM, abs=1e-15) and d == pytest.approx(0.0, abs=1e-15)
+    count = np.zeros(1001, dtype=np.int64)
+    count[500] = 1  # material at Z0, 1 mm short of the reversal
+    seg, s, d = motion(count)
+    assert seg == 0 and s == pytest.approx(3.5 * MM, abs=1e-15) and d == pytest.approx(0.01 * MM, abs=1e-15)
 
 
 def test_no_reversal_ahead_no_jump():
@@ -83,15 +118,36 @@ def test_no_reversal_ahead_no_jump():
     assert out[6] == 0 and out[7] == pytest.approx(1.86 * MM, abs=1e-15) and out[8] == pytest.approx(0.01 * MM)
 
 
-def test_a_reversal_inside_material_is_not_skipped():
-    """A slot cut out and back on one line whose tool turns back 0.3 mm short of the end, in the material: the
-    stretch to skip holds material, so the cursor stays and the member fails off the path (as before)."""
+@pytest.mark.parametrize("short", [0.3e-3, 0.6e-3])
+def test_a_slot_cut_out_and_back_on_one_line_is_followed_the_way_back_has_no_load(short):
+    """A slot cut out and back on one line (the SolidCAM post's O5002: X50., X-50.) whose tool turns back 0.3 or
+    0.6 mm short of the end, in the material. Before: the stretch to skip held material, the cursor stayed and the
+    member failed off the path. Now the member is re-found on the way back: the first pass cuts a full slot,
+    peak Fc = Kt a fz sqrt(1 + Ke^2) (one tooth at 90 deg), the way back runs in the cut slot with no load, and
+    the run agrees with the Z-map mode (the independent model, where the member removes its own material)."""
     a, c = 2e-3, 5e-5
     x0, x_end = -R - 0.5e-3, 0.006
     verts = [[x0, 0.0, -a], [x_end, 0.0, -a], [x0, 0.0, -a]]
-    pos = along([[x0, 0.0, -a], [x_end - 0.3e-3, 0.0, -a], [x0, 0.0, -a]], c / TOOTH_PERIOD * H)
-    with pytest.raises(CuttingError, match="path_tolerance"):
-        path_run(params(), verts, pos, OMEGA)
+    pos = along([[x0, 0.0, -a], [x_end - short, 0.0, -a], [x0, 0.0, -a]], c / TOOTH_PERIOD * H)
+    q, _ = path_run(params(), verts, pos, OMEGA)
+    x = pos[1:, 0, 0]
+    turn = int(np.argmax(x))  # the step that reaches the turning point
+    hand = KT * a * c * math.sqrt(1 + KE * KE)  # 276.7 N
+    out = q["fc_peak"][:turn + 1, 0]
+    assert out.max() == pytest.approx(hand, rel=1e-3)
+    # the way back: the periphery grazes the slot's walls (interval ends at the tangency, chips of 1e-12 m)
+    assert q["fc_peak"][turn + 2:, 0].max() <= 1e-6 * hand
+    assert q["mrr"][turn + 2:, 0].max() <= 1e-6 * q["mrr"][:turn + 1, 0].max()
+    z = zmap_run(params(), pos, OMEGA)
+    # the two steps after the turn: the chip (the move over the last tooth period, 3.8 ms) still points forward,
+    # so in the Z-map the teeth still touch the member's own slot end; the path mode reads the way back (cut to
+    # the programmed end): no load. The net move over the tooth period one step after the turn is at most
+    # (2.8 - 1) / 3.8 = 0.47 of a tooth's feed, so that load stays below half the slot's (the largest load holds)
+    after = slice(turn + 1, turn + 3)
+    assert z["fc_peak"][after, 0].max() < 0.5 * hand
+    for name in z:
+        z[name][after] = q[name][after]
+    assert_modes_agree(z, q)
 
 
 PROGRAM = """G21 G17 G90 G94 G54

@@ -17,8 +17,10 @@ Per member and step ``[t, t + h]``:
    reversal (:func:`across_reversal`): on the stretch after the first segment
    ahead that runs against the cursor's, within :data:`REVERSAL_REACH`. The
    cursor jumps only to a strictly nearer point, and only when no station from
-   the cursor to that point holds material (:func:`no_material`), so it never
-   passes over a stretch where the reference pass removed material.
+   the cursor to that point holds material (:func:`no_material`), or when the
+   tool's move retraces the cursor's segment within :data:`REVERSAL_LAG` of
+   the reversal (a slot cut out and back on one line: the stretch skipped is
+   the one the servo did not reach).
    The chip is the tool-centre displacement over the last tooth period (the
    member's chip history in its state rows, :func:`.kernel.chord_feed`).
 2. **Substeps** — as the Z-map mode, per member: the spindle turns at most
@@ -80,6 +82,13 @@ TIE_TOL = 1e-9
 #: cursor for :func:`across_reversal`, m: the servo lag at a reversal (0.14-0.83 mm at the R plane of the
 #: tested G83 pecks) with room to spare; it bounds the scan, the material check bounds the jump.
 REVERSAL_REACH = 0.01
+#: Farthest short of a reversal inside material that a member may turn back and still be re-found after it, m:
+#: the servo's shortfall at a reversal (0.59 mm at the out-and-back slot of the SolidCAM post's O5002 in the
+#: optimiser's members) with room to spare. Beyond it only a jump over stations without material is taken.
+REVERSAL_LAG = 0.002
+#: A step's move retraces the cursor's segment when its cosine with that segment is below minus this (within
+#: 60 degrees of straight back).
+RETRACE_COS = 0.5
 
 #: Per-member error kinds written to ``status`` by :func:`path_step`: too many substeps, off the table's
 #: path, fed into material with a stalled spindle (:func:`.kernel.stalled_cut`, a crash).
@@ -547,7 +556,7 @@ def no_material(s_a: float, s_b: float, ds: float, count: np.ndarray) -> bool:
 @njit_borrowed
 def across_reversal(
     px: float, py: float, pz: float, seg0: int, s0: float, d0: float, reach: float, verts: np.ndarray,
-    vs: np.ndarray, ds: float, count: np.ndarray,
+    vs: np.ndarray, ds: float, count: np.ndarray, mx: float, my: float, mz: float,
 ) -> tuple[int, float, float]:
     """The member at ``p`` [m] re-found after the next reversal of the path, or ``seg = -1``.
 
@@ -559,12 +568,18 @@ def across_reversal(
     up to ``s_rev + (s_rev - s0) + d0 + reach`` (the mirror image of the cursor plus the window ``reach``
     [m]), where the nearest point is taken (:func:`locate`).
 
+    ``(mx, my, mz)`` [m] is the tool's move over the step.
+
     Returns
     -------
     seg, s, dist : int, float, float
-        That point, when it is nearer than ``d0`` by more than :data:`TIE_TOL` and no station from ``s0`` to
-        it holds material (:func:`no_material`: the jump skips nothing the reference pass cut); otherwise
-        ``(-1, s0, d0)``, the forward projection stands.
+        That point, when it is nearer than ``d0`` by more than :data:`TIE_TOL` and either no station from
+        ``s0`` to it holds material (:func:`no_material`: the jump skips nothing the reference pass cut; the
+        pecks of G83 at R), or the tool turned back in material within :data:`REVERSAL_LAG` of the reversal
+        (the reversal starts at most that far ahead of ``s0`` and the move retraces the cursor's segment,
+        :data:`RETRACE_COS`: a slot cut out and back on one line). The stretch skipped then is the one the
+        servo did not reach: the tool never cuts it, and the way back runs in the reference pass's cut.
+        Otherwise ``(-1, s0, d0)``, the forward projection stands.
     """
     nv = verts.shape[0]
     if seg0 >= nv - 1:
@@ -582,7 +597,14 @@ def across_reversal(
         return -1, s0, d0
     s_rev = vs[k]
     seg, s, d = locate(px, py, pz, k, s_rev, (s_rev - s0) + d0 + reach, verts, vs)
-    if d < d0 - TIE_TOL and no_material(s0, s, ds, count):
+    if not d < d0 - TIE_TOL:
+        return -1, s0, d0
+    if s_rev - s0 <= REVERSAL_LAG:
+        along_t = mx * tx + my * ty + mz * tz
+        size = math.sqrt((mx * mx + my * my + mz * mz) * (tx * tx + ty * ty + tz * tz))
+        if along_t < -RETRACE_COS * size:  # turned back short of the reversal: the stretch ahead is never cut
+            return seg, s, d
+    if no_material(s0, s, ds, count):
         return seg, s, d
     return -1, s0, d0
 
@@ -617,7 +639,7 @@ def member_motion(
     seg0 = int(st[ST_SEG, m])
     seg, s1, dist = locate(x1, y1, z1, seg0, s0, reach, verts, vs)
     if s1 - s0 <= TIE_TOL and dist > st[ST_DIST, m] + TIE_TOL:  # no progress, moving away: a reversal ahead?
-        seg_r, s_r, d_r = across_reversal(x1, y1, z1, seg, s0, dist, reach, verts, vs, ds, count)
+        seg_r, s_r, d_r = across_reversal(x1, y1, z1, seg, s0, dist, reach, verts, vs, ds, count, ddx, ddy, ddz)
         if seg_r >= 0:
             seg, s1, dist = seg_r, s_r, d_r
     return z0, ddx, ddy, ddz, move, s0, seg, s1, dist

@@ -23,6 +23,7 @@ simulated time, however slow its slowest member would be.
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -197,6 +198,17 @@ def per_line(cutting_lines: np.ndarray, executing: np.ndarray, weight: np.ndarra
     return time_s, max_load
 
 
+def _failure_line(ctx: ProblemContext, t: np.ndarray, lines: np.ndarray, why: str) -> str:
+    """``"<program>:<line>: "`` of the line a member executed when it failed at the time ``why`` names
+    (``"... at t = 1.234000 s: ..."``, the master's member failures), or ``""`` when unknown."""
+    found = re.search(r"at t = ([0-9.eE+-]+) s", why)
+    if found is None:
+        return ""
+    n = int(np.searchsorted(t, float(found.group(1)), side="right"))
+    known = np.flatnonzero(np.isfinite(lines[:n]) & (lines[:n] > 0))
+    return f"{ctx.case.program}:{int(lines[known[-1]])}: " if known.size else ""
+
+
 def figures(ctx: ProblemContext, run, batch: int) -> Evaluation:
     """Evaluation of a finished batched run (see the module docstring)."""
     rec = run.recording
@@ -226,7 +238,7 @@ def figures(ctx: ProblemContext, run, batch: int) -> Evaluation:
             if "time limit" in why or (run.success and not failed[b]):
                 reasons.append(f"not done within the cycle-time cut-off of {ctx.time_limit_s:g} s")
             else:
-                reasons.append(f"simulation failed: {why}")
+                reasons.append(f"simulation failed: {_failure_line(ctx, t, lines[:, b], why)}{why}")
             continue
         tp = float(stopped[b] - t[0])
         n = int(np.searchsorted(t, stopped[b], side="right"))

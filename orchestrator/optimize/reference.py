@@ -78,6 +78,26 @@ def _per_revolution_lines(blocks, lines: set[int], file: str) -> frozenset[int]:
     return frozenset(line for line, m in modes.items() if m == {True})
 
 
+def member_off_path(cache: dict) -> str:
+    """The first reason in an evaluation cache (``{genes: Evaluation}``) that a member lost the path-mode
+    cutting load's path (:data:`OFF_PATH`), naming the line; ``""`` when none did."""
+    for ev in cache.values():
+        for reason in ev.reason:
+            if OFF_PATH in reason:
+                return reason
+    return ""
+
+
+def search_on_zmap(ctx: ProblemContext, reason: str) -> None:
+    """Move the search of ``ctx`` to the Z-map cutting model because a member of the search lost the path
+    mode's path while the original followed it (``reason``: that member's failure, naming the line); the
+    note goes to ``report.json``."""
+    ctx.engagement = None
+    ctx.search_model_note = (f"a member of the search loses the path-mode cutting load's path although the "
+                             f"original program follows it ({reason.removeprefix('simulation failed: ')}): the "
+                             "search ran on the Z-map cutting model (slower)")
+
+
 def build_reference(case: Case, program_text: str | None = None, ranges: Ranges | None = None,
                     load_limit_N: float = 60.0, min_removed_mm3: float = MIN_REMOVED_MM3, step: float = 1e-3,
                     time_limit_s: float = 3600.0, max_cycle_factor: float = MAX_CYCLE_FACTOR,

@@ -67,7 +67,7 @@ from .problem import (
     METHODS, OBJECTIVES, GridRepair, LineProblem, LinewiseCrossover, LinewiseMutation, SeededSampling,
     objectives,
 )
-from .reference import MAX_CYCLE_FACTOR, MIN_REMOVED_MM3, Reference, build_reference
+from .reference import MAX_CYCLE_FACTOR, MIN_REMOVED_MM3, Reference, build_reference, member_off_path, search_on_zmap
 from .tidy import TidyResult, tidy_genes
 
 
@@ -541,6 +541,21 @@ def optimize(program: str | Path | None = None, case: str | Path | Case | None =
                 row["fitness_limit_reached"] = bool(algorithm.pop.get("F")[:, 0].min() <= settings.fitness_limit)
                 stop_early = row["fitness_limit_reached"]
             history.append(row)
+            lost = member_off_path(evaluator.cache) if ctx.engagement is not None else ""
+            if lost:  # the path mode cannot follow every member (the original it does): restart on the Z-map
+                search_on_zmap(ctx, lost)
+                if ref_file is not None:
+                    write_pickle(ref_file, reference)  # a resumed job searches on the Z-map model as well
+                    for old in ref_file.parent.glob("gen_*.pkl"):  # the path-mode generations: not resumed
+                        old.unlink()
+                evaluator = CachedEvaluator(ctx, backend)
+                problem = LineProblem(ctx, settings.objective, settings.method, settings.penalty_weight)
+                problem.evaluator = evaluator
+                algorithm = make_algorithm(problem, settings)
+                algorithm.setup(problem, termination=MaximumGenerationTermination(settings.gens),
+                                seed=settings.seed, verbose=False)
+                history, generation, stop_early = [], 0, False
+                continue
             if out_path is not None:
                 write_checkpoint(out_path, generation, {
                     "identity": settings.identity(), "fingerprint": ctx.fingerprint(), "algorithm": algorithm,
