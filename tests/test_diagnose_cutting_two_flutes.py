@@ -96,7 +96,18 @@ def test_two_flute_runout_is_refitted(tmp_path):
     expected = observable_runout(truth["runout"], 2)["eccentricity_um"]
     assert expected == pytest.approx(10.0)
     assert d.effects[0]["parameters"]["eccentricity_um"] == pytest.approx(expected, rel=0.03)
-    assert d.unexplained == [], d.unexplained
+    # The side pass ends in the material (Y8), and the rapid after it now waits until the axes are in position,
+    # so the tool creeps the last 0.1 mm with the feed decaying towards zero. With a 10 um runout of two
+    # flutes one tooth cuts the surface it left itself one revolution (two tooth periods) earlier. The truth
+    # takes that chip from the tool's positions one revolution apart; the twin takes it as twice the last tooth
+    # period's chord (a constant feed over the revolution). While decelerating the first is larger: at
+    # 5.3922 s, 7.9243 - 7.8740 = 0.0503 mm against 2 x (7.9243 - 7.9026) = 0.0434 mm, 16 % more, and the
+    # recorded peak is 124.1 N against the twin's 108.2 N (15 %). That is physics the twin leaves out, and the
+    # diagnosis rightly reports it as unexplained, there and nowhere else.
+    for u in d.unexplained:
+        assert u["channels"] == ["fy_N"] and set(u["where"]["lines"]) <= {15, 16}, d.unexplained
+        t0, t1 = u["where"]["time_s"][0]
+        assert t1 - t0 < 0.1 and u["rms"] < 0.05 * 222.1, d.unexplained   # under 5 % of the pass's peak
 
 
 def test_observable_runout_of_two_teeth():
