@@ -29,7 +29,7 @@ def _cmd_optimize(args: argparse.Namespace) -> int:
         spindle_range=args.spindle_range, pop=args.pop, gens=args.gens, seed=args.seed, workers=args.workers,
         dask=args.dask, resume=args.resume, penalty_weight=args.penalty_weight, fitness_limit=args.fitness_limit,
         step=args.step * 1e-3, max_cycle_factor=args.max_cycle_factor, check_front=not args.no_front_check,
-        tidy=not args.no_tidy,
+        tidy=not args.no_tidy, push=not args.no_push,
         feed_step=args.feed_step, spindle_step=args.spindle_step, feed_step_in_per_min=args.feed_step_in_per_min,
         feed_step_mm_per_rev=args.feed_step_mm_per_rev, feed_step_in_per_rev=args.feed_step_in_per_rev,
     )
@@ -85,6 +85,8 @@ def add_parsers(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--no-tidy", action="store_true",
                    help="time/cost: keep the search's best as it is (no post-pass copying feeds between lines "
                         "that cut alike where that costs nothing)")
+    p.add_argument("--no-push", action="store_true",
+                   help="time/cost: no post-pass raising feeds toward the load limit by the chip-load rule")
     p.add_argument("--out", required=True, help="output folder (optimized.nc, report.json, report.png, checkpoints/)")
     p.set_defaults(func=_cmd_optimize)
 

@@ -11,11 +11,18 @@ Paper's reference (``method="paper"``)
     ``fitness_limit``). Values are snapped to the same grid so that both
     methods write the same kind of program.
 
+Onto the load limit (``push``, time and cost with the default method)
+    After the search, :func:`.push.push_genes` raises the best program's
+    feeds toward the load limit by the chip-load rule (``F · limit / load``,
+    rounded down to the grid), in a few batched rounds, keeping only
+    feasible programs that are not worse.
 Equal feeds on equal cuts (``tidy``, time and cost with the default method)
-    After the search, :func:`.tidy.tidy_genes` copies feeds between
+    Then :func:`.tidy.tidy_genes` copies feeds between
     neighbouring cutting lines and lines that cut alike wherever the program
     stays feasible and its objective is not worse; the result is the first
-    candidate below.
+    candidate below. When the push ran, the other candidates are every
+    feasible program evaluated (search and passes), best first, so a pushed
+    program that fails the Z-map check below falls back to the next pushed one.
 
 The chosen program is re-simulated on its own (B = 1, rewritten text) with
 the Z-map cutting model (material removed from the stock, not the search's
@@ -68,6 +75,7 @@ from .problem import (
     objectives,
 )
 from .reference import MAX_CYCLE_FACTOR, MIN_REMOVED_MM3, Reference, build_reference, member_off_path, search_on_zmap
+from .push import PushResult, push_genes
 from .tidy import TidyResult, tidy_genes
 
 
@@ -129,6 +137,11 @@ class OptimizeSettings:
         neighbouring cutting lines and lines that cut alike wherever the program stays feasible and its
         objective is not worse (:func:`.tidy.tidy_genes`: equal feeds on equal cuts). Ignored for ``pareto``
         and the paper's method.
+    push : bool
+        [--no-push] ``time`` and ``cost`` with the default method: after the search and before the equal-feeds
+        pass, raise the best program's feeds toward the load limit by the chip-load rule wherever the program
+        stays feasible and its objective is not worse (:func:`.push.push_genes`: onto the load limit). Ignored
+        for ``pareto`` and the paper's method.
     """
 
     objective: str = "time"
@@ -157,6 +170,7 @@ class OptimizeSettings:
     plot: bool = True
     check_front: bool = True
     tidy: bool = True
+    push: bool = True
 
     def __post_init__(self) -> None:
         if self.objective not in OBJECTIVES:
@@ -175,6 +189,8 @@ class OptimizeSettings:
             raise OptimizeError(f"check_front must be True or False, got {self.check_front!r}")
         if not isinstance(self.tidy, (bool, np.bool_)):
             raise OptimizeError(f"tidy must be True or False, got {self.tidy!r}")
+        if not isinstance(self.push, (bool, np.bool_)):
+            raise OptimizeError(f"push must be True or False, got {self.push!r}")
 
     def ranges(self) -> Ranges:
         """The search ranges and grid."""
@@ -231,6 +247,10 @@ class OptimizeResult:
     tidy : dict or None
         The equal-feeds post-pass (``settings.tidy``): objective before and after (s or KRW, the search's
         path-mode figures), rounds and the accepted copies (:class:`.tidy.TidyResult`); None when it did not run.
+    push : dict or None
+        The onto-the-load-limit post-pass (``settings.push``): objective before and after (s or KRW, path-mode
+        figures of the search), rounds, the accepted raises (:class:`.push.PushResult`) and ``evaluations``
+        (distinct simulations it added); None when it did not run.
     """
 
     X: dict[str, float]
@@ -246,6 +266,7 @@ class OptimizeResult:
     recording_before: Any = None
     recording_after: Any = None
     tidy: dict[str, Any] | None = None
+    push: dict[str, Any] | None = None
     tool_changes: list[dict[str, int]] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
 
@@ -363,18 +384,43 @@ def _candidates(ctx, cache: dict, settings: OptimizeSettings) -> tuple[list[tupl
     return [keys[i] for i in knee] + [keys[i] for i in rest], front
 
 
-def _tidy(ctx, evaluator: CachedEvaluator, candidates: list[tuple], settings: OptimizeSettings
-          ) -> TidyResult | None:
-    """The equal-feeds post-pass on the best feasible individual (time and cost, default method), or None."""
-    if not settings.tidy or settings.method != "default" or settings.objective == "pareto" or not candidates:
-        return None
-    L = ctx.n_lines
-    best = np.array(candidates[0], float)
-
+def _score(ctx, settings: OptimizeSettings) -> Callable[[Evaluation], np.ndarray]:
+    """Objective of each member of an Evaluation (s or KRW, lower is better) as the search ranks it."""
     def score(ev: Evaluation) -> np.ndarray:
         return objectives(ev, settings.objective, settings.method, ctx.load_limit_N, settings.penalty_weight)[0][:, 0]
 
-    return tidy_genes(ctx, evaluator, score, best[:L], best[L:], max_candidates=max(8, int(settings.pop)))
+    return score
+
+
+def _single_objective_pass(settings: OptimizeSettings, candidates: list[tuple]) -> bool:
+    """The post-passes run on time and cost with the default method, when the search found a feasible program."""
+    return settings.method == "default" and settings.objective != "pareto" and bool(candidates)
+
+
+def _push(ctx, evaluator: CachedEvaluator, candidates: list[tuple], settings: OptimizeSettings
+          ) -> PushResult | None:
+    """The onto-the-load-limit post-pass on the best feasible individual (time and cost, default method), or
+    None; ``evaluations`` counts the distinct simulations it added."""
+    if not settings.push or not _single_objective_pass(settings, candidates):
+        return None
+    L = ctx.n_lines
+    best = np.array(candidates[0], float)
+    before = evaluator.evaluations
+    result = push_genes(ctx, evaluator, _score(ctx, settings), best[:L], best[L:],
+                        max_candidates=max(8, int(settings.pop)))
+    result.evaluations = evaluator.evaluations - before
+    return result
+
+
+def _tidy(ctx, evaluator: CachedEvaluator, candidates: list[tuple], settings: OptimizeSettings
+          ) -> TidyResult | None:
+    """The equal-feeds post-pass on the best feasible individual (time and cost, default method), or None."""
+    if not settings.tidy or not _single_objective_pass(settings, candidates):
+        return None
+    L = ctx.n_lines
+    best = np.array(candidates[0], float)
+    return tidy_genes(ctx, evaluator, _score(ctx, settings), best[:L], best[L:],
+                      max_candidates=max(8, int(settings.pop)))
 
 
 def _resimulate(ctx, text: str):
@@ -567,9 +613,16 @@ def optimize(program: str | Path | None = None, case: str | Path | Case | None =
         bar.close()
         L = ctx.n_lines
         candidates, front = _candidates(ctx, evaluator.cache, settings)
+        pushed = _push(ctx, evaluator, candidates, settings)
+        if pushed is not None:
+            key = tuple(float(v) for v in np.concatenate([pushed.feeds, pushed.spindles]))
+            candidates = [key] + [k for k in candidates if k != key]
         tidied = _tidy(ctx, evaluator, candidates, settings)
-        if tidied is not None:
-            key = tuple(float(v) for v in np.concatenate([tidied.feeds, tidied.spindles]))
+        if pushed is not None:  # every feasible program evaluated, best first: the pushed ones lead the fallbacks
+            candidates, _ = _candidates(ctx, evaluator.cache, settings)
+        if tidied is not None or pushed is not None:
+            first = tidied if tidied is not None else pushed
+            key = tuple(float(v) for v in np.concatenate([first.feeds, first.spindles]))
             candidates = [key] + [k for k in candidates if k != key]
     finally:
         backend.close()
@@ -641,6 +694,7 @@ def optimize(program: str | Path | None = None, case: str | Path | Case | None =
         wall_time_s=wall_before + time.perf_counter() - t_start,
         recording_before=reference.recording, recording_after=rec_after,
         tidy=None if tidied is None else tidied.as_dict(),
+        push=None if pushed is None else pushed.as_dict(),
     )
     changes = [(b.line, b.tool) for b in ctx.interpreted().blocks if isinstance(b, ToolChange)]
     result.tool_changes, tool_text = tool_notes(changes, True, ctx.case.tool.diameter_mm, ctx.case.tool.flutes)
