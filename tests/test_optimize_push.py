@@ -33,8 +33,10 @@ def _context(L: int, per_rev: frozenset[int] = frozenset()) -> ProblemContext:
 class Analytic:
     """Evaluator of the model in the module docstring, on the feed in effect; counts the members it evaluates."""
 
-    def __init__(self, ctx: ProblemContext, k: list[float], length_mm: list[float], p: float = 1.0) -> None:
+    def __init__(self, ctx: ProblemContext, k: list[float], length_mm: list[float], p: float = 1.0,
+                 floor_N: list[float] | None = None) -> None:
         self.ctx, self.k, self.length, self.p = ctx, np.asarray(k, float), np.asarray(length_mm, float), p
+        self.floor = np.zeros(len(k)) if floor_N is None else np.asarray(floor_N, float)
         self.members = 0
 
     def __call__(self, feeds: np.ndarray, spindles: np.ndarray) -> Evaluation:
@@ -44,7 +46,7 @@ class Analytic:
         eff = np.array([[feed_in_effect(self.ctx, i, F[b, i], S[b, i]) for i in range(L)] for b in range(B)])
         line_t = 60.0 * self.length / eff
         t = np.ceil(line_t.sum(axis=1) * 1000.0 - 1e-9) / 1000.0
-        line_load = self.k * (eff / S) ** self.p
+        line_load = np.maximum(self.k * (eff / S) ** self.p, self.floor)
         load = line_load.max(axis=1)
         ok = load <= LIMIT_N
         return Evaluation(t, t.copy(), load, np.zeros(B), line_t, line_load, np.ones(B, bool), ok,
@@ -93,6 +95,17 @@ def test_several_lines_are_raised_together_and_the_evaluations_stay_bounded():
     r = push_genes(ctx, ev, _time, np.full(4, 100.0), np.full(4, 6000.0), max_candidates=8)
     assert r.feeds.tolist() == [300.0, 240.0, 200.0, 150.0]
     assert ev.members <= 1 + 4 * (8 + 1)
+
+
+def test_a_line_whose_load_does_not_follow_its_feed_goes_to_the_top_of_the_range():
+    """The line's largest load is 57 N whatever its feed (set by the line before it; its own chip loads
+    20 N at F300): the rule asks 300 * 60 / 57 = 315.8 -> 310, the load stays 57 N, and the secant through
+    (300, 57) and (310, 57) then sends it to the top, F500 (own chip 33.3 N)."""
+    ctx = _context(1)
+    ev = Analytic(ctx, [20.0 * 6000.0 / 300.0], [20.0], floor_N=[57.0])
+    r = push_genes(ctx, ev, _time, np.array([300.0]), np.array([6000.0]))
+    assert [m["feed_after_mm_per_min"] for m in r.moves] == [310.0, 500.0]
+    assert r.feeds.tolist() == [500.0] and r.rounds == 2
 
 
 def test_the_pass_never_worsens_the_objective_and_leaves_an_infeasible_start_alone():

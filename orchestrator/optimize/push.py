@@ -14,7 +14,10 @@ search's job (its mutations scale F and S together), not this pass's.
 Rounds
     Each round proposes, from the current program's per-line loads, in ONE batched call of at most
     ``max_candidates`` members: every eligible line raised to its target at once, each line alone at its
-    target, then the same at half-way (the bisection toward the limit). A line whose raise overloads the
+    target, then the same at half-way (the bisection toward the limit). A line raised before follows the
+    secant through its last two (feed, load) points instead: the same target when its load rose with its feed,
+    the top of the range when it did not (its largest load is then set elsewhere, e.g. by the servo lag's tail
+    of the line before it). A line whose raise overloads the
     tool (its own load over the limit, or any overload when it was raised alone) gets a cap: its next target
     stays a grid step below the lowest feed known to overload. The lines raised alone that stayed feasible
     and not worse are then combined (each at its highest such feed) and evaluated as one more member. The best
@@ -123,7 +126,8 @@ def top_feed(ctx: ProblemContext) -> float:
 
 
 def line_targets(ctx: ProblemContext, feeds: np.ndarray, spindles: np.ndarray, loads: np.ndarray,
-                 caps: np.ndarray) -> dict[int, tuple[float, float | None]]:
+                 caps: np.ndarray, previous: dict[int, tuple[float, float]] | None = None
+                 ) -> dict[int, tuple[float, float | None]]:
     """Target and half-way feed genes of every line that can move toward the load limit.
 
     Parameters
@@ -136,14 +140,19 @@ def line_targets(ctx: ProblemContext, feeds: np.ndarray, spindles: np.ndarray, l
         Largest load of each line in the current program, N.
     caps : ndarray, shape (L,)
         Lowest feed gene known to overload each line, mm/min (inf: none).
+    previous : dict, optional
+        ``{i: (feed in effect mm/min, load N)}`` of line ``i`` before its last kept raise (same spindle speed).
+        The rule then follows the secant through that point and the current one: a line whose load rose as
+        its feed (the chip-load rule's case) gets the same target, one whose load did not rise (its largest
+        load set by the line before it, e.g. the servo lag's tail of a cut at the limit) the top of the range.
 
     Returns
     -------
     dict
         ``{i: (target, half)}``: the largest grid feed whose feed in effect is at most the chip-load rule's
         ``F · limit / load`` (F the feed in effect now; on a G94 line the rule rounded down to the grid), at
-        most the top of the range and one step below the cap; ``half`` is the grid feed half-way from the current one (None when there is no
-        grid feed strictly between). Lines with no load (<= :data:`MIN_LOAD_N`), at or over the limit, at the
+        most the top of the range and one step below the cap; ``half`` is the grid feed half-way from the
+        current one (None when there is no grid feed strictly between). Lines with no load (<= :data:`MIN_LOAD_N`), at or over the limit, at the
         top of the range, or whose target would not raise the feed in effect, are left out.
     """
     step = ctx.feed_step
@@ -155,7 +164,10 @@ def line_targets(ctx: ProblemContext, feeds: np.ndarray, spindles: np.ndarray, l
             continue
         now = feed_in_effect(ctx, i, f, s)
         rule = now * ctx.load_limit_N / load
-        g = min(math.ceil(rule / step - 1e-9) * step, top, float(caps[i]) - step)
+        if previous is not None and i in previous and previous[i][0] < now:
+            f0, l0 = previous[i]
+            rule = now + (ctx.load_limit_N - load) * (now - f0) / (load - l0) if load > l0 else math.inf
+        g = min(math.ceil(min(rule, top) / step - 1e-9) * step, top, float(caps[i]) - step)
         while g > f and feed_in_effect(ctx, i, g, s) > rule * (1.0 + 1e-12):  # G94: the grid feed below
             g -= step
         if g <= f or feed_in_effect(ctx, i, g, s) <= now:
@@ -220,9 +232,10 @@ def push_genes(ctx: ProblemContext, evaluate: Callable[[np.ndarray, np.ndarray],
         return result
     loads = np.asarray(ev.line_max_load_N[0], float)
     caps = np.full(ctx.n_lines, np.inf)
+    previous: dict[int, tuple[float, float]] = {}
     limit = ctx.load_limit_N
     for round_no in range(1, max_rounds + 1):
-        targets = line_targets(ctx, f, s, loads, caps)
+        targets = line_targets(ctx, f, s, loads, caps, previous)
         if not targets:
             break
         gain = np.asarray(ev.line_time_s[0], float) * (1.0 - f / np.maximum(
@@ -271,6 +284,7 @@ def push_genes(ctx: ProblemContext, evaluate: Callable[[np.ndarray, np.ndarray],
         new_f, new_ev, new_score = min(members, key=lambda m: (m[2], -float(np.sum(m[0]))))
         new_loads = np.asarray(new_ev.line_max_load_N[0], float)
         for i in np.flatnonzero(new_f != f).tolist():
+            previous[i] = (feed_in_effect(ctx, i, f[i], s[i]), float(loads[i]))
             result.moves.append({"line": int(ctx.lines[i]), "round": round_no,
                                  "feed_before_mm_per_min": float(f[i]), "feed_after_mm_per_min": float(new_f[i]),
                                  "spindle_rpm": float(s[i]), "load_before_N": float(loads[i]),
