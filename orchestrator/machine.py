@@ -177,7 +177,7 @@ VALUE_RULES: dict[tuple[str, str], tuple[Any, str]] = {
                                    "depreciation_KRW_per_s")},
     **{("cost", k): _GT0 for k in ("taylor_n", "taylor_C")},
 }
-#: Shortest internal drive step (s) a machine file may imply (:func:`fmus_src.servo.drive.stribeck_step_cap`):
+#: Shortest internal drive step (s) a machine file may imply (:func:`fmus_src.servo.step_cap.stribeck_step_cap`):
 #: 25 000 RK4 substeps per 250 us velocity-loop tick. Below it a run takes hours of wall time per second.
 MIN_DRIVE_STEP_S = 1e-8
 
@@ -437,7 +437,7 @@ def _check_relations(path: Path, text: str, values: dict[str, Any]) -> None:
             raise MachineFileError(
                 f"{path}:{_line_of(text, 'servo', 'position_loop_period_ms')}: [servo] position_loop_period_ms = "
                 f"{tp!r} must be a whole multiple (1, 2, ...) of velocity_loop_period_ms = {tv!r}")
-    from fmus_src.servo.drive import stribeck_step_cap
+    from fmus_src.servo.step_cap import stribeck_step_cap
     from fmus_src.servo.friction import StribeckParameters
 
     for a in AXES:

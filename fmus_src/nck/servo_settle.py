@@ -22,7 +22,6 @@ import math
 from typing import Sequence
 
 import numpy as np
-from scipy.signal import lfilter
 
 
 def _decay_periods(error: float, width: float, a: float, rate: float) -> int:
@@ -61,6 +60,8 @@ def servo_in_position(path: np.ndarray, target: np.ndarray, gains: Sequence[floa
         First row index k at which every axis's deviation ``|p - y[k]|`` is within ``width`` and stays so (it may
         lie beyond the last row).
     """
+    from scipy.signal import lfilter  # imported on first use: importing the planner need not pay ~1 s for scipy.signal
+
     m = path.shape[0]
     if m == 0:
         return 0
