@@ -23,6 +23,8 @@ from typing import Sequence
 
 import numpy as np
 
+from .errors import NCParameterError
+
 
 def _decay_periods(error: float, width: float, a: float, rate: float) -> int:
     """Fewest periods ``j >= 0`` with ``error * a**j <= width`` (``rate = Kv Ts = -ln a``)."""
@@ -59,6 +61,11 @@ def servo_in_position(path: np.ndarray, target: np.ndarray, gains: Sequence[floa
     int
         First row index k at which every axis's deviation ``|p - y[k]|`` is within ``width`` and stays so (it may
         lie beyond the last row).
+
+    Raises
+    ------
+    NCParameterError
+        When ``exp(-Kv Ts)`` rounds to 1 on an axis (the deviation would never decay).
     """
     from scipy.signal import lfilter  # imported on first use: importing the planner need not pay ~1 s for scipy.signal
 
@@ -71,6 +78,10 @@ def servo_in_position(path: np.ndarray, target: np.ndarray, gains: Sequence[floa
     for ax in range(3):
         rate = float(gains[ax]) * period
         a = math.exp(-rate)
+        if not (math.isfinite(rate) and a < 1.0):  # a = 1: the deviation would never decay (endless count)
+            raise NCParameterError(f"in-position model: position loop gain {gains[ax]!r} 1/s x period {period!r} s "
+                                   f"of axis {'XYZ'[ax]} gives no decay; expected Kv x Ts > 1.2e-16 "
+                                   "(exp(-Kv Ts) < 1 in floating point)")
         y = lfilter([0.0, 1.0 - a], [1.0, -a], rel[:, ax])  # y[0] = 0: the servo at rest on the move's start
         err = np.abs(end[ax] - y)
         out = np.nonzero(err > width)[0]
