@@ -139,8 +139,9 @@ def prune_cache_folders(root: Path, in_use: str, *, keep: int = KEEP_NEWEST, max
 
     "Used" is a folder's modification time, which :func:`open_cache_folder` refreshes at every process's first
     use. The folder ``in_use`` is never deleted. Safe against concurrent processes: a folder is first renamed to
-    a hidden name (atomic; one that vanished or was taken by another process meanwhile is skipped), then removed;
-    errors leave files behind and are logged at debug level, never raised.
+    a hidden name (atomic; one that vanished or was taken by another process meanwhile is skipped), then removed
+    (as is any such hidden folder a pruner left when it died); errors leave files behind and are logged at debug
+    level, never raised.
 
     Parameters
     ----------
@@ -182,6 +183,8 @@ def prune_cache_folders(root: Path, in_use: str, *, keep: int = KEEP_NEWEST, max
             continue
         shutil.rmtree(trash, onerror=_ignore_vanished)
         deleted.append(folder)
+    for trash in root.glob(f".{PACKAGE}-*.deleting-*"):  # left by a pruner that died while removing
+        shutil.rmtree(trash, onerror=_ignore_vanished)
     return deleted
 
 

@@ -168,6 +168,8 @@ def test_prune_deletes_folders_unused_for_30_days_beyond_the_newest_three(tmp_pa
     ages = {"fmus_src-new": 0.0, "fmus_src-a": 10.0, "fmus_src-b": 40.0, "fmus_src-c": 50.0, "fmus_src-d": 29.0,
             "fmus_src-e": 31.0, "other-x": 400.0}
     _folders(tmp_path, ages)
+    (tmp_path / ".fmus_src-f.deleting-123").mkdir()  # a pruner that died while removing f
+    (tmp_path / ".fmus_src-f.deleting-123" / "f.nbi").write_bytes(b"x")
     (tmp_path / "fmus_src-file").write_text("not a cache folder of ours, older than all")
     os.utime(tmp_path / "fmus_src-file", (NOW - 500 * DAY,) * 2)
     deleted = jit_locator.prune_cache_folders(tmp_path, "fmus_src-new", now=NOW)
