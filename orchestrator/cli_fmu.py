@@ -55,7 +55,7 @@ def _cmd_check_fmu(args: argparse.Namespace) -> int:
 
 def add_parsers(subparsers: argparse._SubParsersAction) -> None:
     """Add the ``build-fmus`` and ``check-fmu`` sub-commands to ``cnctwin``."""
-    from .fmu.build import DEFAULT_OUT_DIR
+    from .fmu.paths import DEFAULT_OUT_DIR
     from .fmu.roles import ROLES
 
     p = subparsers.add_parser("build-fmus", help="export every component as an FMI 2.0 co-simulation FMU")

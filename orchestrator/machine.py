@@ -28,7 +28,7 @@ import numpy as np
 from fmus_src.nck.cycles import BORING_SHIFTS
 from fmus_src.nck.decimal_input import DECIMAL_INPUTS
 from fmus_src.nck.m_aliases import ALIAS_TARGETS, alias_problem
-from fmus_src.nck.params import FILTER_KINDS
+from fmus_src.nck.params import FILTER_KINDS, MIN_POSITION_GAIN
 from fmus_src.nck.settings import TOOL_CHANGE_RETRACTS
 from fmus_src.units import UnitError, split_unit_suffix, to_si
 
@@ -177,7 +177,7 @@ VALUE_RULES: dict[tuple[str, str], tuple[Any, str]] = {
                                    "depreciation_KRW_per_s")},
     **{("cost", k): _GT0 for k in ("taylor_n", "taylor_C")},
 }
-#: Shortest internal drive step (s) a machine file may imply (:func:`fmus_src.servo.drive.stribeck_step_cap`):
+#: Shortest internal drive step (s) a machine file may imply (:func:`fmus_src.servo.step_cap.stribeck_step_cap`):
 #: 25 000 RK4 substeps per 250 us velocity-loop tick. Below it a run takes hours of wall time per second.
 MIN_DRIVE_STEP_S = 1e-8
 
@@ -428,7 +428,8 @@ def _check_complete(path: Path, text: str, values: dict[str, Any]) -> None:
 
 
 def _check_relations(path: Path, text: str, values: dict[str, Any]) -> None:
-    """Checks between keys: the servo loop periods, the drives' internal step, the chatter mode."""
+    """Checks between keys: the servo loop periods, the position loop gains, the drives' internal step, the chatter
+    mode."""
     servo = values.get("servo", {})
     tp, tv = servo.get("position_loop_period_ms"), servo.get("velocity_loop_period_ms")
     if tp is not None and tv is not None:
@@ -437,7 +438,8 @@ def _check_relations(path: Path, text: str, values: dict[str, Any]) -> None:
             raise MachineFileError(
                 f"{path}:{_line_of(text, 'servo', 'position_loop_period_ms')}: [servo] position_loop_period_ms = "
                 f"{tp!r} must be a whole multiple (1, 2, ...) of velocity_loop_period_ms = {tv!r}")
-    from fmus_src.servo.drive import stribeck_step_cap
+    _check_position_gains(path, text, values)
+    from fmus_src.servo.step_cap import stribeck_step_cap
     from fmus_src.servo.friction import StribeckParameters
 
     for a in AXES:
@@ -465,6 +467,25 @@ def _check_relations(path: Path, text: str, values: dict[str, Any]) -> None:
             f"{path}:{_line_of(text, 'cutting.effects', 'chatter_stiffness_N_per_um')}: [cutting.effects] "
             f"chatter_frequency_Hz = {effects['chatter_frequency_Hz']!r} needs chatter_stiffness_N_per_um > 0 "
             f"(the modal stiffness of the chatter mode), got {effects.get('chatter_stiffness_N_per_um', 0.0)!r}")
+
+
+def _check_position_gains(path: Path, text: str, values: dict[str, Any]) -> None:
+    """Each axis's position loop gain Kv = ``position_gain_per_s`` x ``position_scale`` (1/s) is at least
+    :data:`~fmus_src.nck.params.MIN_POSITION_GAIN`: the NC kernel's in-position model before rapids
+    (``[nck] in_position_before_rapid``) divides by the smallest Kv, and its wait grows as 1 / Kv. Each key on
+    its own is checked > 0 by :data:`VALUE_RULES`; this catches a product that is too small or underflows."""
+    for a in AXES:
+        axis = values.get("axis", {}).get(a, {})
+        gain, scale = axis.get("position_gain_per_s"), axis.get("position_scale")
+        if gain is None or scale is None:
+            continue
+        kv = float(gain) * float(scale)
+        if not (math.isfinite(kv) and kv >= MIN_POSITION_GAIN):
+            raise MachineFileError(
+                f"{path}:{_line_of(text, f'axis.{a}', 'position_gain_per_s')}: [axis.{a}] position_gain_per_s x "
+                f"position_scale = {gain!r} x {scale!r} = {kv:.6g} 1/s is the axis's position loop gain Kv (of the "
+                f"servo and of the in-position check before rapids); expected a finite Kv of at least "
+                f"{MIN_POSITION_GAIN:g} 1/s (FANUC No. 1825's smallest setting)")
 
 
 def _check_machine_zero(path: Path, text: str, values: dict[str, Any]) -> None:

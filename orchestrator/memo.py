@@ -71,3 +71,16 @@ def forget(kind: str | None = None) -> None:
         _store.clear()
     else:
         _store.pop(kind, None)
+
+
+def clear() -> None:
+    """Drop every kept result, of every kind (their memory is freed once no caller holds them).
+
+    For a long-lived process (a notebook, a service) that is done with a diagnosis or an optimisation and
+    wants the memory of their largest intermediate results back (a twin run of a long log, an engagement
+    table). Always safe: results are keyed by content, so a later call only builds again what it needs.
+    :func:`orchestrator.diagnose.diagnose` and :func:`orchestrator.optimize.optimize` do not call it
+    themselves: successive jobs on one program reuse the kept twin runs and tables (a scorecard's seeds, the
+    tests' scenarios).
+    """
+    _store.clear()

@@ -9,13 +9,26 @@ instances (``NO_FREE_TOOLS``), but ``fmpy.simulate_fmu`` and fmpy's validation,
 which the FMU tests call, still do. So once pytest is completely done
 (results reported, every other plugin unconfigured), the process leaves with
 pytest's own exit status without running the interpreter's teardown.
+
+The numba kernels of FMUs run standalone (``fmus_src`` from an unpacked FMU,
+:mod:`fmus_src.jit_locator`) are cached under ``$CNCTWIN_FMU_CACHE_DIR``, set
+here (unless already set) for the test process and every process it starts to
+a per-user folder in the system's temporary directory, not the user's
+``~/.cache``; it persists between sessions, so FMU tests load their kernels
+instead of recompiling them, and the locator prunes it as any cache root.
 """
 from __future__ import annotations
 
+import getpass
 import os
 import sys
+import tempfile
+from pathlib import Path
 
 import pytest
+
+os.environ.setdefault("CNCTWIN_FMU_CACHE_DIR",
+                      str(Path(tempfile.gettempdir()) / f"cnctwin-tests-fmu-numba-{getpass.getuser()}"))
 
 _EXIT_STATUS: list[int] = []
 

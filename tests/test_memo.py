@@ -32,3 +32,14 @@ def test_remember_builds_once_per_key_keeps_a_few_and_never_a_failure():
         memo.remember("test", f"n{i}", lambda i=i: build(10 + i))
     assert memo.remember("test", "k1", lambda: build(4)) == [4] and calls[-1] == 4
     memo.forget("test")
+
+
+def test_clear_drops_every_kind_and_the_next_call_builds_again():
+    calls = []
+    for kind in ("test_a", "test_b"):
+        memo.remember(kind, "k", lambda kind=kind: calls.append(kind) or kind)
+    memo.clear()
+    assert memo._store == {}
+    assert memo.remember("test_a", "k", lambda: calls.append("again") or "new") == "new"
+    assert calls == ["test_a", "test_b", "again"]
+    memo.clear()

@@ -201,7 +201,7 @@ def test_extreme_friction_parameters_stay_accurate(monkeypatch):
     """Seeded random parameter sets over a GA-like range (vs 0.1-10 mm/s, Fs/Fc 0.8-2, mu_v 0-15000,
     gain scales 0.5-2) through reversals: finite, no chattering (few velocity sign changes), and
     halving the internal step changes position by < 1e-9 m (the step is capped by the Stribeck rate)."""
-    import fmus_src.servo.drive as drive_module
+    import fmus_src.servo.step_cap as step_cap_module
 
     rng = np.random.default_rng(1)
     batch = 16
@@ -216,8 +216,8 @@ def test_extreme_friction_parameters_stay_accurate(monkeypatch):
                 for k in ("position_scale", "velocity_p_scale", "velocity_i_scale")}
     ref = reciprocating_reference(rng.uniform(50, 3000, batch) / 60e3, stroke=0.08)
     traces = []
-    for factor in (drive_module.STRIBECK_STEP_FACTOR, drive_module.STRIBECK_STEP_FACTOR / 2):
-        monkeypatch.setattr(drive_module, "STRIBECK_STEP_FACTOR", factor)
+    for factor in (step_cap_module.STRIBECK_STEP_FACTOR, step_cap_module.STRIBECK_STEP_FACTOR / 2):
+        monkeypatch.setattr(step_cap_module, "STRIBECK_STEP_FACTOR", factor)
         mcu, drives = build(batch=batch, mcu_overrides=mcu_over, drive_overrides=drive_over)
         traces.append(run(mcu, drives, lambda t: np.broadcast_to(ref(t), (3, batch)), 800))
     a, b = traces

@@ -17,22 +17,57 @@ NCParams, plan_batch, plan_member, build_schedule
 """
 from __future__ import annotations
 
-from .blocks import (
-    Arc, Block, Coolant, Dwell, Linear, Program, ProgramEnd, ProgramStop, Rapid, SpindleSpeed, SpindleStop,
-    ToolChange,
-)
-from .component import NCKernel
-from .errors import GCodeError, NCParameterError
-from .interpreter import interpret
-from .params import NCParams
-from .planner import BatchPlan, MemberPlan, build_schedule, plan_batch, plan_member
-from .settings import EXTERNAL_OFFSET, InterpreterSettings, additional_offset_key
-from .source import read_program
-from .writer import rewrite_program
+import importlib
+from typing import TYPE_CHECKING, Any
+
+#: Public name -> submodule that defines it, imported on first access (PEP 562): reading a machine
+#: file needs only the tables of a few light submodules, not the planner and its numba kernels.
+_LAZY = {
+    **dict.fromkeys(("Arc", "Block", "Coolant", "Dwell", "Linear", "Program", "ProgramEnd", "ProgramStop", "Rapid",
+                     "SpindleSpeed", "SpindleStop", "ToolChange"), ".blocks"),
+    "NCKernel": ".component",
+    "GCodeError": ".errors", "NCParameterError": ".errors",
+    "interpret": ".interpreter",
+    "NCParams": ".params",
+    **dict.fromkeys(("BatchPlan", "MemberPlan", "build_schedule", "plan_batch", "plan_member"), ".planner"),
+    **dict.fromkeys(("EXTERNAL_OFFSET", "InterpreterSettings", "additional_offset_key"), ".settings"),
+    "read_program": ".source",
+    "rewrite_program": ".writer",
+}
 
 __all__ = [
-    "EXTERNAL_OFFSET", "additional_offset_key", "Arc", "BatchPlan", "Block", "Coolant", "Dwell", "GCodeError", "InterpreterSettings", "Linear", "MemberPlan",
+    "EXTERNAL_OFFSET", "additional_offset_key", "Arc", "BatchPlan", "Block", "Coolant", "Dwell", "GCodeError",
+    "InterpreterSettings", "Linear", "MemberPlan",
     "NCKernel", "NCParameterError", "NCParams", "Program", "ProgramEnd", "ProgramStop", "Rapid", "SpindleSpeed",
     "SpindleStop", "ToolChange", "build_schedule", "interpret", "plan_batch", "plan_member", "read_program",
     "rewrite_program",
 ]
+
+
+def __getattr__(name: str) -> Any:
+    """Import a public name on first access (PEP 562); submodules import as usual."""
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(module, __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))
+
+
+if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs
+    from .blocks import (
+        Arc, Block, Coolant, Dwell, Linear, Program, ProgramEnd, ProgramStop, Rapid, SpindleSpeed, SpindleStop,
+        ToolChange,
+    )
+    from .component import NCKernel
+    from .errors import GCodeError, NCParameterError
+    from .interpreter import interpret
+    from .params import NCParams
+    from .planner import BatchPlan, MemberPlan, build_schedule, plan_batch, plan_member
+    from .settings import EXTERNAL_OFFSET, InterpreterSettings, additional_offset_key
+    from .source import read_program
+    from .writer import rewrite_program

@@ -11,6 +11,11 @@ MM_PER_MIN = 1e-3 / 60.0
 
 FILTER_KINDS = ("linear", "bell")
 
+#: Smallest position loop gain Kv (1/s) of the in-position model (:mod:`.servo_settle`): FANUC No. 1825's
+#: smallest setting (1 in units of 0.01/s). The model's memory is SERVO_MEMORY / (Kv Ts) periods and its wait
+#: ln(e0 / width) / Kv, both unbounded as Kv -> 0.
+MIN_POSITION_GAIN = 0.01
+
 
 @dataclass(frozen=True)
 class NCParams:
@@ -59,6 +64,10 @@ class NCParams:
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
                 raise NCParameterError(f"NC parameter {name} must be a finite number > 0, got {value!r}")
+        for name in ("x_position_gain", "y_position_gain", "z_position_gain"):
+            if not getattr(self, name) >= MIN_POSITION_GAIN:
+                raise NCParameterError(f"NC parameter {name} must be at least {MIN_POSITION_GAIN} 1/s (the position "
+                                       f"loop gain of the in-position model), got {getattr(self, name)!r}")
         for name in ("accel_change_time_before_interp", "cutting_time_constant", "rapid_time_constant",
                      "tool_change_time", "rigid_tapping_time_constant"):
             value = getattr(self, name)

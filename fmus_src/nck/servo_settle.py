@@ -22,7 +22,8 @@ import math
 from typing import Sequence
 
 import numpy as np
-from scipy.signal import lfilter
+
+from .errors import NCParameterError
 
 
 def _decay_periods(error: float, width: float, a: float, rate: float) -> int:
@@ -60,7 +61,14 @@ def servo_in_position(path: np.ndarray, target: np.ndarray, gains: Sequence[floa
     int
         First row index k at which every axis's deviation ``|p - y[k]|`` is within ``width`` and stays so (it may
         lie beyond the last row).
+
+    Raises
+    ------
+    NCParameterError
+        When ``exp(-Kv Ts)`` rounds to 1 on an axis (the deviation would never decay).
     """
+    from scipy.signal import lfilter  # imported on first use: importing the planner need not pay ~1 s for scipy.signal
+
     m = path.shape[0]
     if m == 0:
         return 0
@@ -70,6 +78,10 @@ def servo_in_position(path: np.ndarray, target: np.ndarray, gains: Sequence[floa
     for ax in range(3):
         rate = float(gains[ax]) * period
         a = math.exp(-rate)
+        if not (math.isfinite(rate) and a < 1.0):  # a = 1: the deviation would never decay (endless count)
+            raise NCParameterError(f"in-position model: position loop gain {gains[ax]!r} 1/s x period {period!r} s "
+                                   f"of axis {'XYZ'[ax]} gives no decay; expected Kv x Ts > 1.2e-16 "
+                                   "(exp(-Kv Ts) < 1 in floating point)")
         y = lfilter([0.0, 1.0 - a], [1.0, -a], rel[:, ax])  # y[0] = 0: the servo at rest on the move's start
         err = np.abs(end[ax] - y)
         out = np.nonzero(err > width)[0]

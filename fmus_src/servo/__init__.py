@@ -14,14 +14,23 @@ reference they are tested against (``MCU.use_compiled = False``,
 """
 from __future__ import annotations
 
-from ..jit import NUMBA_AVAILABLE
-from .control import CascadeGains, CascadeState, position_loop, velocity_loop
-from .drive import DEFAULT_INTEGRATION_STEP, DriveAxis, stribeck_step_cap
-from .errors import ServoError
-from .friction import StribeckParameters, stribeck_force
-from .mcu import MCU
-from .params import DRIVE_EFFECT_KEYS, MCU_EFFECT_KEYS, drive_parameters, effect_parameters, mcu_parameters
-from .stick_slip import SlipState, advance
+import importlib
+from typing import TYPE_CHECKING, Any
+
+#: Public name -> submodule that defines it, imported on first access (PEP 562): a machine file's check of
+#: the drive step (:mod:`.step_cap`, :mod:`.friction`) does not load numba through the components.
+_LAZY = {
+    "NUMBA_AVAILABLE": "..jit",
+    **dict.fromkeys(("CascadeGains", "CascadeState", "position_loop", "velocity_loop"), ".control"),
+    **dict.fromkeys(("DEFAULT_INTEGRATION_STEP", "DriveAxis"), ".drive"),
+    "stribeck_step_cap": ".step_cap",
+    "ServoError": ".errors",
+    "StribeckParameters": ".friction", "stribeck_force": ".friction",
+    "MCU": ".mcu",
+    **dict.fromkeys(("DRIVE_EFFECT_KEYS", "MCU_EFFECT_KEYS", "drive_parameters", "effect_parameters",
+                     "mcu_parameters"), ".params"),
+    "SlipState": ".stick_slip", "advance": ".stick_slip",
+}
 
 __all__ = [
     "MCU", "DriveAxis", "ServoError", "DEFAULT_INTEGRATION_STEP", "stribeck_step_cap", "CascadeGains", "CascadeState",
@@ -29,3 +38,29 @@ __all__ = [
     "mcu_parameters", "drive_parameters", "effect_parameters", "DRIVE_EFFECT_KEYS", "MCU_EFFECT_KEYS",
     "NUMBA_AVAILABLE",
 ]
+
+
+def __getattr__(name: str) -> Any:
+    """Import a public name on first access (PEP 562); submodules import as usual."""
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(module, __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))
+
+
+if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs
+    from ..jit import NUMBA_AVAILABLE
+    from .control import CascadeGains, CascadeState, position_loop, velocity_loop
+    from .drive import DEFAULT_INTEGRATION_STEP, DriveAxis
+    from .errors import ServoError
+    from .friction import StribeckParameters, stribeck_force
+    from .mcu import MCU
+    from .params import DRIVE_EFFECT_KEYS, MCU_EFFECT_KEYS, drive_parameters, effect_parameters, mcu_parameters
+    from .step_cap import stribeck_step_cap
+    from .stick_slip import SlipState, advance

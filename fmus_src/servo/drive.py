@@ -18,7 +18,7 @@ read at every step) selects the numpy reference
 :func:`fmus_src.servo.stick_slip.advance`. Both update the same state arrays.
 
 Each member integrates with its own internal substep (its ``integration_step``
-capped by its own Stribeck time scale, :func:`stribeck_step_cap`), so a member
+capped by its own Stribeck time scale, :func:`.step_cap.stribeck_step_cap`), so a member
 gives bit for bit the result of its solo run whatever the rest of the batch.
 A member whose stick/slip step fails (see :mod:`.stick_slip`) is failed alone
 (:meth:`~fmus_src.component.Component.fail_members`) and frozen; a single run
@@ -39,6 +39,7 @@ from .friction import StribeckParameters
 from .stick_slip import OK, SlipState, advance, failure_reason, friction_force, substeps
 from .exponential_numba import select_kernel
 from .stick_slip_numba import pack_parameters
+from .step_cap import STRIBECK_STEP_FACTOR, stribeck_step_cap  # noqa: F401 - re-exported
 
 #: Default internal step [s]. With the Table 1 parameters the fastest time
 #: scale of the table is the Stribeck growth rate (Fs - Fc) / (vs Ms) <= 530 1/s
@@ -48,41 +49,8 @@ from .stick_slip_numba import pack_parameters
 #: mu_v / Ms <= 20 1/s is far from any stability limit.
 DEFAULT_INTEGRATION_STEP = 125e-6
 
-#: The internal step is further capped so that (Stribeck growth rate) x step <= this value, where the
-#: growth rate is max(0, (Fs - Fc) / vs - mu_v) / Ms, the largest positive eigenvalue of the sliding
-#: dynamics. Inactive for Table 1 values (cap >= 480 us); it keeps a GA's extreme trial parameters
-#: (vs = 0.1 mm/s, Fs - Fc = 700 N, 600 kg: cap ~ 21 us) about as accurate as the paper's, at the
-#: price of more substeps for that member only.
-STRIBECK_STEP_FACTOR = 0.25
-
-
 def _p(name: str, unit: str, start: float, description: str) -> Variable:
     return Variable(name, "parameter", unit, start, description)
-
-
-def stribeck_step_cap(friction: StribeckParameters, mass: np.ndarray) -> np.ndarray:
-    """Largest internal step [s] of each member with (Stribeck growth rate) x step <= ``STRIBECK_STEP_FACTOR``.
-
-    Parameters
-    ----------
-    friction : StribeckParameters
-        Both branches, shape (B,).
-    mass : ndarray, shape (B,)
-        Moving mass [kg].
-
-    Returns
-    -------
-    ndarray, shape (B,)
-        The cap [s]; ``inf`` for a member without a growing Stribeck mode.
-    """
-    worst = np.maximum(
-        np.maximum(0.0, (friction.static_pos - friction.coulomb_pos) / friction.stribeck_velocity_pos
-                   - friction.viscous_pos) / mass,
-        np.maximum(0.0, (friction.static_neg - friction.coulomb_neg) / friction.stribeck_velocity_neg
-                   - friction.viscous_neg) / mass,
-    )
-    with np.errstate(divide="ignore"):
-        return np.where(worst == 0.0, math.inf, STRIBECK_STEP_FACTOR / worst)
 
 
 class DriveAxis(Component):

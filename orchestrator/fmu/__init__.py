@@ -6,13 +6,45 @@
 * :func:`check_fmu` — variables, validation, smoke run and role fit.
 * :class:`FMUError` — the one exception type of all of it.
 """
-from .build import COMPONENTS, DEFAULT_OUT_DIR, available_components, build_fmu, build_fmus, machine_parameters
-from .check import FMUCheckReport, check_fmu
-from .component import FMUComponent, load_fmu
-from .errors import FMUError
-from .roles import ROLES, Role, get_role
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
+#: Public name -> submodule that defines it, imported on first access (PEP 562): the ``cnctwin`` parser
+#: and ``import orchestrator.fmu.roles`` do not load fmpy, pythonfmu or the components.
+_LAZY = {
+    **dict.fromkeys(("COMPONENTS", "DEFAULT_OUT_DIR", "available_components", "build_fmu", "build_fmus",
+                     "machine_parameters"), ".build"),
+    "FMUCheckReport": ".check", "check_fmu": ".check",
+    "FMUComponent": ".component", "load_fmu": ".component",
+    "FMUError": ".errors",
+    "ROLES": ".roles", "Role": ".roles", "get_role": ".roles",
+}
 
 __all__ = [
     "COMPONENTS", "DEFAULT_OUT_DIR", "available_components", "build_fmu", "build_fmus", "machine_parameters",
     "FMUCheckReport", "check_fmu", "FMUComponent", "load_fmu", "FMUError", "ROLES", "Role", "get_role",
 ]
+
+
+def __getattr__(name: str) -> Any:
+    """Import a public name on first access (PEP 562); submodules import as usual."""
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(module, __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))
+
+
+if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs
+    from .build import COMPONENTS, DEFAULT_OUT_DIR, available_components, build_fmu, build_fmus, machine_parameters
+    from .check import FMUCheckReport, check_fmu
+    from .component import FMUComponent, load_fmu
+    from .errors import FMUError
+    from .roles import ROLES, Role, get_role

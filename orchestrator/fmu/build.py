@@ -31,9 +31,7 @@ from fmus_src.component import Component
 from ..machine import AXES, Machine, frame_parameters, load_machine
 from .errors import FMUError
 from .model_description import annotate_model_description, rewrite_member
-
-#: Default output folder of :func:`build_fmus`.
-DEFAULT_OUT_DIR = Path(__file__).resolve().parents[2] / "models" / "fmus"
+from .paths import DEFAULT_OUT_DIR
 
 #: Communication step written as ``<DefaultExperiment stepSize>``, s.
 DEFAULT_STEP = 1e-3
