@@ -95,9 +95,9 @@ def test_each_slot_removes_its_own_width_and_peaks_at_its_own_hand_calculation(t
     assert "T2" in result.summary["notes"][0] and "6 mm, 2 flutes" in result.summary["notes"][0]
 
 
-def _short_twin(case):
+def _short_twin(case, batch=1):
     """The two-slot twin with a 0.2 s tool change, for 4.6 s: slot 1's end, both tool changes, slot 2's start."""
-    twin = build_twin(case, options=TwinOptions(cutting_mode="zmap"))
+    twin = build_twin(case, batch=batch, options=TwinOptions(cutting_mode="zmap"))
     twin.nck.set("tool_change_time", 0.2)
     settings = MasterSettings(step=twin.options.step, time_limit=4.6, stop_when=twin.stop_when,
                               limits=twin.limits or {}, check_every=10)
@@ -178,3 +178,36 @@ def test_path_mode_refuses_several_cutters(two_tools):
     case, _ = two_tools
     with pytest.raises(Exception, match=r"engagement table is built for one cutter"):
         build_twin(case, options=TwinOptions(cutting_mode="path"))
+
+
+def test_members_with_their_own_tables_in_two_threads_match_the_python_master(tmp_path):
+    """Member 1's T2 is an 8 mm 3-flute cutter: each member switches to its own; the compiled loop in two
+    member blocks equals the Python master bit for bit."""
+    program = PROGRAM.replace("X-5. Y10.", "X2. Y10.").replace("X17. F300", "X6. F600")
+    case = load_case(_case_folder(tmp_path, program=program))
+    runs = []
+    for compiled in (True, False):
+        twin, settings = _short_twin(case, batch=2)
+        for name, value in (("tool_1_diameter", 8e-3), ("tool_1_flutes", 3)):
+            arr = twin.cutting.get(name)
+            arr[1] = value
+            twin.cutting.set(name, arr)
+        settings.compiled, settings.threads = compiled, 2
+        runs.append(Master(twin.system, settings, twin.probes).run())
+    _assert_same(runs[0], runs[1])
+    rec = runs[0].recording
+    line = np.asarray(rec["line"])[:, 0]
+    peak = np.asarray(rec["fc_peak_N"])
+    slot2 = line == 12
+    # slot 2's start: the members' loads differ (10 mm 4 flutes vs 8 mm 3 flutes at the same F and S)
+    assert np.nanmax(peak[slot2, 0]) > 10.0 and np.nanmax(peak[slot2, 1]) > 10.0
+    assert not np.array_equal(peak[slot2, 0], peak[slot2, 1])
+
+
+def test_the_optimiser_searches_several_cutters_on_the_zmap_model(two_tools):
+    from orchestrator.optimize.reference import build_reference
+
+    case, _ = two_tools
+    reference = build_reference(case)
+    assert reference.context.engagement is None
+    assert "tool table ([tools]) lists cutters other than [tool]" in reference.context.search_model_note
