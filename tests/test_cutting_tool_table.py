@@ -211,3 +211,52 @@ def test_the_optimiser_searches_several_cutters_on_the_zmap_model(two_tools):
     reference = build_reference(case)
     assert reference.context.engagement is None
     assert "tool table ([tools]) lists cutters other than [tool]" in reference.context.search_model_note
+
+
+def test_tool_table_packing_lookup_and_errors():
+    from fmus_src.cutting.component import CuttingError
+    from fmus_src.cutting.tool_table import ToolTable, slot_of, slots, table_variables
+
+    values = {v.name: np.full(2, v.start, dtype=np.int64 if v.type == "Integer" else np.float64)
+              for v in table_variables()}
+    values["tool_diameter"], values["flutes"] = np.array([6e-3, 6e-3]), np.array([2, 2])
+    values["tool_3_number"] = np.array([2, 0])  # member 1: slot 3 empty (diameter 0 there)
+    values["tool_3_diameter"] = np.array([10e-3, 0.0])
+    values["tool_3_flutes"] = np.array([4, 0])
+    values["tool_5_number"] = np.array([7, 2])
+    values["tool_5_diameter"] = np.array([4e-3, 8e-3])
+    values["tool_5_flutes"] = np.array([3, 3])
+    table = ToolTable.from_values(values, 2, "cutting", CuttingError)
+    assert table.number.tolist() == [[-1, 2, 7], [-1, 0, 2]]  # default column, then the used slots 3 and 5
+    # T2 -> 5 mm radius for member 0 (slot 3), 4 mm for member 1 (slot 5); T9 and T0 -> the default
+    for tool, expected in (([2, 2], [1, 2]), ([7, 7], [2, 0]), ([9, 0], [0, 0])):
+        k = slots(table, np.array(tool))
+        assert k.tolist() == expected
+        assert [slot_of(table.number, m, float(tool[m])) for m in range(2)] == expected
+    assert table.radius[[0, 1], slots(table, np.array([2, 2]))].tolist() == [5e-3, 4e-3]
+    assert table.smallest_radius().tolist() == [2e-3, 3e-3]  # member 1's empty slot (radius 0) left out
+    for name, value, message in (("tool_5_number", [7, 7], r"lists T7 in a second slot"),
+                                 ("tool_5_number", [-1, 2], r"tool_5_number: member 0 has -1"),
+                                 ("tool_5_flutes", [0, 3], r"tool_5_flutes: member 0 has 0 for T7")):
+        bad = dict(values)
+        bad[name] = np.array(value)
+        if name == "tool_5_number" and value == [7, 7]:
+            bad["tool_3_number"] = np.array([2, 7])
+            bad["tool_3_diameter"] = np.array([10e-3, 5e-3])
+            bad["tool_3_flutes"] = np.array([4, 2])
+        with pytest.raises(CuttingError, match=message):
+            ToolTable.from_values(bad, 2, "cutting", CuttingError)
+
+
+def test_the_ssp_export_of_a_two_tool_case_runs_as_the_case(two_tools, tmp_path):
+    from orchestrator.simulate import simulate_system_file
+    from orchestrator.twin import write_twin_ssp
+
+    case, result = two_tools
+    ssd, _ = write_twin_ssp(case, tmp_path / "two_tools.ssd")
+    text = ssd.read_text()
+    assert 'startElement="nck" startConnector="tool" endElement="cutting" endConnector="tool"' in text
+    system = simulate_system_file(ssd)
+    assert system.success, system.message
+    for ch in result.recording.channels:
+        np.testing.assert_array_equal(system.recording.data[ch], result.recording.data[ch], err_msg=ch)

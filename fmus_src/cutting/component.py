@@ -38,6 +38,20 @@ Time discretisation of one communication step ``[t, t + h]``
 * ``fc_peak`` is the largest ``Fc`` over the substep instants of the step and
   over the entry/exit instants so located.
 
+Several tools (the tool table)
+------------------------------
+The Integer input ``tool`` is the tool in the spindle (the NC kernel's ``tool``);
+the slot parameters ``tool_<i>_number`` / ``_diameter`` / ``_flutes``
+(:mod:`.tool_table`) give listed tools their own cutter, every other tool is
+cut with ``tool_diameter`` and ``flutes``. At the start of a step, a member
+whose tool's cutter differs from its current one commits its whole recent
+path (to the tool at the step's start) to the Z-map with the old radius, then
+takes the new radius and teeth and the near-field spacing and lag derived
+from the radius (:meth:`CuttingLoad._switch_tools`; compiled:
+:func:`.zmap_numba.switch_tool`). With every slot empty, or every listed
+cutter equal to the default, nothing ever switches: the one-tool model bit
+for bit.
+
 Feeding into material with the spindle stopped (a crash)
 --------------------------------------------------------
 The chip per tooth of a tool that does not turn is unbounded. A member whose
@@ -193,9 +207,9 @@ class CuttingLoad(Component):
         lag = self._radius + 2.0 * np.maximum(self.stock.dx, self.stock.dy)
         capacity = int(np.ceil(np.max(lag / spacing))) + 4
         if self._tools.listed:  # room for the near field of the smallest cutter of the table
-            cell = 2.0 * np.maximum(self.stock.dx, self.stock.dy)[:, None]
-            capacity = max(capacity, int(np.ceil(np.max((self._tools.radius + cell)
-                                                        / (PATH_SPACING * self._tools.radius)))) + 4)
+            smallest = self._tools.smallest_radius()
+            cell = 2.0 * np.maximum(self.stock.dx, self.stock.dy)
+            capacity = max(capacity, int(np.ceil(np.max((smallest + cell) / (PATH_SPACING * smallest)))) + 4)
         self.path = SweptPath(position, spacing, lag, capacity)
         # motion state per member: the tool tip at the start of the step, then its chip history (kernel.chord_feed)
         self._motion = np.zeros((self.batch, 3 + CHIP_HISTORY_WIDTH))

@@ -104,6 +104,10 @@ class ToolTable:
         """Whether any slot is in use."""
         return self.number.shape[1] > 1
 
+    def smallest_radius(self) -> np.ndarray:
+        """Smallest radius of each member's cutters (default and listed), shape (B,), m."""
+        return np.min(np.where(self.number != 0, self.radius, np.inf), axis=1)
+
 
 @njit
 def slot_of(number: np.ndarray, m: int, tool: float) -> int:
@@ -117,4 +121,6 @@ def slot_of(number: np.ndarray, m: int, tool: float) -> int:
 def slots(table: ToolTable, tool: np.ndarray) -> np.ndarray:
     """Column of each member's tool in ``table`` (:func:`slot_of` for every member), shape (B,) int."""
     tool = np.asarray(tool, dtype=np.float64)
-    return np.array([slot_of(table.number, m, float(tool[m])) for m in range(tool.shape[0])], dtype=np.int64)
+    match = (table.number == tool[:, None]) & (table.number != 0)
+    match[:, 0] = False
+    return np.where(match.any(axis=1), match.argmax(axis=1), 0).astype(np.int64)
