@@ -264,7 +264,8 @@ def _tool(path: Path, text: str, section: str, t: dict[str, Any]) -> Tool:
         )
     if isinstance(flutes, bool) or not isinstance(flutes, int) or not 1 <= flutes <= 24:
         raise CaseError(
-            f"{path}:{_line_of(text, section, 'flutes')}: [{section}] flutes must be a whole number 1..24, got {flutes!r}"
+            f"{path}:{_line_of(text, section, 'flutes')}: [{section}] flutes must be a whole number 1..24, "
+            f"got {flutes!r}"
         )
     for key in ("diameter_mm", "flutes"):  # a tool table states the cutter: a key left out is not guessed
         if key not in t:

@@ -1,9 +1,8 @@
 """Figures of merit of a run: cycle time, per-line times and loads, following error, cost."""
 from __future__ import annotations
 
-from collections.abc import Collection
-
 import math
+from collections.abc import Collection
 from typing import Any
 
 import numpy as np

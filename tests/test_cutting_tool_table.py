@@ -146,15 +146,16 @@ def test_tool_table_parsing(tmp_path):
     assert case.tools == {2: type(case.tool)(10.0, 4)} and case.tool_stated and case.several_tools()
     assert case.tool_for(2).diameter_mm == 10.0 and case.tool_for(7) == case.tool
     bad = {
-        "[tools.X2]\ndiameter_mm = 3.0\nflutes = 2\n": (r"case.toml:11: unknown tool 'X2' in \[tools\]", 11),
-        "[tools.T3]\ndiameter_mm = 3.0\nflutes = 0\n": (r"case.toml:13: \[tools.T3\] flutes must be a whole", 13),
-        "[tools.T3]\ndiameter_mm = -3.0\nflutes = 2\n": (r"case.toml:12: \[tools.T3\] diameter_mm must be", 12),
-        "[tools.T3]\nflutes = 2\n": (r"case.toml:11: \[tools.T3\] needs 'diameter_mm'", 11),
-        "[tools.T3]\ndiameter_mm = 3.0\nflutes = 2\nlength_mm = 50.0\n": (r"case.toml:14: unknown field 'length_mm'", 14),
-        "[tools.T02]\ndiameter_mm = 3.0\nflutes = 2\n": (r"case.toml:11: \[tools.T02\] lists T2 a second time", 11),
+        "[tools.X2]\ndiameter_mm = 3.0\nflutes = 2\n": r"case.toml:11: unknown tool 'X2' in \[tools\]",
+        "[tools.T3]\ndiameter_mm = 3.0\nflutes = 0\n": r"case.toml:13: \[tools.T3\] flutes must be a whole",
+        "[tools.T3]\ndiameter_mm = -3.0\nflutes = 2\n": r"case.toml:12: \[tools.T3\] diameter_mm must be",
+        "[tools.T3]\nflutes = 2\n": r"case.toml:11: \[tools.T3\] needs 'diameter_mm'",
+        "[tools.T3]\ndiameter_mm = 3.0\nflutes = 2\nlength_mm = 50.0\n":
+            r"case.toml:14: unknown field 'length_mm' in \[tools.T3\]",
+        "[tools.T02]\ndiameter_mm = 3.0\nflutes = 2\n": r"case.toml:11: \[tools.T02\] lists T2 a second time",
     }
     base = CASE.format(tool=TOOL_1).replace('[machine]\nparameters = "default"\n', "")
-    for extra, (pattern, _) in bad.items():
+    for extra, pattern in bad.items():  # each names case.toml and the line of the key
         (tmp_path / "case.toml").write_text(base + extra)
         with pytest.raises(CaseError, match=pattern):
             load_case(tmp_path)

@@ -226,8 +226,9 @@ class OptimizeResult:
         ``{"line": ..., "tool": ...}`` per M6 of the program, in execution order.
     notes : list of str
         What the twin assumed (as ``cnctwin simulate``'s summary): a tool of the program that the case's tool
-        table (``[tools.T<n>]``) does not list has its cutting load computed with ``[tool]``. Also when the original program was written
-        because no candidate passed the Z-map check (and whether the original itself exceeds the limit).
+        table (``[tools.T<n>]``) does not list has its cutting load computed with ``[tool]``. Also when the
+        original program was written because no candidate passed the Z-map check (and whether the original
+        itself exceeds the limit).
     tidy : dict or None
         The equal-feeds post-pass (``settings.tidy``): objective before and after (s or KRW, the search's
         path-mode figures), rounds and the accepted copies (:class:`.tidy.TidyResult`); None when it did not run.
