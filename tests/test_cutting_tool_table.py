@@ -261,3 +261,17 @@ def test_the_ssp_export_of_a_two_tool_case_runs_as_the_case(two_tools, tmp_path)
     assert system.success, system.message
     for ch in result.recording.channels:
         np.testing.assert_array_equal(system.recording.data[ch], result.recording.data[ch], err_msg=ch)
+
+
+def test_notes_name_only_the_tools_the_table_does_not_list():
+    from orchestrator.summary import tool_notes
+
+    changes = [(2, 1), (9, 2), (15, 3)]
+    assert tool_notes(changes, True, 6.0, 2, listed=(1, 2, 3))[1] == []  # every tool listed: nothing assumed
+    notes = tool_notes(changes, True, 6.0, 2, listed=(1, 2))[1]
+    assert len(notes) == 1 and "uses T3 (the first change to one at line 15)" in notes[0]
+    assert "(T1, T2)" in notes[0] and "6 mm, 2 flutes" in notes[0]
+    # one tool, listed in no table: [tool] is that tool, as before; with a table that misses it: noted
+    assert tool_notes([(2, 5)], True, 6.0, 2)[1] == []
+    assert "uses T5" in tool_notes([(2, 5)], True, 6.0, 2, listed=(1,))[1][0]
+    assert tool_notes(changes, False, 6.0, 2, listed=(1,))[1] == []  # no stock: no cutting load
