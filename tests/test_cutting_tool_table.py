@@ -275,3 +275,14 @@ def test_notes_name_only_the_tools_the_table_does_not_list():
     assert tool_notes([(2, 5)], True, 6.0, 2)[1] == []
     assert "uses T5" in tool_notes([(2, 5)], True, 6.0, 2, listed=(1,))[1][0]
     assert tool_notes(changes, False, 6.0, 2, listed=(1,))[1] == []  # no stock: no cutting load
+
+
+def test_the_diagnosis_memo_key_tells_tool_tables_apart(tmp_path):
+    from dataclasses import replace
+
+    from orchestrator.diagnose.prepare import run_key
+
+    case = load_case(_case_folder(tmp_path))
+    plain = replace(case, tools={})
+    assert run_key(case, case.machine) != run_key(plain, case.machine)
+    assert run_key(plain, case.machine) == run_key(replace(plain), case.machine)
