@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import math
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -127,7 +128,7 @@ def test_compiled_loop_python_master_and_numpy_kernel_agree_bit_for_bit(tmp_path
 
 def test_a_table_listing_t1_as_tool_runs_the_paper_part_bit_for_bit(tmp_path):
     folder = tmp_path / "paper"
-    shutil.copytree("models/examples/paper_part", folder)
+    shutil.copytree(Path(__file__).resolve().parents[1] / "models" / "examples" / "paper_part", folder)
     plain = simulate(case=load_case(folder), plot=False)
     with open(folder / "case.toml", "a") as f:
         f.write("\n[tools.T1]\ndiameter_mm = 6.0\nflutes = 2\n")
