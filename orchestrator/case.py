@@ -6,17 +6,20 @@ file, the line and the field.
 from __future__ import annotations
 
 import math
+import re
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from fmus_src.cutting.tool_table import N_TOOL_TABLE
 from fmus_src.nck.component import N_TOOL_LENGTHS, N_TOOL_RADII
+from fmus_src.nck.input_ranges import MAX_TOOL
 
 from .errors import CncTwinError
 from .machine import Machine, MachineFileError, _line_of, load_machine, resolve_machine_path
 
-_TOP_KEYS = {"program", "recording", "stock", "tool", "machine", "material", "offsets"}
+_TOP_KEYS = {"program", "recording", "stock", "tool", "tools", "machine", "material", "offsets"}
 _SECTION_KEYS = {
     "stock": {"min", "max"},
     "tool": {"diameter_mm", "flutes"},
@@ -27,6 +30,8 @@ _SECTION_KEYS = {
 MAX_STOCK_COORDINATE_MM = 10_000.0
 #: Smallest tool diameter, mm: the smallest micro end mills (10 um).
 MIN_TOOL_DIAMETER_MM = 0.01
+#: Most tools a case's tool table (``[tools.T<n>]``) lists: the cutting load's table slots.
+MAX_CASE_TOOLS = N_TOOL_TABLE
 #: ``[offsets]`` key -> (NC kernel parameter prefix, address, number of registers).
 _OFFSET_TABLES = {"radius_mm": ("tool_radius", "D", N_TOOL_RADII), "length_mm": ("tool_length", "H", N_TOOL_LENGTHS)}
 
@@ -88,13 +93,19 @@ class Case:
     stock : Stock or None
         Workpiece block; None means an air cut.
     tool : Tool
-        Cutter (default: 6 mm, 2 flutes as in the paper).
+        Cutter (default: 6 mm, 2 flutes as in the paper): the tool of every T number that ``tools`` does not
+        list, and of a program without T words.
     machine : Machine
         Machine parameter set.
     material : str
         Material name in the machine file (default: its first material, A6061).
     offsets : ToolOffsets
         Tool radius (D) and length (H) offsets of the control (default: all 0, as CAM "wear"-mode posts need).
+    tools : dict int -> Tool
+        The tool table (``[tools.T<n>]`` of case.toml): the cutter of each listed T number (default: empty).
+    tool_stated : bool
+        Whether case.toml states ``[tool]`` (False: ``tool`` is the 6 mm, 2-flute default); with a tool table
+        and no ``[tool]``, a program that changes to an unlisted tool is refused (:func:`unlisted_tool_error`).
     """
 
     folder: Path
@@ -107,6 +118,17 @@ class Case:
     source: Path | None = None
     extra: dict[str, Any] = field(default_factory=dict)
     offsets: ToolOffsets = field(default_factory=ToolOffsets)
+    tools: dict[int, Tool] = field(default_factory=dict)
+    tool_stated: bool = True
+
+    def tool_for(self, number: int) -> Tool:
+        """The cutter modelled for tool number ``number`` (the table's, else ``[tool]``)."""
+        return self.tools.get(int(number), self.tool)
+
+    def several_tools(self) -> bool:
+        """Whether the tool table lists a cutter whose geometry differs from ``[tool]``'s (the cutting load then
+        switches geometry at tool changes)."""
+        return any(t != self.tool for t in self.tools.values())
 
 
 def _vector(path: Path, text: str, section: str, key: str, value: Any) -> tuple[float, float, float]:
@@ -195,27 +217,8 @@ def load_case(path: str | Path, machine_override: str | Path | None = None) -> C
             )
         stock = Stock(lo, hi)
 
-    tool = Tool()
-    if "tool" in raw:
-        t = raw["tool"]
-        diameter = t.get("diameter_mm", tool.diameter_mm)
-        flutes = t.get("flutes", tool.flutes)
-        if isinstance(diameter, bool) or not isinstance(diameter, (int, float)) \
-                or not MIN_TOOL_DIAMETER_MM <= diameter < 1000:
-            raise CaseError(
-                f"{toml_path}:{_line_of(text, 'tool', 'diameter_mm')}: [tool] diameter_mm must be a number in mm "
-                f"from {MIN_TOOL_DIAMETER_MM:g} (the smallest micro end mills) to below 1000, got {diameter!r}"
-            )
-        if isinstance(flutes, bool) or not isinstance(flutes, int) or not 1 <= flutes <= 24:
-            raise CaseError(
-                f"{toml_path}:{_line_of(text, 'tool', 'flutes')}: [tool] flutes must be a whole number 1..24, got {flutes!r}"
-            )
-        for key in ("diameter_mm", "flutes"):  # a [tool] table states the cutter: a key left out is not guessed
-            if key not in t:
-                raise CaseError(f"{toml_path}:{_line_of(text, 'tool', None)}: [tool] needs {key!r} "
-                                f"({'the cutter diameter in mm' if key == 'diameter_mm' else 'the number of teeth'}); "
-                                f"without a [tool] table the case uses {Tool.diameter_mm:g} mm, {Tool.flutes} flutes")
-        tool = Tool(float(diameter), int(flutes))
+    tool = _tool(toml_path, text, "tool", raw["tool"]) if "tool" in raw else Tool()
+    tools = _tools(toml_path, text, raw["tools"]) if "tools" in raw else {}
 
     machine_ref: str | Path = "default"
     if "machine" in raw and "parameters" not in raw["machine"]:
@@ -245,7 +248,91 @@ def load_case(path: str | Path, machine_override: str | Path | None = None) -> C
             f"it defines {materials}"
         )
     offsets = _offsets(toml_path, text, raw["offsets"]) if "offsets" in raw else ToolOffsets()
-    return Case(folder, program, recording, stock, tool, machine, material, toml_path, offsets=offsets)
+    return Case(folder, program, recording, stock, tool, machine, material, toml_path, offsets=offsets, tools=tools,
+                tool_stated="tool" in raw)
+
+
+def _tool(path: Path, text: str, section: str, t: dict[str, Any]) -> Tool:
+    """``[tool]`` or ``[tools.T<n>]`` (``section``) -> :class:`Tool`; both keys required, checked."""
+    diameter = t.get("diameter_mm", Tool.diameter_mm)
+    flutes = t.get("flutes", Tool.flutes)
+    if isinstance(diameter, bool) or not isinstance(diameter, (int, float)) \
+            or not MIN_TOOL_DIAMETER_MM <= diameter < 1000:
+        raise CaseError(
+            f"{path}:{_line_of(text, section, 'diameter_mm')}: [{section}] diameter_mm must be a number in mm "
+            f"from {MIN_TOOL_DIAMETER_MM:g} (the smallest micro end mills) to below 1000, got {diameter!r}"
+        )
+    if isinstance(flutes, bool) or not isinstance(flutes, int) or not 1 <= flutes <= 24:
+        raise CaseError(
+            f"{path}:{_line_of(text, section, 'flutes')}: [{section}] flutes must be a whole number 1..24, "
+            f"got {flutes!r}"
+        )
+    for key in ("diameter_mm", "flutes"):  # a tool table states the cutter: a key left out is not guessed
+        if key not in t:
+            raise CaseError(f"{path}:{_line_of(text, section, None)}: [{section}] needs {key!r} "
+                            f"({'the cutter diameter in mm' if key == 'diameter_mm' else 'the number of teeth'}); "
+                            + (f"without a [tool] table the case uses {Tool.diameter_mm:g} mm, {Tool.flutes} flutes"
+                               if section == "tool" else "each listed tool states both"))
+    return Tool(float(diameter), int(flutes))
+
+
+def _tools(path: Path, text: str, table: Any) -> dict[int, Tool]:
+    """``[tools.T1]``, ``[tools.T2]``, ... -> ``{1: Tool, 2: Tool}`` (names, keys and values checked)."""
+    line = _line_of(text, "tools", None) or _find_top_key(text, "tools")
+    if not isinstance(table, dict):
+        raise CaseError(f"{path}:{line}: 'tools' must be a table of tools, e.g. [tools.T2] with diameter_mm and "
+                        f"flutes, got {table!r}")
+    out: dict[int, Tool] = {}
+    for name, entry in table.items():
+        match = re.fullmatch(r"T(\d+)", name)
+        where = _line_of(text, f"tools.{name}", None) or line
+        if match is None or not 1 <= int(match.group(1)) <= MAX_TOOL:
+            raise CaseError(f"{path}:{where}: unknown tool {name!r} in [tools]; expected T<n> with n = 1..{MAX_TOOL} "
+                            "(the T word of the program's M6), e.g. [tools.T2]")
+        section = f"tools.{name}"
+        if not isinstance(entry, dict):
+            raise CaseError(f"{path}:{where}: {section!r} must be a table [{section}] with diameter_mm and flutes, "
+                            f"got {entry!r}")
+        unknown = set(entry) - _SECTION_KEYS["tool"]
+        if unknown:
+            bad = sorted(unknown)[0]
+            raise CaseError(f"{path}:{_line_of(text, section, bad)}: unknown field {bad!r} in [{section}]; "
+                            f"expected {sorted(_SECTION_KEYS['tool'])}")
+        number = int(match.group(1))
+        if number in out:  # T02 and T2 are one tool
+            raise CaseError(f"{path}:{where}: [{section}] lists T{number} a second time; expected each tool once")
+        out[number] = _tool(path, text, section, entry)
+    if len(out) > MAX_CASE_TOOLS:
+        raise CaseError(f"{path}:{line}: [tools] lists {len(out)} tools; the cutting load holds at most "
+                        f"{MAX_CASE_TOOLS} (list the tools the program uses)")
+    return dict(sorted(out.items()))
+
+
+def unlisted_tool_error(case: Case, changes: list[tuple[int, int]]) -> str | None:
+    """Why the program cannot run on the case's tool table, or None.
+
+    Parameters
+    ----------
+    case : Case
+        The case (its ``tools`` and whether it states ``[tool]``).
+    changes : list of (int, int)
+        ``(line, tool)`` of every M6 of the program, in execution order.
+
+    Returns
+    -------
+    str or None
+        With a tool table and no ``[tool]``, the first M6 to a tool the table does not list, naming the
+        program file and line and the case file; None otherwise (``[tool]`` covers every unlisted tool).
+    """
+    if case.tool_stated or not case.tools:
+        return None
+    for line, number in changes:
+        if int(number) not in case.tools:
+            listed = ", ".join(f"T{n}" for n in case.tools)
+            return (f"{case.program}:{line}: M6 changes to T{number}, which {case.source or case.folder} does not "
+                    f"list (its [tools] has {listed} and it has no [tool] for the others); expected a "
+                    f"[tools.T{number}] table with diameter_mm and flutes, or a [tool] for every unlisted tool")
+    return None
 
 
 def _offsets(path: Path, text: str, table: dict[str, Any]) -> ToolOffsets:

@@ -161,7 +161,7 @@ def simulate(
     summary["machine"] = resolved.machine.name
     changes = [(b.line, b.tool) for b in twin.nck.program_.blocks if isinstance(b, ToolChange)]
     summary["tool_changes"], notes = tool_notes(changes, twin.cutting is not None, resolved.tool.diameter_mm,
-                                                resolved.tool.flutes)
+                                                resolved.tool.flutes, resolved.tools)
     if notes:
         summary["notes"] = notes
     result = SimulationResult(recording, summary, run.success, message)

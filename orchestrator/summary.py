@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Collection
 from typing import Any
 
 import numpy as np
@@ -101,8 +102,8 @@ def summarize(
     return summary
 
 
-def tool_notes(changes: list[tuple[int, int]], cutting: bool, diameter_mm: float, flutes: int
-               ) -> tuple[list[dict[str, int]], list[str]]:
+def tool_notes(changes: list[tuple[int, int]], cutting: bool, diameter_mm: float, flutes: int,
+               listed: Collection[int] = ()) -> tuple[list[dict[str, int]], list[str]]:
     """The program's tool changes, and what the twin assumes about them.
 
     Parameters
@@ -112,24 +113,36 @@ def tool_notes(changes: list[tuple[int, int]], cutting: bool, diameter_mm: float
     cutting : bool
         Whether the run computes a cutting load (the case has a ``[stock]``).
     diameter_mm, flutes : float, int
-        The case's ``[tool]``.
+        The case's ``[tool]`` (mm, teeth): the cutter of every tool the tool table does not list.
+    listed : collection of int
+        The tool numbers of the case's tool table (``[tools.T<n>]``), each cut with its own cutter.
 
     Returns
     -------
     tool_changes : list of dict
         ``{"line": ..., "tool": ...}`` per M6.
     notes : list of str
-        When the program uses more than one tool and the run cuts: the case describes one tool, so every
-        tool's cutting load is computed with it (a drill or a tap after an end mill is modelled as that end
-        mill). Empty otherwise.
+        When the run cuts and the program puts a tool in the spindle that the tool table does not list
+        (and it uses more than one tool, or the case has a tool table): that tool's cutting load is
+        computed with ``[tool]`` (a drill after an end mill, unlisted, is modelled as the end mill). Empty
+        otherwise (one tool and no table: ``[tool]`` is that tool).
     """
     table = [{"line": int(line), "tool": int(tool)} for line, tool in changes]
     tools = sorted({int(tool) for _, tool in changes})
+    listed = {int(n) for n in listed}
+    unlisted = [t for t in tools if t not in listed]
     notes = []
-    if cutting and len(tools) > 1:
-        first = next(line for line, tool in changes if tool != changes[0][1])
-        notes.append(
-            f"the program uses tools {', '.join(f'T{t}' for t in tools)} (the first change to another tool at line "
-            f"{first}); the case describes one tool ([tool]: {diameter_mm:g} mm, {flutes} flutes), and the cutting "
-            "load of every tool is computed with it")
+    if cutting and unlisted and (len(tools) > 1 or listed):
+        first = next(line for line, tool in changes if int(tool) in unlisted and (listed or tool != changes[0][1]))
+        cutter = f"[tool]: {diameter_mm:g} mm, {flutes} flutes"
+        if listed:
+            notes.append(
+                f"the program uses {', '.join(f'T{t}' for t in unlisted)} (the first change to one at line {first}), "
+                f"which the case's [tools] does not list ({', '.join(f'T{t}' for t in sorted(listed))}); their "
+                f"cutting load is computed with {cutter}")
+        else:
+            notes.append(
+                f"the program uses tools {', '.join(f'T{t}' for t in tools)} (the first change to another tool at "
+                f"line {first}); the case has no tool table ([tools.T<n>]) and describes one tool ({cutter}), and "
+                "the cutting load of every tool is computed with it")
     return table, notes

@@ -7,6 +7,7 @@ components and wires them by variable name::
     {a}_drive.position ──► mcu.{a}_position, cutting.{a}_position
     {a}_drive.velocity ──► mcu.{a}_velocity
     nck.spindle_speed ──► cutting.spindle_speed   (spindle_rpm is recorded from cutting.spindle_speed_actual)
+    nck.tool ──► cutting.tool                     (with a tool table, [tools] of case.toml: each tool's cutter)
     cutting.fx_mean / fy_mean ──► x_drive / y_drive.disturbance_force   (Fd = +F on the workpiece)
     cutting.fz ──► z_drive.disturbance_force   (the end edges' thrust, a step mean; Fd = +fz, see below)
 
@@ -31,12 +32,13 @@ import numpy as np
 from fmus_src.cutting.component import CuttingLoad
 from fmus_src.cutting.path_component import PathCuttingLoad
 from fmus_src.cutting.table import EngagementTable
+from fmus_src.nck.blocks import ToolChange
 from fmus_src.nck.component import NCKernel
 from fmus_src.nck.m_aliases import format_m_codes
 from fmus_src.servo.drive import DriveAxis
 from fmus_src.servo.mcu import MCU
 
-from .case import Case
+from .case import Case, CaseError, unlisted_tool_error
 from .errors import CncTwinError, SystemDescriptionError
 from .machine import AXES, Machine, frame_parameters
 from .master import Probe
@@ -175,11 +177,14 @@ def cutting_effect_parameters(machine: Machine) -> dict[str, float]:
 
 
 def cutting_parameters(case: Case) -> dict[str, object]:
-    """Cutting-load parameters (SI) from a case (tool, stock, material, ``[cutting.effects]``)."""
+    """Cutting-load parameters (SI) from a case (tool, tool table, stock, material, ``[cutting.effects]``)."""
     params: dict[str, object] = {
         "tool_diameter": case.tool.diameter_mm * 1e-3,
         "flutes": case.tool.flutes,
     }
+    for i, (number, tool) in enumerate(case.tools.items(), start=1):  # the tool table, [tools.T<n>]
+        params.update({f"tool_{i}_number": number, f"tool_{i}_diameter": tool.diameter_mm * 1e-3,
+                       f"tool_{i}_flutes": tool.flutes})
     if case.material:
         params.update(case.machine.si(f"material.{case.material}"))
     params.update(cutting_effect_parameters(case.machine))
@@ -188,6 +193,18 @@ def cutting_parameters(case: Case) -> dict[str, object]:
             params[f"stock_{a}_min"] = case.stock.min_mm[i] * 1e-3
             params[f"stock_{a}_max"] = case.stock.max_mm[i] * 1e-3
     return _declared(CuttingLoad, params)
+
+
+def _check_tools_listed(case: Case, nck: NCKernel) -> None:
+    """With a tool table and no ``[tool]``, every M6 of the program changes to a listed tool (else
+    :class:`~orchestrator.case.CaseError` naming the program line and the case file)."""
+    if case.tool_stated:
+        return
+    nck.planning_inputs()  # interprets the program (set-up does it again, with the plan)
+    changes = [(b.line, b.tool) for b in nck.program_.blocks if isinstance(b, ToolChange)]
+    why = unlisted_tool_error(case, changes)
+    if why is not None:
+        raise CaseError(why)
 
 
 @dataclass
@@ -260,6 +277,8 @@ def build_twin(
     cutting = None
     if options.cutting and case.stock is not None:
         if options.cutting_mode == "path":
+            if case.several_tools():  # the table of options.engagement was built for [tool]
+                engagement_table(case)  # raises, naming the case file
             cutting = PathCuttingLoad("cutting", batch=batch, **cutting_parameters(case))
             cutting.attach_table(options.engagement or engagement_table(case, options, program_text))
         elif options.cutting_mode == "zmap":
@@ -270,6 +289,9 @@ def build_twin(
         for a in AXES:
             system.connect(f"{a}_drive.table_position", f"cutting.{a}_position")   # tool vs workpiece
         system.connect("nck.spindle_speed", "cutting.spindle_speed")
+        if case.tools:  # a tool table: the cutter of the tool in the spindle (without one, the one [tool])
+            system.connect("nck.tool", "cutting.tool")
+            _check_tools_listed(case, nck)
         # step-mean forces: instantaneous samples at 1 ms would alias the tooth frequency
         system.connect("cutting.fx_mean", "x_drive.disturbance_force")
         system.connect("cutting.fy_mean", "y_drive.disturbance_force")
@@ -413,6 +435,10 @@ def engagement_table(case: Case, options: TwinOptions | None = None, program_tex
     """
     if case.stock is None:
         raise SystemDescriptionError(f"{case.program}: an engagement table needs a stock (the case has none)")
+    if case.several_tools():
+        raise SystemDescriptionError(
+            f"{case.source or case.folder}: [tools] lists cutters other than [tool]; the path-mode cutting load's "
+            "engagement table is built for one cutter: use cutting_mode 'zmap'")
     path = reference_path(case, options, program_text)
     params = cutting_parameters(case)
     key = digest(path, {k: v for k, v in params.items() if k == "tool_diameter" or k.startswith("stock_")})

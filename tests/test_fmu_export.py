@@ -245,3 +245,19 @@ def test_setup_error_inside_pythonfmu_is_reported_at_setup(fmus):
     assert err.function == "fmi2ExitInitializationMode" and err.status == 3
     assert "nck: fmi2ExitInitializationMode logged fmi2Error at t = 0.000000 s" in str(err)
     assert "no program" in str(err)
+
+
+def test_cutting_fmu_takes_the_tool_in_the_spindle_and_the_tool_table_as_scalars(fmus):
+    """A program with several tools needs no case at export: the cutting FMU has the Integer input ``tool``
+    and the tool table as FMI 2.0 scalar parameters (empty slots: the one-tool model)."""
+    from fmus_src.cutting.tool_table import N_TOOL_TABLE
+
+    svs = _scalars(fmus["CuttingLoad"])
+    tool = svs["tool"]
+    assert tool.get("causality") == "input" and tool.get("variability") == "discrete"
+    assert tool.find("Integer") is not None
+    for i in (1, N_TOOL_TABLE):
+        assert svs[f"tool_{i}_number"].get("causality") == "parameter"
+        assert svs[f"tool_{i}_number"].find("Integer").get("start") == "0"
+        assert svs[f"tool_{i}_diameter"].find("Real").get("unit") == "m"
+        assert svs[f"tool_{i}_flutes"].find("Integer") is not None

@@ -5,6 +5,7 @@
 * :mod:`.force` — chip thickness and mechanistic tooth forces (Eq. 10-13);
 * :mod:`.kernel` — one communication step: substeps, exact means, entry/exit location, peak;
 * :mod:`.component` — :class:`CuttingLoad`, the FMI-style component;
+* :mod:`.tool_table` — the tool table (the cutter of each tool number of a program with several tools);
 * :mod:`.effects`, :mod:`.chip`, :mod:`.effect_model` — effect terms (runout, helix, edge force, deflection,
   wear, spindle droop, chatter), off by default; :mod:`.kernel_effects` and :mod:`.path_effects` the steps
   with them on (Z-map and path mode);

@@ -38,6 +38,20 @@ Time discretisation of one communication step ``[t, t + h]``
 * ``fc_peak`` is the largest ``Fc`` over the substep instants of the step and
   over the entry/exit instants so located.
 
+Several tools (the tool table)
+------------------------------
+The Integer input ``tool`` is the tool in the spindle (the NC kernel's ``tool``);
+the slot parameters ``tool_<i>_number`` / ``_diameter`` / ``_flutes``
+(:mod:`.tool_table`) give listed tools their own cutter, every other tool is
+cut with ``tool_diameter`` and ``flutes``. At the start of a step, a member
+whose tool's cutter differs from its current one commits its whole recent
+path (to the tool at the step's start) to the Z-map with the old radius, then
+takes the new radius and teeth and the near-field spacing and lag derived
+from the radius (:meth:`CuttingLoad._switch_tools`; compiled:
+:func:`.zmap_numba.switch_tool`). With every slot empty, or every listed
+cutter equal to the default, nothing ever switches: the one-tool model bit
+for bit.
+
 Feeding into material with the spindle stopped (a crash)
 --------------------------------------------------------
 The chip per tooth of a tool that does not turn is unbounded. A member whose
@@ -74,17 +88,16 @@ from ..errors import CncTwinError
 from ..jit import NUMBA_AVAILABLE
 from .axial import AX_MRR, AX_THRUST, AX_TORQUE, AXIAL_RATIO_DEFAULT, axial_cuts, stalled_plunges
 from .effect_model import CHATTER_SUBSTEPS_PER_PERIOD, EffectParameters, EffectState
-from .engagement import NearField, SweptPath
+from .engagement import PATH_SPACING, NearField, SweptPath
 from .kernel import CHIP_HISTORY_WIDTH, StepResult, chord_advance_all, chord_feeds, cut_step, stalled_cuts
 from .kernel_effects import cut_step_effects
 from .stock import ZMapStock
-from .zmap_numba import (ERR_STALLED, ERR_SUBSTEPS, IO_ROWS, ZMapArrays, _ring, commit, cut_step_compiled,
-                         zmap_component_step)
+from .tool_table import TABLE_PARAMETERS, ToolTable, slots, table_variables
+from .zmap_numba import (ERR_STALLED, ERR_SUBSTEPS, IO_FX, IO_FZ, IO_INPUTS, IO_ROWS, ZMapArrays, _ring, commit,
+                         cut_step_compiled, flush, zmap_component_step)
 
 #: Refuse steps needing more substeps than this (spindle speed or jump far too large).
 MAX_SUBSTEPS = 100_000
-#: XY spacing of the stored near-field path, as a fraction of the tool radius.
-PATH_SPACING = 0.1
 
 
 #: Parameters of the baseline model (Eq. 10-13 on a Z-map stock); every other parameter is an effect term,
@@ -92,7 +105,7 @@ PATH_SPACING = 0.1
 BASELINE_PARAMETERS = frozenset((
     "tool_diameter", "flutes", "kt", "ke", "ka", "stock_x_min", "stock_y_min", "stock_z_min", "stock_x_max",
     "stock_y_max", "stock_z_max", "stock_cell", "angle_steps_per_tooth", "initial_spindle_angle",
-))
+)) | TABLE_PARAMETERS
 
 
 class CuttingError(CncTwinError):
@@ -148,10 +161,13 @@ class CuttingLoad(Component):
         _p("chatter_frequency", "Hz", 0.0, "natural frequency of the tool mode (x and y); 0 = no chatter"),
         _p("chatter_damping", "1", 0.0, "damping ratio of the tool mode"),
         _p("chatter_stiffness", "N/m", 0.0, "modal stiffness of the tool mode"),
+        *table_variables(),
         Variable("x_position", "input", "m", 0.0, "actual tool-tip x, work coordinates"),
         Variable("y_position", "input", "m", 0.0, "actual tool-tip y, work coordinates"),
         Variable("z_position", "input", "m", 0.0, "actual tool-tip z, work coordinates"),
         Variable("spindle_speed", "input", "rad/s", 0.0, "actual spindle speed (M03 positive)"),
+        Variable("tool", "input", "1", 0, "tool in the spindle (T number, the NC kernel's tool): its cutter from "
+                 "the tool table (tool_<i>_*), tool_diameter and flutes when unlisted", "Integer"),
         Variable("fx", "output", "N", 0.0, "x force on the workpiece at t + h"),
         Variable("fy", "output", "N", 0.0, "y force on the workpiece at t + h"),
         Variable("fc", "output", "N", 0.0, "cutting load sqrt(fx^2 + fy^2) at t + h (Eq. 13)"),
@@ -178,8 +194,10 @@ class CuttingLoad(Component):
     def _setup(self, t0: float) -> None:
         v = self.values
         self._check_parameters()
-        self._radius = 0.5 * np.asarray(v["tool_diameter"], dtype=np.float64)
-        self._flutes = np.asarray(v["flutes"], dtype=np.int64)
+        # the cutter in the spindle per member (own arrays: a tool change replaces them in place)
+        self._radius = np.array(0.5 * np.asarray(v["tool_diameter"], dtype=np.float64))
+        self._flutes = np.array(np.broadcast_to(np.asarray(v["flutes"], dtype=np.int64), (self.batch,)))
+        self._tools = ToolTable.from_values(v, self.batch, self.name, CuttingError)
         lower = np.stack([v["stock_x_min"], v["stock_y_min"], v["stock_z_min"]], axis=1)
         upper = np.stack([v["stock_x_max"], v["stock_y_max"], v["stock_z_max"]], axis=1)
         self.stock = ZMapStock(lower, upper, np.asarray(v["stock_cell"], dtype=np.float64))
@@ -188,6 +206,10 @@ class CuttingLoad(Component):
         spacing = PATH_SPACING * self._radius
         lag = self._radius + 2.0 * np.maximum(self.stock.dx, self.stock.dy)
         capacity = int(np.ceil(np.max(lag / spacing))) + 4
+        if self._tools.listed:  # room for the near field of the smallest cutter of the table
+            smallest = self._tools.smallest_radius()
+            cell = 2.0 * np.maximum(self.stock.dx, self.stock.dy)
+            capacity = max(capacity, int(np.ceil(np.max((smallest + cell) / (PATH_SPACING * smallest)))) + 4)
         self.path = SweptPath(position, spacing, lag, capacity)
         # motion state per member: the tool tip at the start of the step, then its chip history (kernel.chord_feed)
         self._motion = np.zeros((self.batch, 3 + CHIP_HISTORY_WIDTH))
@@ -372,9 +394,10 @@ class CuttingLoad(Component):
         """The arrays :func:`.zmap_numba.zmap_component_step` steps, after ``io``, without ``failed``.
 
         The component's own arrays (stock heights, path ring buffer, motion state (start position and
-        chip history), spindle angle, effect clocks, failure status) are returned, not copies, so the
-        compiled master loop can step them in place; ``spacing``, ``lag`` and the coefficients are fresh
-        arrays.
+        chip history), spindle angle, effect clocks, failure status, the cutter in the spindle (radius,
+        teeth) and the path's ``spacing`` and ``lag``, which a tool change replaces) are returned, not copies,
+        so the compiled master loop can step them in place; the coefficients are fresh arrays; the tool table
+        (:class:`.tool_table.ToolTable`) comes last.
         """
         v = self.values
         z = self._zmap
@@ -386,7 +409,8 @@ class CuttingLoad(Component):
                 np.ascontiguousarray(self._flutes, dtype=np.int64),
                 np.array(v["angle_steps_per_tooth"], dtype=np.float64), np.array(v["kt"], dtype=np.float64),
                 np.array(v["ke"], dtype=np.float64), np.array(v["ka"], dtype=np.float64), st.cutting_time,
-                st.torque, st.angle, self._kernel_status, self._kernel_diag, int(MAX_SUBSTEPS))
+                st.torque, st.angle, self._kernel_status, self._kernel_diag, int(MAX_SUBSTEPS), self._tools.number,
+                self._tools.radius, self._tools.flutes)
 
     def fail_kernel_substeps(self, h: float) -> None:
         """Fail the members :func:`.zmap_numba.zmap_component_step` reported; clear them.
@@ -403,10 +427,60 @@ class CuttingLoad(Component):
         if stalled.any():
             self._fail_stalled(stalled, h)
 
+    def _switch_tools(self) -> None:
+        """Each member takes the cutter of the tool in its spindle (the ``tool`` input) from the tool table.
+
+        A member whose radius or teeth change first commits its recent path with the old cutter
+        (:meth:`_flush_path`); its near-field spacing and lag become the new cutter's. The numpy form of
+        :func:`.zmap_numba.switch_tool` (the same numbers).
+        """
+        table = self._tools
+        if not table.listed:
+            return
+        k = slots(table, self.values["tool"])
+        rows = np.arange(self.batch)
+        r_new = table.radius[rows, k]
+        z_new = table.flutes[rows, k]
+        change = (r_new != self._radius) | (z_new != self._flutes)
+        if not change.any():
+            return
+        self._flush_path(change)
+        self._radius[change] = r_new[change]
+        self._flutes[change] = z_new[change]
+        self.path.spacing[change] = PATH_SPACING * r_new[change]
+        self.path.lag[change] = r_new[change] + 2.0 * np.maximum(self.stock.dx, self.stock.dy)[change]
+
+    def _flush_path(self, mask: np.ndarray) -> None:
+        """Commit the whole recent path of the members ``mask`` (shape (B,) bool), to the tool at the step's
+        start, to the Z-map with their current radius (a tool change; :func:`.zmap_numba.flush_member`)."""
+        if self.use_compiled:
+            flush(self._zmap, self.path, mask, self._p_prev, self._radius)
+            return
+        path = self.path
+        p = self._p_prev
+        rows = np.flatnonzero(mask)
+        last_i = path._index(path.count - 1)[rows]  # noqa: SLF001 - the ring buffer's own indexing
+        new_i = (path.head[rows] + path.count[rows]) % path.capacity
+        step = np.hypot(p[rows, 0] - path.points[rows, last_i, 0], p[rows, 1] - path.points[rows, last_i, 1])
+        path.points[rows, new_i] = p[rows]
+        path.arc[rows, new_i] = path.arc[rows, last_i] + step
+        path.count[rows] += 1
+        every = np.arange(self.batch)
+        while True:
+            pop = mask & (path.count >= 2)
+            if not pop.any():
+                break
+            first = path.points[every, path.head]
+            second = path.points[every, (path.head + 1) % path.capacity]
+            path.head = np.where(pop, (path.head + 1) % path.capacity, path.head)
+            path.count = np.where(pop, path.count - 1, path.count)
+            self.stock.remove_sweep(first, second, self._radius, pop)
+
     def _do_step(self, t: float, h: float) -> None:
         if self._whole_step_compiled:
             self._do_step_compiled(h)
             return
+        self._switch_tools()
         v = self.values
         p_new, actual, held = self._step_inputs()
         failed = self.failed_members & ~held
@@ -459,11 +533,11 @@ class CuttingLoad(Component):
         """:meth:`_do_step` with every effect term off, in one compiled call (the same numbers)."""
         v = self.values
         io = self._io
-        for r in range(4):  # inputs
+        for r in IO_INPUTS:
             io[r] = v[IO_ROWS[r]]
         arrays = self.compiled_step_arrays()
         n_bad = zmap_component_step(h, io, *arrays[:18], self.failed_members, *arrays[18:])
-        for r in range(4, len(IO_ROWS)):  # outputs
+        for r in range(IO_FX, IO_FZ + 1):  # outputs
             v[IO_ROWS[r]][...] = io[r]
         if n_bad:
             self.fail_kernel_substeps(h)

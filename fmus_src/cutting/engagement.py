@@ -41,6 +41,8 @@ from .stock import ZMapStock, disc_sweep_cover
 #: Rim tolerance of the near-field test, m: a point within 1 nm of the rim of
 #: the current tool disc counts as outside it (the front arc is in material).
 RIM_TOL = 1e-9
+#: XY spacing of the stored near-field path (:class:`SweptPath`), as a fraction of the tool radius.
+PATH_SPACING = 0.1
 #: XY distance within which a lower tool position only lowers the last stored
 #: point of :class:`SweptPath` (the same axis), m.
 SAME_XY_TOL = 1e-9

@@ -37,6 +37,7 @@ from .effect_model import HISTORY_PER_PITCH
 from .path_axial import path_axial
 from .path_effects import path_step_effects
 from .table import EngagementTable
+from .tool_table import ToolTable
 
 #: Relative mismatch of tool radius / stock tolerated between parameters and table.
 MATCH_TOL = 1e-9
@@ -110,6 +111,18 @@ class PathCuttingLoad(CuttingLoad):
                         f"{ref} m (rebuild the table for this stock)"
                     )
 
+    def _check_one_cutter(self) -> None:
+        """The tool table lists no cutter other than ``tool_diameter`` / ``flutes`` (the table's one cutter)."""
+        tools = ToolTable.from_values(self.values, self.batch, self.name, CuttingError)
+        other = (tools.radius != tools.radius[:, :1]) | (tools.flutes != tools.flutes[:, :1])
+        if other.any():
+            m, k = (int(i[0]) for i in np.nonzero(other))
+            raise CuttingError(
+                f"{self.name}: the tool table lists T{int(tools.number[m, k])} ({2e3 * tools.radius[m, k]:g} mm, "
+                f"{int(tools.flutes[m, k])} flutes) beside the {2e3 * tools.radius[m, 0]:g} mm, "
+                f"{int(tools.flutes[m, 0])}-flute tool_diameter / flutes; the path mode's engagement table is "
+                "built for one cutter: run a program with several cutters on the Z-map cutting load (CuttingLoad)")
+
     # ------------------------------------------------------------------ lifecycle
     def _setup(self, t0: float) -> None:
         v = self.values
@@ -125,6 +138,7 @@ class PathCuttingLoad(CuttingLoad):
             self._table = EngagementTable.load(fname)
         table = self._table
         self._check_table(table)
+        self._check_one_cutter()
         position = self._position()
         self._par = np.stack([
             0.5 * np.asarray(v["tool_diameter"], dtype=np.float64),

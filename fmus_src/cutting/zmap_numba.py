@@ -34,12 +34,13 @@ import numpy as np
 from ..errors import CncTwinError
 from ..jit import njit
 from ..jit_cache import guard_cache
-from . import axial, engagement, kernel, stock
+from . import axial, engagement, kernel, stock, tool_table
 from .axial import AX_MRR, AX_THRUST, AX_TORQUE, axial_cut, stalled_plunge
-from .engagement import RIM_TOL, SAME_XY_TOL, SweptPath
+from .engagement import PATH_SPACING, RIM_TOL, SAME_XY_TOL, SweptPath
 from .kernel import (H_COUNT, OMEGA_FLOOR, SECTION_ROUNDS, SECTIONS, StepResult, chord_advance, chord_feed,
                      stalled_cut, substep_counts)
 from .stock import StockError, ZMapStock, sweep_cover_z
+from .tool_table import slot_of
 
 #: Columns of the per-member float parameters of :func:`zmap_step`.
 MP_X0, MP_Y0, MP_Z0, MP_X1, MP_Y1, MP_Z1, MP_THETA, MP_OMEGA, MP_RADIUS, MP_KT, MP_KE, MP_FX, MP_FY = range(13)
@@ -495,6 +496,58 @@ def commit_rows(heights: np.ndarray, grid: np.ndarray, cells: np.ndarray, rho: n
             _remove_segment(heights, grid, cells, rho, b, points, i_first, i_second, radius[b])
 
 
+@njit
+def flush_member(heights: np.ndarray, grid: np.ndarray, cells: np.ndarray, rho: np.ndarray, points: np.ndarray,
+                 arc: np.ndarray, head: np.ndarray, count: np.ndarray, b: int, px: float, py: float, pz: float,
+                 radius: float) -> None:
+    """Commit member ``b``'s whole recent path, to the tool at ``(px, py, pz)``, to the Z-map (a tool change).
+
+    The tool position is appended to the ring buffer (the open segment from the last stored point becomes a
+    stored one), then every stored segment is removed from the Z-map with ``radius`` (the tool that swept
+    them, :func:`_remove_segment`), oldest first, leaving the position as the only stored point. The numpy
+    reference is :meth:`.component.CuttingLoad._flush_path`.
+    """
+    cap = points.shape[1]
+    last_i = (head[b] + count[b] - 1) % cap
+    new_i = (head[b] + count[b]) % cap
+    step = math.hypot(px - points[b, last_i, 0], py - points[b, last_i, 1])
+    points[b, new_i, 0] = px
+    points[b, new_i, 1] = py
+    points[b, new_i, 2] = pz
+    arc[b, new_i] = arc[b, last_i] + step
+    count[b] += 1
+    while count[b] >= 2:
+        i_first = head[b]
+        i_second = (head[b] + 1) % cap
+        head[b] = i_second
+        count[b] -= 1
+        _remove_segment(heights, grid, cells, rho, b, points, i_first, i_second, radius)
+
+
+@njit
+def switch_tool(heights: np.ndarray, grid: np.ndarray, cells: np.ndarray, rho: np.ndarray, points: np.ndarray,
+                arc: np.ndarray, head: np.ndarray, count: np.ndarray, spacing: np.ndarray, lag: np.ndarray,
+                b: int, px: float, py: float, pz: float, radius: np.ndarray, flutes: np.ndarray,
+                table_number: np.ndarray, table_radius: np.ndarray, table_flutes: np.ndarray, tool: float) -> None:
+    """Member ``b`` takes the cutter of tool ``tool`` from the tool table (:mod:`.tool_table`).
+
+    When its radius or teeth differ from the member's current ones, the recent path is committed with the
+    old radius (:func:`flush_member`, the tool at ``(px, py, pz)``), then ``radius``, ``flutes`` and the
+    path's ``spacing`` and ``lag`` (:data:`.engagement.PATH_SPACING` of the radius; the radius plus two cells)
+    become the new tool's. Nothing changes otherwise (a one-tool table leaves every number as it was).
+    """
+    k = slot_of(table_number, b, tool)
+    r_new = table_radius[b, k]
+    z_new = table_flutes[b, k]
+    if r_new == radius[b] and z_new == flutes[b]:
+        return
+    flush_member(heights, grid, cells, rho, points, arc, head, count, b, px, py, pz, radius[b])
+    radius[b] = r_new
+    flutes[b] = z_new
+    spacing[b] = PATH_SPACING * r_new
+    lag[b] = r_new + 2.0 * np.maximum(grid[b, G_DX], grid[b, G_DY])
+
+
 def commit(zmap: ZMapArrays, path: SweptPath, position: np.ndarray, radius: np.ndarray) -> None:
     """Store the new tool position in ``path`` and commit its old segments to the Z-map (compiled).
 
@@ -522,13 +575,29 @@ def commit(zmap: ZMapArrays, path: SweptPath, position: np.ndarray, radius: np.n
                 np.ascontiguousarray(position, dtype=np.float64), np.ascontiguousarray(radius, dtype=np.float64))
 
 
+def flush(zmap: ZMapArrays, path: SweptPath, mask: np.ndarray, position: np.ndarray, radius: np.ndarray) -> None:
+    """:func:`flush_member` for every member in ``mask`` (shape (B,) bool): the tool changes at ``position``
+    (shape (B, 3), m); ``radius`` (B,) is the radius of the cutter that swept the path, m."""
+    for name, dtype in (("points", np.float64), ("arc", np.float64), ("head", np.int64), ("count", np.int64)):
+        value = getattr(path, name)
+        if value.dtype != dtype or not value.flags.c_contiguous or not value.flags.writeable:
+            setattr(path, name, np.array(value, dtype=dtype))
+    for b in np.flatnonzero(mask):
+        flush_member(zmap.heights, zmap.grid, zmap.cells, zmap.rho, path.points, path.arc, path.head, path.count,
+                     int(b), float(position[b, 0]), float(position[b, 1]), float(position[b, 2]), float(radius[b]))
+
+
 #: Rows of the ``io`` block of :func:`zmap_component_step`: the inputs and outputs of
-#: :class:`.component.CuttingLoad`, in this order (``engaged_teeth`` as a float).
+#: :class:`.component.CuttingLoad`, in this order (``engaged_teeth`` and the ``tool`` input as floats): the
+#: four motion inputs, the outputs ``IO_FX`` .. ``IO_FZ``, then the tool in the spindle.
 IO_ROWS = ("x_position", "y_position", "z_position", "spindle_speed", "fx", "fy", "fc", "fc_peak", "fx_mean",
            "fy_mean", "spindle_torque", "spindle_power", "mrr", "spindle_angle", "axial_depth", "chip_thickness",
-           "engaged_teeth", "spindle_speed_actual", "tool_vibration_x", "tool_vibration_y", "cutting_time", "fz")
+           "engaged_teeth", "spindle_speed_actual", "tool_vibration_x", "tool_vibration_y", "cutting_time", "fz",
+           "tool")
 (IO_X, IO_Y, IO_Z, IO_SPEED, IO_FX, IO_FY, IO_FC, IO_PEAK, IO_MFX, IO_MFY, IO_TORQUE, IO_POWER, IO_MRR, IO_ANGLE,
- IO_DEPTH, IO_CHIP, IO_TEETH, IO_ACTUAL, IO_VIBX, IO_VIBY, IO_TIME, IO_FZ) = range(len(IO_ROWS))
+ IO_DEPTH, IO_CHIP, IO_TEETH, IO_ACTUAL, IO_VIBX, IO_VIBY, IO_TIME, IO_FZ, IO_TOOL) = range(len(IO_ROWS))
+#: The input rows of ``io`` (the others are outputs).
+IO_INPUTS = (IO_X, IO_Y, IO_Z, IO_SPEED, IO_TOOL)
 #: ``status`` of :func:`zmap_component_step`: the member needs more than ``max_substeps`` substeps.
 ERR_SUBSTEPS = 1
 #: ``status`` of :func:`zmap_component_step`: the member fed into material with a stalled spindle
@@ -543,6 +612,7 @@ def zmap_component_step(
     p_prev: np.ndarray, theta: np.ndarray, radius: np.ndarray, flutes: np.ndarray, steps: np.ndarray,
     kt: np.ndarray, ke: np.ndarray, ka: np.ndarray, failed: np.ndarray, cutting_time: np.ndarray,
     torque: np.ndarray, angle: np.ndarray, status: np.ndarray, diag: np.ndarray, max_substeps: int,
+    table_number: np.ndarray, table_radius: np.ndarray, table_flutes: np.ndarray,
 ) -> int:
     """``CuttingLoad._do_step`` with every effect term off and the compiled kernels, for every member.
 
@@ -589,6 +659,10 @@ def zmap_component_step(
         Spindle speed (rad/s) and XY tool move (m) of those members.
     max_substeps : int
         Most substeps a step may take.
+    table_number, table_radius, table_flutes : ndarray, shape (B, 1 + n)
+        The tool table (:class:`.tool_table.ToolTable`): at the start of each member's step, the cutter of
+        the ``tool`` input replaces ``radius`` and ``flutes`` (and the path's ``spacing`` and ``lag``) when
+        it differs, after the recent path is committed with the old one (:func:`switch_tool`).
 
     Returns
     -------
@@ -596,6 +670,11 @@ def zmap_component_step(
         Number of members newly reported in ``status``.
     """
     B = io.shape[1]
+    if table_number.shape[1] > 1:  # a tool table: each member cuts with the cutter of the tool in its spindle
+        for b in range(B):
+            switch_tool(heights, grid, cells, rho, points, arc, head, count, spacing, lag, b, p_prev[b, 0],
+                        p_prev[b, 1], p_prev[b, 2], radius, flutes, table_number, table_radius, table_flutes,
+                        io[IO_TOOL, b])
     two_pi = 2.0 * math.pi
     mp = np.empty((1, 13))
     mi = np.empty((1, 3), dtype=np.int64)
@@ -709,5 +788,5 @@ def zmap_component_step(
 
 
 # the cached kernels call stock.sweep_cover_z and hold constants of kernel and engagement: recompile on change
-for _kernel in (_depth, zmap_step, _remove_segment, commit_rows, zmap_component_step):
-    guard_cache(_kernel, stock, kernel, engagement, axial)
+for _kernel in (_depth, zmap_step, _remove_segment, commit_rows, flush_member, switch_tool, zmap_component_step):
+    guard_cache(_kernel, stock, kernel, engagement, axial, tool_table)

@@ -70,9 +70,10 @@ _CUT = ((_Members(1), _Members(1), _Members(0)) + (None,) * 11 + (_Members(0),) 
         + (_Members(0, copy=False), None, None, _Members(0)))
 _RO = _Members(0, copy=False)
 # Z-map heights, grid, cells, rho; ring buffer points, arc, head, count; spacing, lag; start position, angle;
-# radius, flutes, steps, Kt, Ke, Ka; clocks (time, torque, angle); status, diag (2, B); max substeps
-_ZMAP = ((_Members(0), _RO, _RO, _RO) + (_Members(0),) * 4 + (_RO, _RO, _Members(0), _Members(0)) + (_RO,) * 6
-         + (_Members(0),) * 4 + (_Members(1), None))
+# radius, flutes (spacing, lag, radius and flutes written at a tool change); steps, Kt, Ke, Ka; clocks (time,
+# torque, angle); status, diag (2, B); max substeps; the tool table (number, radius, flutes: (B, 1 + n))
+_ZMAP = ((_Members(0), _RO, _RO, _RO) + (_Members(0),) * 8 + (_Members(0),) * 2 + (_RO,) * 4
+         + (_Members(0),) * 4 + (_Members(1), None) + (_RO,) * 3)
 HEAD = (None,) * 6 + (_Members(1),) + (None,) * 14 + (_Members(0), _Members(0, copy=False), None, None)
 TAIL = (None, None, _Members(1, copy=False), _HAS_FAILED, _NCK, _MCU, _DRIVES, _CUT, _ZMAP)
 _STOP_ROWS = 20  # position of stop_rows in HEAD

@@ -19,8 +19,9 @@ Covered (each checked per component; anything else runs on the Python master):
   arrays of :meth:`~fmus_src.cutting.component.CuttingLoad.compiled_step_arrays` (stock heights, path ring
   buffer, start position, spindle angle, effect clocks) are the component's own, stepped in place by
   :func:`~fmus_src.cutting.zmap_numba.zmap_component_step`, which is also the component's own step;
-* Gauss-Seidel coupling, connections between Real variables, probes / stop signals / limits on
-  inputs and outputs.
+* Gauss-Seidel coupling, connections between Real variables and, unscaled, between Integer ones (the tool
+  in the spindle, ``nck.tool -> cutting.tool``; T numbers are exact in float64), probes / stop signals /
+  limits on inputs and outputs.
 
 A parameter these classes gain later (an effect term) is accepted only at its
 off value (0 or an empty string), so a new term never runs silently without
@@ -34,6 +35,7 @@ import numpy as np
 
 from fmus_src.cutting.component import BASELINE_PARAMETERS, MAX_SUBSTEPS, CuttingLoad
 from fmus_src.cutting.path_component import PathCuttingLoad
+from fmus_src.cutting.tool_table import TABLE_PARAMETERS
 from fmus_src.nck.component import NCKernel
 from fmus_src.servo.drive import DriveAxis
 from fmus_src.servo.mcu import MCU, TICK_RTOL
@@ -67,7 +69,7 @@ _CUT_KNOWN = frozenset((
     "stock_y_max", "stock_z_max", "stock_cell", "angle_steps_per_tooth", "initial_spindle_angle",
     "engagement_table", "path_tolerance",
     "ka",  # the end edges' thrust ratio (fmus_src.cutting.path_axial)
-))
+)) | TABLE_PARAMETERS  # a tool table with one cutter (PathCuttingLoad refuses others at set-up)
 
 _INTEGRATORS = {"rk4": INTEGRATOR_RK4, "exponential": INTEGRATOR_EXPONENTIAL}
 
@@ -191,10 +193,11 @@ class Layout:
         # connections grouped by target component, in connection order
         wires: list[list[tuple[int, int, float]]] = [[] for _ in self.order]
         for c in system.connections:
-            for ref in (c.source, c.target):
-                comp, var = split_reference(ref)
-                if system.components[comp].variable(var).type != "Real":
-                    raise Unsupported(f"connection {c.source} -> {c.target}: {ref} is not Real")
+            types = {system.components[comp].variable(var).type
+                     for comp, var in (split_reference(c.source), split_reference(c.target))}
+            if types != {"Real"} and not (types == {"Integer"} and c.factor == 1.0 and c.offset == 0.0):
+                raise Unsupported(f"connection {c.source} -> {c.target}: {sorted(types)} variables (the compiled "
+                                  "loop connects Real ones, and Integer ones unscaled)")
             if c.offset != 0.0:  # the loop scales only; the Python loop applies factor and offset
                 raise Unsupported(f"connection {c.source} -> {c.target} converts units with an offset "
                                   f"({c.offset!r}); the compiled loop applies factors only")
@@ -330,7 +333,8 @@ class Layout:
             f, i = np.zeros(B), np.zeros(B, dtype=np.int64)
             self.zmap = (np.zeros((B, 1, 1), dtype=np.float32), np.ones((B, 5)), np.zeros((B, 2), dtype=np.int64),
                          f, np.zeros((B, 3, 3)), np.zeros((B, 3)), i, i.copy(), f, f, np.zeros((B, 3)), f.copy(),
-                         f, i, f, f, f, f, f.copy(), f.copy(), f.copy(), i.copy(), np.zeros((2, B)), 1)
+                         f, i, f, f, f, f, f.copy(), f.copy(), f.copy(), i.copy(), np.zeros((2, B)), 1,
+                         np.full((B, 1), -1, dtype=np.int64), np.zeros((B, 1)), np.zeros((B, 1), dtype=np.int64))
             return
         path = c.path
         for name, dtype in (("points", np.float64), ("arc", np.float64), ("head", np.int64), ("count", np.int64)):
@@ -374,11 +378,12 @@ class Layout:
         c = self._zmap_comp
         st = c._effect_state  # noqa: SLF001
         own = (c._zmap.heights, c.path.points, c.path.arc, c.path.head, c.path.count,  # noqa: SLF001
-               c._motion, c._theta, st.cutting_time, st.torque, st.angle)  # noqa: SLF001
-        shared = tuple(self.zmap[i] for i in (0, 4, 5, 6, 7, 10, 11, 18, 19, 20))
+               c._motion, c._theta, st.cutting_time, st.torque, st.angle,  # noqa: SLF001
+               c.path.spacing, c.path.lag, c._radius, c._flutes)  # noqa: SLF001 - a tool change replaces these
+        shared = tuple(self.zmap[i] for i in (0, 4, 5, 6, 7, 10, 11, 18, 19, 20, 8, 9, 12, 13))
         if any(a is not b for a, b in zip(own, shared)):
             raise CncTwinError(f"compiled loop: {c.name} replaced an array the loop shares with it "
-                               "(stock heights, path ring buffer or effect clocks)")
+                               "(stock heights, path ring buffer, cutter in the spindle or effect clocks)")
 
     def unpack(self, V: np.ndarray) -> None:
         """Write ``V`` and the loop's state copies back into the components (values, drive states, MCU tick)."""

@@ -73,6 +73,8 @@ CUT_OUTPUTS = ("fx", "fy", "fc", "fc_peak", "fx_mean", "fy_mean", "spindle_torqu
 CUT_EFFECT_OUTPUTS = ("spindle_speed_actual", "tool_vibration_x", "tool_vibration_y", "cutting_time")
 #: ``fz``: the end edges' thrust (axial chip; path mode: :func:`fmus_src.cutting.path_axial.path_axial`).
 CUT_ROWS = CUT_INPUTS + CUT_OUTPUTS + ("engaged_teeth",) + CUT_EFFECT_OUTPUTS + ("fz",)
+#: ``tool``: the tool in the spindle (PathCuttingLoad models one cutter; the input is not read).
+CUT_ROWS = CUT_ROWS + ("tool",)
 #: Rows of the Z-map cutting load (``CuttingLoad``), in the order of ``zmap_component_step``'s ``io``.
 ZMAP_ROWS = IO_ROWS
 _OUT_TORQUE = 4 + CUT_OUTPUTS.index("spindle_torque")
@@ -256,7 +258,8 @@ def _run_chunk(
     (c_par, c_st, c_engaged, c_verts, c_vs, c_ds, c_count, c_alpha, c_beta, c_top, c_zfloor, c_margin, c_tol,
      c_maxsub, c_time, c_torque, c_angle, c_status, c_ka, c_axa, c_axj, c_zold) = cut
     (z_heights, z_grid, z_cells, z_rho, z_points, z_arc, z_head, z_count, z_spacing, z_lag, z_prev, z_theta,
-     z_radius, z_flutes, z_steps, z_kt, z_ke, z_ka, z_time, z_torque, z_angle, z_status, z_diag, z_maxsub) = zmap
+     z_radius, z_flutes, z_steps, z_kt, z_ke, z_ka, z_time, z_torque, z_angle, z_status, z_diag, z_maxsub,
+     z_tnum, z_trad, z_tflu) = zmap
     n_zmap = len(ZMAP_ROWS)
     B = V.shape[1]
     m_tp2 = m_tp * m_tp
@@ -362,7 +365,7 @@ def _run_chunk(
                     n_bad = zmap_component_step(
                         h_i, V[base:base + n_zmap], z_heights, z_grid, z_cells, z_rho, z_points, z_arc, z_head,
                         z_count, z_spacing, z_lag, z_prev, z_theta, z_radius, z_flutes, z_steps, z_kt, z_ke, z_ka,
-                        comp_failed[c], z_time, z_torque, z_angle, z_status, z_diag, z_maxsub)
+                        comp_failed[c], z_time, z_torque, z_angle, z_status, z_diag, z_maxsub, z_tnum, z_trad, z_tflu)
                     if n_bad != 0:  # members needing too many substeps (held, blanked): the component fails them
                         return k, n_rec, EV_FAIL, c, n_bad, j, item
                 else:  # KIND_CUT

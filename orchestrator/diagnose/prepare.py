@@ -192,14 +192,15 @@ def _has_commands(recording: Recording, nc: Recording) -> bool:
 
 def run_key(case: Case, machine: Machine, *extra: object) -> str | None:
     """Digest of what the twin's run of ``case`` on ``machine`` depends on (program text, machine values, stock,
-    tool, material, offsets; :func:`orchestrator.memo.digest`), None when the program cannot be read (the run
+    tool and tool table, material, offsets; :func:`orchestrator.memo.digest`), None when the program cannot be read (the run
     then raises its own error)."""
     try:
         text = Path(case.program).read_bytes()
     except OSError:
         return None
+    tools = (case.tools, case.tool_stated) if case.tools else ()  # the tool table, when the case has one
     return digest(text.decode("utf-8", errors="replace"), machine.values, str(machine.path), case.stock,
-                  case.tool, case.material, case.extra, case.offsets, *extra)
+                  case.tool, case.material, case.extra, case.offsets, *tools, *extra)
 
 
 def twin_commands(case: Case, machine: Machine) -> Recording:

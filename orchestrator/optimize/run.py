@@ -241,9 +241,10 @@ class OptimizeResult:
     tool_changes : list of dict
         ``{"line": ..., "tool": ...}`` per M6 of the program, in execution order.
     notes : list of str
-        What the twin assumed (as ``cnctwin simulate``'s summary): a program using more than one tool has every
-        tool's cutting load computed with the case's one ``[tool]``. Also when the original program was written
-        because no candidate passed the Z-map check (and whether the original itself exceeds the limit).
+        What the twin assumed (as ``cnctwin simulate``'s summary): a tool of the program that the case's tool
+        table (``[tools.T<n>]``) does not list has its cutting load computed with ``[tool]``. Also when the
+        original program was written because no candidate passed the Z-map check (and whether the original
+        itself exceeds the limit).
     tidy : dict or None
         The equal-feeds post-pass (``settings.tidy``): objective before and after (s or KRW, the search's
         path-mode figures), rounds and the accepted copies (:class:`.tidy.TidyResult`); None when it did not run.
@@ -697,7 +698,8 @@ def optimize(program: str | Path | None = None, case: str | Path | Case | None =
         push=None if pushed is None else pushed.as_dict(),
     )
     changes = [(b.line, b.tool) for b in ctx.interpreted().blocks if isinstance(b, ToolChange)]
-    result.tool_changes, tool_text = tool_notes(changes, True, ctx.case.tool.diameter_mm, ctx.case.tool.flutes)
+    result.tool_changes, tool_text = tool_notes(changes, True, ctx.case.tool.diameter_mm, ctx.case.tool.flutes,
+                                                ctx.case.tools)
     result.notes = tool_text + ([ctx.search_model_note] if ctx.search_model_note else []) + notes
     if out_path is not None:
         result.files = write_outputs(result, ctx, settings, out_path)

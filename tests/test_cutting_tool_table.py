@@ -1,0 +1,289 @@
+"""A tool table per case: each tool of a program (T words, M6) cuts with its own cutter.
+
+``[tools.T<n>]`` of case.toml (:func:`orchestrator.case.load_case`) lists cutters by tool number; the Z-map
+cutting load takes the NC kernel's tool in the spindle and switches each member's radius and teeth at a tool
+change (:mod:`fmus_src.cutting.tool_table`). Checked against hand calculations on a program that slots with
+T1 (6 mm, 2 flutes), then with T2 (10 mm, 4 flutes) at its own F and S:
+
+* removed volume of a full slot through the block = width (its own diameter) x depth x block length;
+* peak cutting load of a full slot = Kt a fz sqrt(1 + Ke^2) with fz = F / (z S) of its own teeth (for two
+  teeth, one tooth at 90 deg; for four teeth, the two engaged teeth 90 deg apart sum to that value at every
+  angle: (Fx, Fy) = Kt a fz (-Ke, 1));
+* the compiled master loop, the Python master and the numpy kernel give the same recording bit for bit;
+* a case whose table lists T1 equal to [tool] runs bit for bit as the case without a table (paper part).
+"""
+from __future__ import annotations
+
+import math
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fmus_src.cutting.component import CuttingLoad
+from orchestrator.case import CaseError, load_case
+from orchestrator.compiled import compiled_support
+from orchestrator.master import Master, MasterSettings
+from orchestrator.simulate import simulate
+from orchestrator.twin import TwinOptions, build_twin
+from tests.test_cutting_path_reversal import _per_line
+from test_compiled_master import _assert_same
+
+MM = 1e-3
+BLOCK_X_MM = 12.0  # the stock's length along the slots
+PROGRAM = """G21 G90 G17
+T1 M6
+S6000 M3
+G0 X-5. Y10. Z2.
+G1 Z-1. F300
+X17. F300
+G0 Z5.
+T2 M6
+S4000 M3
+G0 X-6. Y28. Z2.
+G1 Z-1. F300
+X18. F600
+G0 Z5.
+M30
+"""
+CASE = """program = "program.nc"
+[stock]
+min = [0.0, 0.0, -10.0]
+max = [12.0, 40.0, 0.0]
+{tool}
+[tools.T2]
+diameter_mm = 10.0
+flutes = 4
+[machine]
+parameters = "default"
+"""
+TOOL_1 = "[tool]\ndiameter_mm = 6.0\nflutes = 2"
+
+
+def _case_folder(folder, tool=TOOL_1, program=PROGRAM, case=CASE):
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "case.toml").write_text(case.format(tool=tool))
+    (folder / "program.nc").write_text(program)
+    return folder
+
+
+@pytest.fixture(scope="module")
+def two_tools(tmp_path_factory):
+    case = load_case(_case_folder(tmp_path_factory.mktemp("two_tools")))
+    return case, simulate(case=case, plot=False)
+
+
+def test_each_slot_removes_its_own_width_and_peaks_at_its_own_hand_calculation(two_tools):
+    case, result = two_tools
+    assert result.success, result.message
+    peak, removed = _per_line(result.recording)
+    kt = case.machine.si(f"material.{case.material}")["kt"]
+    ke = case.machine.si(f"material.{case.material}")["ke"]
+    # slot 1 (lines 5-7: plunge in air, slot, lift): 6 mm wide, 1 mm deep through the 12 mm block
+    assert removed[5] + removed[6] + removed[7] == pytest.approx(6.0 * 1.0 * BLOCK_X_MM, rel=1e-3)  # 72 mm3
+    # slot 2 (lines 11-13) with T2: 10 mm wide (with the [tool] cutter it would be 72 mm3 again)
+    assert removed[11] + removed[12] + removed[13] == pytest.approx(10.0 * 1.0 * BLOCK_X_MM, rel=1e-3)  # 120 mm3
+    # slot 1: F300, S6000, 2 teeth: fz = 0.025 mm -> 34.38 N
+    fz1 = 300.0 / (2 * 6000.0) * MM
+    assert peak[6] == pytest.approx(kt * 1 * MM * fz1 * math.sqrt(1 + ke * ke), abs=0.05)
+    # slot 2: F600, S4000, 4 teeth: fz = 0.0375 mm -> 51.57 N (with 2 teeth it would be 103 N)
+    fz2 = 600.0 / (4 * 4000.0) * MM
+    assert peak[12] == pytest.approx(kt * 1 * MM * fz2 * math.sqrt(1 + ke * ke), abs=0.1)
+    assert result.summary["tool_changes"] == [{"line": 2, "tool": 1}, {"line": 8, "tool": 2}]
+    # T1 is not listed: the note says it is cut with [tool] (T2 has its own cutter)
+    assert len(result.summary["notes"]) == 1 and "T1 " in result.summary["notes"][0]
+    assert "T2" in result.summary["notes"][0] and "6 mm, 2 flutes" in result.summary["notes"][0]
+
+
+def _short_twin(case, batch=1):
+    """The two-slot twin with a 0.2 s tool change, for 4.6 s: slot 1's end, both tool changes, slot 2's start."""
+    twin = build_twin(case, batch=batch, options=TwinOptions(cutting_mode="zmap"))
+    twin.nck.set("tool_change_time", 0.2)
+    settings = MasterSettings(step=twin.options.step, time_limit=4.6, stop_when=twin.stop_when,
+                              limits=twin.limits or {}, check_every=10)
+    return twin, settings
+
+
+def test_compiled_loop_python_master_and_numpy_kernel_agree_bit_for_bit(tmp_path, monkeypatch):
+    program = PROGRAM.replace("X-5. Y10.", "X2. Y10.").replace("X17. F300", "X6. F600")  # a short slot 1
+    case = load_case(_case_folder(tmp_path, program=program))
+    runs = []
+    for compiled, kernel in ((True, True), (False, True), (False, False)):
+        with monkeypatch.context() as m:
+            m.setattr(CuttingLoad, "use_compiled", kernel)
+            twin, settings = _short_twin(case)
+            settings.compiled = compiled
+            master = Master(twin.system, settings, twin.probes)
+            if compiled:
+                assert compiled_support(master) is None, compiled_support(master)
+            runs.append(master.run())
+    _assert_same(runs[0], runs[1])
+    _assert_same(runs[0], runs[2])
+    rec = runs[0].recording
+    line = np.asarray(rec["line"]).ravel()
+    teeth = np.asarray(rec["fc_peak_N"]).ravel()
+    assert np.nanmax(teeth[line == 6]) > 10.0 and np.nanmax(teeth[line == 12]) > 10.0  # both slots cut
+
+
+def test_a_table_listing_t1_as_tool_runs_the_paper_part_bit_for_bit(tmp_path):
+    folder = tmp_path / "paper"
+    shutil.copytree(Path(__file__).resolve().parents[1] / "models" / "examples" / "paper_part", folder)
+    plain = simulate(case=load_case(folder), plot=False)
+    with open(folder / "case.toml", "a") as f:
+        f.write("\n[tools.T1]\ndiameter_mm = 6.0\nflutes = 2\n")
+    listed = load_case(folder)
+    assert listed.tools and not listed.several_tools()
+    table = simulate(case=listed, plot=False)
+    assert plain.success and table.success
+    assert plain.recording.channels == table.recording.channels
+    for ch in plain.recording.channels:
+        np.testing.assert_array_equal(plain.recording.data[ch], table.recording.data[ch], err_msg=ch)
+    assert "notes" not in table.summary  # T1 listed: nothing assumed
+
+
+def test_tool_table_parsing(tmp_path):
+    case = load_case(_case_folder(tmp_path))
+    assert case.tools == {2: type(case.tool)(10.0, 4)} and case.tool_stated and case.several_tools()
+    assert case.tool_for(2).diameter_mm == 10.0 and case.tool_for(7) == case.tool
+    bad = {
+        "[tools.X2]\ndiameter_mm = 3.0\nflutes = 2\n": r"case.toml:11: unknown tool 'X2' in \[tools\]",
+        "[tools.T3]\ndiameter_mm = 3.0\nflutes = 0\n": r"case.toml:13: \[tools.T3\] flutes must be a whole",
+        "[tools.T3]\ndiameter_mm = -3.0\nflutes = 2\n": r"case.toml:12: \[tools.T3\] diameter_mm must be",
+        "[tools.T3]\nflutes = 2\n": r"case.toml:11: \[tools.T3\] needs 'diameter_mm'",
+        "[tools.T3]\ndiameter_mm = 3.0\nflutes = 2\nlength_mm = 50.0\n":
+            r"case.toml:14: unknown field 'length_mm' in \[tools.T3\]",
+        "[tools.T02]\ndiameter_mm = 3.0\nflutes = 2\n": r"case.toml:11: \[tools.T02\] lists T2 a second time",
+    }
+    base = CASE.format(tool=TOOL_1).replace('[machine]\nparameters = "default"\n', "")
+    for extra, pattern in bad.items():  # each names case.toml and the line of the key
+        (tmp_path / "case.toml").write_text(base + extra)
+        with pytest.raises(CaseError, match=pattern):
+            load_case(tmp_path)
+    (tmp_path / "case.toml").write_text('program = "program.nc"\ntools = 3\n')
+    with pytest.raises(CaseError, match=r"case.toml:2: 'tools' must be a table of tools"):
+        load_case(tmp_path)
+
+
+def test_without_tool_an_unlisted_tool_is_refused_naming_the_m6_and_the_case(tmp_path):
+    folder = _case_folder(tmp_path, tool="[tools.T1]\ndiameter_mm = 6.0\nflutes = 2")
+    case = load_case(folder)
+    assert not case.tool_stated and set(case.tools) == {1, 2}
+    build_twin(case)  # T1 and T2 listed: fine
+    (folder / "program.nc").write_text(PROGRAM.replace("T2 M6", "T3 M6"))
+    with pytest.raises(CaseError, match=rf"program.nc:8: M6 changes to T3, which {folder / 'case.toml'} does not "
+                                        r"list \(its \[tools\] has T1, T2"):
+        build_twin(case)
+
+
+def test_path_mode_refuses_several_cutters(two_tools):
+    case, _ = two_tools
+    with pytest.raises(Exception, match=r"engagement table is built for one cutter"):
+        build_twin(case, options=TwinOptions(cutting_mode="path"))
+
+
+def test_members_with_their_own_tables_in_two_threads_match_the_python_master(tmp_path):
+    """Member 1's T2 is an 8 mm 3-flute cutter: each member switches to its own; the compiled loop in two
+    member blocks equals the Python master bit for bit."""
+    program = PROGRAM.replace("X-5. Y10.", "X2. Y10.").replace("X17. F300", "X6. F600")
+    case = load_case(_case_folder(tmp_path, program=program))
+    runs = []
+    for compiled in (True, False):
+        twin, settings = _short_twin(case, batch=2)
+        for name, value in (("tool_1_diameter", 8e-3), ("tool_1_flutes", 3)):
+            arr = twin.cutting.get(name)
+            arr[1] = value
+            twin.cutting.set(name, arr)
+        settings.compiled, settings.threads = compiled, 2
+        runs.append(Master(twin.system, settings, twin.probes).run())
+    _assert_same(runs[0], runs[1])
+    rec = runs[0].recording
+    line = np.asarray(rec["line"])[:, 0]
+    peak = np.asarray(rec["fc_peak_N"])
+    slot2 = line == 12
+    # slot 2's start: the members' loads differ (10 mm 4 flutes vs 8 mm 3 flutes at the same F and S)
+    assert np.nanmax(peak[slot2, 0]) > 10.0 and np.nanmax(peak[slot2, 1]) > 10.0
+    assert not np.array_equal(peak[slot2, 0], peak[slot2, 1])
+
+
+def test_the_optimiser_searches_several_cutters_on_the_zmap_model(two_tools):
+    from orchestrator.optimize.reference import build_reference
+
+    case, _ = two_tools
+    reference = build_reference(case)
+    assert reference.context.engagement is None
+    assert "tool table ([tools]) lists cutters other than [tool]" in reference.context.search_model_note
+
+
+def test_tool_table_packing_lookup_and_errors():
+    from fmus_src.cutting.component import CuttingError
+    from fmus_src.cutting.tool_table import ToolTable, slot_of, slots, table_variables
+
+    values = {v.name: np.full(2, v.start, dtype=np.int64 if v.type == "Integer" else np.float64)
+              for v in table_variables()}
+    values["tool_diameter"], values["flutes"] = np.array([6e-3, 6e-3]), np.array([2, 2])
+    values["tool_3_number"] = np.array([2, 0])  # member 1: slot 3 empty (diameter 0 there)
+    values["tool_3_diameter"] = np.array([10e-3, 0.0])
+    values["tool_3_flutes"] = np.array([4, 0])
+    values["tool_5_number"] = np.array([7, 2])
+    values["tool_5_diameter"] = np.array([4e-3, 8e-3])
+    values["tool_5_flutes"] = np.array([3, 3])
+    table = ToolTable.from_values(values, 2, "cutting", CuttingError)
+    assert table.number.tolist() == [[-1, 2, 7], [-1, 0, 2]]  # default column, then the used slots 3 and 5
+    # T2 -> 5 mm radius for member 0 (slot 3), 4 mm for member 1 (slot 5); T9 and T0 -> the default
+    for tool, expected in (([2, 2], [1, 2]), ([7, 7], [2, 0]), ([9, 0], [0, 0])):
+        k = slots(table, np.array(tool))
+        assert k.tolist() == expected
+        assert [slot_of(table.number, m, float(tool[m])) for m in range(2)] == expected
+    assert table.radius[[0, 1], slots(table, np.array([2, 2]))].tolist() == [5e-3, 4e-3]
+    assert table.smallest_radius().tolist() == [2e-3, 3e-3]  # member 1's empty slot (radius 0) left out
+    for name, value, message in (("tool_5_number", [7, 7], r"lists T7 in a second slot"),
+                                 ("tool_5_number", [-1, 2], r"tool_5_number: member 0 has -1"),
+                                 ("tool_5_flutes", [0, 3], r"tool_5_flutes: member 0 has 0 for T7")):
+        bad = dict(values)
+        bad[name] = np.array(value)
+        if name == "tool_5_number" and value == [7, 7]:
+            bad["tool_3_number"] = np.array([2, 7])
+            bad["tool_3_diameter"] = np.array([10e-3, 5e-3])
+            bad["tool_3_flutes"] = np.array([4, 2])
+        with pytest.raises(CuttingError, match=message):
+            ToolTable.from_values(bad, 2, "cutting", CuttingError)
+
+
+def test_the_ssp_export_of_a_two_tool_case_runs_as_the_case(two_tools, tmp_path):
+    from orchestrator.simulate import simulate_system_file
+    from orchestrator.twin import write_twin_ssp
+
+    case, result = two_tools
+    ssd, _ = write_twin_ssp(case, tmp_path / "two_tools.ssd")
+    text = ssd.read_text()
+    assert 'startElement="nck" startConnector="tool" endElement="cutting" endConnector="tool"' in text
+    system = simulate_system_file(ssd)
+    assert system.success, system.message
+    for ch in result.recording.channels:
+        np.testing.assert_array_equal(system.recording.data[ch], result.recording.data[ch], err_msg=ch)
+
+
+def test_notes_name_only_the_tools_the_table_does_not_list():
+    from orchestrator.summary import tool_notes
+
+    changes = [(2, 1), (9, 2), (15, 3)]
+    assert tool_notes(changes, True, 6.0, 2, listed=(1, 2, 3))[1] == []  # every tool listed: nothing assumed
+    notes = tool_notes(changes, True, 6.0, 2, listed=(1, 2))[1]
+    assert len(notes) == 1 and "uses T3 (the first change to one at line 15)" in notes[0]
+    assert "(T1, T2)" in notes[0] and "6 mm, 2 flutes" in notes[0]
+    # one tool, listed in no table: [tool] is that tool, as before; with a table that misses it: noted
+    assert tool_notes([(2, 5)], True, 6.0, 2)[1] == []
+    assert "uses T5" in tool_notes([(2, 5)], True, 6.0, 2, listed=(1,))[1][0]
+    assert tool_notes(changes, False, 6.0, 2, listed=(1,))[1] == []  # no stock: no cutting load
+
+
+def test_the_diagnosis_memo_key_tells_tool_tables_apart(tmp_path):
+    from dataclasses import replace
+
+    from orchestrator.diagnose.prepare import run_key
+
+    case = load_case(_case_folder(tmp_path))
+    plain = replace(case, tools={})
+    assert run_key(case, case.machine) != run_key(plain, case.machine)
+    assert run_key(plain, case.machine) == run_key(replace(plain), case.machine)
