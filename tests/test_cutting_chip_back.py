@@ -126,13 +126,16 @@ def _runout_slot(x_of, n, **kw):
     return {k: np.array(v) for k, v in out.items()}
 
 
-def test_zmap_runout_at_a_constant_feed_keeps_the_chord_rule(monkeypatch):
+@pytest.mark.parametrize("extra", [{}, {"chatter_frequency": 1150.0, "chatter_damping": 0.03,
+                                        "chatter_stiffness": 300e6}], ids=["runout", "runout+chatter"])
+def test_zmap_runout_at_a_constant_feed_keeps_the_chord_rule(monkeypatch, extra):
+    # with the tool mode every tooth looks 5 surfaces back (MAX_PASSES): rows 1..4 of the displacements
     def steady(t):
         return 0.005 + V0 * np.asarray(t, float)
 
-    new = _runout_slot(steady, 40)
+    new = _runout_slot(steady, 40, **extra)
     monkeypatch.setattr(zmap_component, "chords_back_all", _chord_rule)
-    old = _runout_slot(steady, 40)
+    old = _runout_slot(steady, 40, **extra)
     assert new["fc"].max() > 50.0  # it cut
     for name in new:
         scale = np.abs(old[name]).max()
