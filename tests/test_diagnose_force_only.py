@@ -114,8 +114,13 @@ def test_clock_of_a_force_only_recording_comes_from_the_cutting_load(clean_case,
 def test_runout_in_a_force_only_recording_is_named(tmp_path):
     folder = _dynamometer_case(tmp_path / "runout", {"eccentricity_um": 10.0, "phase_deg": 0.0}, seed=8)
     d = diagnose(folder)
-    assert d.alignment["time_offset_s"] == pytest.approx(SHIFT_S, abs=0.5e-3)
+    # 0.83 ms late, as the clean case's 0.72 ms (the twin's forces lag its own replay, see README), bound 1 ms.
+    # Before the chip against a surface a revolution back was the displacement over that revolution (both the
+    # recording's Z-map run and the replay took twice the last chord) it came back 0.13 ms late, with an fx_N
+    # window at the slot's end and corner (lines 5-6, 1.8 N rms) left unexplained; now nothing is
+    assert d.alignment["time_offset_s"] == pytest.approx(SHIFT_S, abs=1e-3)
     assert [e["effect"] for e in d.effects] == ["runout"], d.log
+    assert d.unexplained == [], d.unexplained
     # two flutes fix the radial offset e cos(phase) of tooth 0 against tooth 1 only (phase 0: all of e), and the
     # refit holds the phase (cutting_refit.fixed_by_flutes). The runout moves the two chips by +-2 e: with
     # Kt = 1.23e9 N/m2, Ke = 0.5 and 1.5 mm depth a tooth's force changes by Kt a sqrt(1 + Ke^2) 2 e = 4.1 N/um.

@@ -380,8 +380,8 @@ def regenerative_displacements(dq: np.ndarray, nf: int, ht: np.ndarray, hx: np.n
 
 
 @njit
-def build_forms(forms: np.ndarray, nf: int, fxt: float, fyt: float, dq: np.ndarray, offsets: np.ndarray) -> None:
-    """Chip forms of one tooth: the surface cut ``i + 1`` teeth back gives ``(i + 1) c . u + off_i + dq_i . u``.
+def build_forms(forms: np.ndarray, nf: int, back: np.ndarray, dq: np.ndarray, offsets: np.ndarray) -> None:
+    """Chip forms of one tooth: the surface cut ``i + 1`` teeth back gives ``c_i . u + off_i + dq_i . u``.
 
     Parameters
     ----------
@@ -389,16 +389,18 @@ def build_forms(forms: np.ndarray, nf: int, fxt: float, fyt: float, dq: np.ndarr
         Written: ``(a, b, c)`` of ``a sin phi + b cos phi + c`` [m].
     nf : int
         Surfaces considered (1 = the previous tooth only).
-    fxt, fyt : float
-        Feed per tooth vector [m].
+    back : ndarray, shape (P, 2)
+        ``c_i``: the tool-centre displacement since the surface cut ``i + 1`` teeth back was left, over
+        ``i + 1`` tooth periods [m] (:func:`.kernel.chords_back`; row 0 the feed per tooth, the tooth-period
+        chord; ``(i + 1)`` times it at a constant feed).
     dq : ndarray, shape (P, 2)
         Regenerative displacements (:func:`regenerative_displacements`) [m].
     offsets : ndarray, shape (P,)
         Runout chip offsets ``r_j - r_(j-i-1)`` of the tooth [m].
     """
     for i in range(nf):
-        forms[i, 0] = (i + 1) * fxt + dq[i, 0]
-        forms[i, 1] = (i + 1) * fyt + dq[i, 1]
+        forms[i, 0] = back[i, 0] + dq[i, 0]
+        forms[i, 1] = back[i, 1] + dq[i, 1]
         forms[i, 2] = offsets[i]
 
 

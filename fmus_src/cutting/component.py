@@ -16,7 +16,11 @@ Time discretisation of one communication step ``[t, t + h]``
   2023 Eq. 10-11, :func:`.kernel.chord_feed`), read from the member's record of
   its last :data:`.kernel.CHIP_HISTORY_STEPS` steps (the tool moves linearly
   within each); the step velocity times ``T`` when ``T <= h``, at the start, after
-  the spindle starts and while the record is younger than ``T``.
+  the spindle starts and while the record is younger than ``T``. With runout or
+  chatter a tooth may cut a surface left ``i + 1`` teeth back: its chip is the
+  displacement over ``i + 1`` periods from the same record
+  (:func:`.kernel.chords_back`), ``i + 1`` times the chord where the record
+  does not reach back that far.
 * The step is cut into ``n`` substeps so that the spindle turns at most
   ``pitch / angle_steps_per_tooth`` and the tool moves at most ``R / 20`` per
   substep (with chatter on, also at least 32 substeps per period of the tool
@@ -87,9 +91,10 @@ from ..component import Component, Variable
 from ..errors import CncTwinError
 from ..jit import NUMBA_AVAILABLE
 from .axial import AX_MRR, AX_THRUST, AX_TORQUE, AXIAL_RATIO_DEFAULT, axial_cuts, stalled_plunges
-from .effect_model import CHATTER_SUBSTEPS_PER_PERIOD, EffectParameters, EffectState
+from .effect_model import CHATTER_SUBSTEPS_PER_PERIOD, MAX_PASSES, EffectParameters, EffectState
 from .engagement import PATH_SPACING, NearField, SweptPath
-from .kernel import CHIP_HISTORY_WIDTH, StepResult, chord_advance_all, chord_feeds, cut_step, stalled_cuts
+from .kernel import (CHIP_HISTORY_WIDTH, StepResult, chord_advance_all, chord_feeds, chords_back_all, cut_step,
+                     stalled_cuts)
 from .kernel_effects import cut_step_effects
 from .stock import ZMapStock
 from .tool_table import TABLE_PARAMETERS, ToolTable, slots, table_variables
@@ -619,11 +624,17 @@ class CuttingLoad(Component):
         ke = np.asarray(v["ke"], dtype=np.float64)[sel]
         if geometric:
             coefficients = np.stack([kt, ke, self._eff.kte[sel] * wear, self._eff.kre[sel] * wear])
+            # the surfaces left 1 .. passes teeth back: the tool-centre displacement since each was left
+            flutes = np.ascontiguousarray(self._flutes[sel])
+            back = np.zeros((flutes.shape[0], MAX_PASSES, 2))
+            chords_back_all(np.ascontiguousarray(self._motion[sel, 3:]), p_new[sel] - self._p_prev[sel], h,
+                            np.ascontiguousarray(omega[sel], dtype=np.float64), flutes,
+                            np.ascontiguousarray(feed[sel]), self._eff.passes(self._flutes)[sel], back)
             return cut_step_effects(
                 self.stock, near, self._p_prev[sel], p_new[sel], self._theta[sel], omega[sel], h, n[sel],
                 self._radius[sel], self._flutes[sel],
                 np.asarray(v["angle_steps_per_tooth"], dtype=np.float64)[sel], coefficients, self._eff,
-                self._effect_state, np.asarray(v["stock_z_max"], dtype=np.float64)[sel], rows, feed[sel],
+                self._effect_state, np.asarray(v["stock_z_max"], dtype=np.float64)[sel], rows, feed[sel], back,
             )
         if self.use_compiled:
             return cut_step_compiled(self._zmap, self.path, self._p_prev[sel], p_new[sel], self._theta[sel],

@@ -152,6 +152,91 @@ def chord_feed(hist: np.ndarray, dpx: float, dpy: float, h: float, omega: float,
 
 
 @njit_borrowed
+def chords_back(hist: np.ndarray, dpx: float, dpy: float, h: float, omega: float, flutes: int, fx: float,
+                fy: float, nf: int, back: np.ndarray) -> None:
+    """Tool-centre displacements over the last ``1 .. nf`` tooth periods, ``c(t+h) - c(t+h-(i+1) T)``, in place.
+
+    The surface a tooth cuts was left ``i + 1`` tooth periods back (runout: a tooth that stands back leaves the
+    older surface in place; chatter: a tooth that jumped out of the cut), where the tool centre was then; the
+    chip against it is the displacement since (the independent truth's ``c(t) - c(t - i T)``). Read from the
+    same record of the steps as :func:`chord_feed`, the tool moving linearly within each step.
+
+    Parameters
+    ----------
+    hist : ndarray, shape (CHIP_HISTORY_WIDTH,)
+        The member's history of the previous steps (:func:`chord_advance`).
+    dpx, dpy : float
+        Tool move over this step, m.
+    h : float
+        Step length, s.
+    omega : float
+        Spindle speed of the step, rad/s (below :data:`OMEGA_FLOOR` the period at that speed).
+    flutes : int
+        Teeth.
+    fx, fy : float
+        The step's feed per tooth (:func:`chord_feed`), m: ``back[0]`` bit for bit.
+    nf : int
+        Periods wanted (``1 <= nf <= back.shape[0]``).
+    back : ndarray, shape (>= nf, 2)
+        Written: row ``i`` the displacement over ``i + 1`` periods, m.
+
+    Notes
+    -----
+    Row ``i >= 1`` falls back to the chord rule ``(i + 1) (fx, fy)`` (a constant feed over the ``i + 1``
+    periods; the same operations as the kernels used before, so bit for bit) when ``(i + 1) T <= h`` (the
+    span lies within the step: the same thing to rounding), and when the record does not reach back
+    ``(i + 1) T``: at the start of a run, after a step with the spindle stopped or a member held, and when
+    ``(i + 1) T`` exceeds :data:`CHIP_HISTORY_STEPS` steps. At a constant feed every row equals the chord
+    rule to rounding (1e-12 relative).
+    """
+    back[0, 0] = fx
+    back[0, 1] = fy
+    for i in range(1, nf):
+        back[i, 0] = (i + 1) * fx
+        back[i, 1] = (i + 1) * fy
+    if nf < 2:
+        return
+    period = 2.0 * math.pi / (np.float64(flutes) * max(omega, OMEGA_FLOOR))
+    cap = (hist.shape[0] - H_RECORDS) // 3
+    idx = int(hist[H_HEAD])  # the newest record not yet added in full
+    left = int(hist[H_COUNT])  # records not yet added in full
+    cx = dpx  # the step's move plus the records added in full, m
+    cy = dpy
+    done = 0.0  # their time, s (the step's own excluded)
+    for i in range(1, nf):
+        rem = (i + 1) * period - h  # how far the span reaches back beyond the step, s
+        if not rem > 0.0:
+            continue
+        while left > 0:  # as chord_feed: add whole records until the one holding t + h - (i + 1) T
+            r = H_RECORDS + 3 * idx
+            if rem - done <= hist[r]:
+                break
+            cx += hist[r + 1]
+            cy += hist[r + 2]
+            done += hist[r]
+            left -= 1
+            idx = idx - 1 if idx > 0 else cap - 1
+        if left == 0:
+            return  # the record ends before: this row and the older ones keep the chord rule
+        r = H_RECORDS + 3 * idx
+        f = (rem - done) / hist[r]
+        back[i, 0] = cx + hist[r + 1] * f
+        back[i, 1] = cy + hist[r + 2] * f
+
+
+@njit
+def chords_back_all(hist: np.ndarray, dp: np.ndarray, h: float, omega: np.ndarray, flutes: np.ndarray,
+                    feed: np.ndarray, nf: np.ndarray, back: np.ndarray) -> None:
+    """:func:`chords_back` of every member, in place.
+
+    ``hist`` (B, CHIP_HISTORY_WIDTH), ``dp`` (B, >= 2) m, ``omega`` rad/s, ``flutes``, ``feed`` (B, 2) m
+    (:func:`chord_feeds`), ``nf`` (B,) periods wanted; ``back`` (B, >= max(nf), 2) m is written.
+    """
+    for b in range(dp.shape[0]):
+        chords_back(hist[b], dp[b, 0], dp[b, 1], h, omega[b], flutes[b], feed[b, 0], feed[b, 1], nf[b], back[b])
+
+
+@njit_borrowed
 def chord_advance(hist: np.ndarray, h: float, dpx: float, dpy: float, omega: float) -> None:
     """Record a step that was cut (length ``h`` s, move ``dpx, dpy`` m) in a member's history, in place.
 

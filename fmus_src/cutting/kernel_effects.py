@@ -11,11 +11,14 @@ discretisation as :mod:`.kernel`; the differences:
   one band). The geometry (axial depth per band at the substep instants,
   entry/exit instants located to 1/4096 substep) is numpy, vectorised over
   members, instants and bands, as :func:`.kernel.cut_step`.
-* **Chip** — ``h = alpha_j min_i ((i + 1) c . u + off_ji + dq_i . u) - beta_j``
+* **Chip** — ``h = alpha_j min_i (c_i . u + off_ji + dq_i . u) - beta_j``
   clipped at 0, ``u = (sin phi, cos phi)``: tooth ``j`` cuts the lowest of the
   surfaces left by the last teeth (``i = 0``: the previous one; more with
   runout or chatter, :meth:`.effect_model.EffectParameters.passes`), with
-  ``c`` the feed per tooth, ``off_ji = r_j - r_(j-i-1)`` the runout offsets,
+  ``c_i`` the tool-centre displacement over the last ``i + 1`` tooth periods
+  (``c_0`` the feed per tooth; :func:`.kernel.chords_back`, ``(i + 1) c_0``
+  at a constant feed and where the record of the steps does not reach back),
+  ``off_ji = r_j - r_(j-i-1)`` the runout offsets,
   ``dq_i`` the regenerative displacement (tool vibration now minus at
   ``i + 1`` pitches of spindle angle ago, held at its substep-middle value
   over a substep) and ``alpha_j, beta_j`` the static deflection of tooth ``j``
@@ -37,12 +40,13 @@ import math
 
 import numpy as np
 
+from ..errors import CncTwinError
 from ..jit import njit
 from ..jit_cache import guard_cache
 from . import chip, effect_model
 from .chip import add_piece, add_piece_point, build_forms, chip_now, deflection_factors, edge_force_on_tool, \
     effect_workspace, history_push, mode_advance, regenerative_displacements
-from .effect_model import HISTORY_PER_PITCH, EffectParameters, EffectState, helix_bands
+from .effect_model import HISTORY_PER_PITCH, MAX_PASSES, EffectParameters, EffectState, helix_bands
 from .engagement import NearField, tooth_depth
 from .kernel import SECTION_ROUNDS, SECTIONS, StepResult, step_kinematics, substep_counts
 from .stock import ZMapStock
@@ -100,7 +104,7 @@ def cut_step_effects(
     stock: ZMapStock, near: NearField, p_old: np.ndarray, p_new: np.ndarray, theta0: np.ndarray,
     omega: np.ndarray, h: float, n: int | np.ndarray, radius: np.ndarray, flutes: np.ndarray, steps: np.ndarray,
     coefficients: np.ndarray, eff: EffectParameters, state: EffectState, stock_top: np.ndarray,
-    rows: np.ndarray | None = None, feed: np.ndarray | None = None,
+    rows: np.ndarray | None = None, feed: np.ndarray | None = None, back: np.ndarray | None = None,
 ) -> StepResult:
     """Cutting forces with the effect terms while the tool moves linearly from ``p_old`` to ``p_new``.
 
@@ -129,6 +133,10 @@ def cut_step_effects(
         members passed with it.
     feed : ndarray, shape (B, 2), optional
         Nominal feed per tooth vector, m, as :func:`.kernel.cut_step` (the tooth-period chord).
+    back : ndarray, shape (B, >= passes, 2), optional
+        Tool-centre displacement over the last ``i + 1`` tooth periods (row ``i``), m
+        (:func:`.kernel.chords_back_all`; row 0 must be ``feed``); default: ``(i + 1)`` times the feed
+        (a constant feed).
 
     Returns
     -------
@@ -204,8 +212,14 @@ def cut_step_effects(
     chip = np.zeros(B)
     engaged = np.zeros(B, dtype=np.int64)
     gap = pitch / HISTORY_PER_PITCH
+    passes = eff.passes(flutes)
+    if back is None:
+        back = np.arange(1, MAX_PASSES + 1)[None, :, None] * feed[:, None, :]
+    back = np.ascontiguousarray(back, dtype=np.float64)
+    if back.shape[0] != B or back.shape[1] < passes.max() or back.shape[2] != 2:
+        raise CncTwinError(f"cut_step_effects: back has shape {back.shape}; expected ({B}, >= {passes.max()}, 2)")
     _integrate(
-        h, ns, omega, state.angle, feed, R, pitch, coefficients, eff.stiffness, toff, eff.passes(flutes), et, nmax,
+        h, ns, omega, state.angle, feed, back, R, pitch, coefficients, eff.stiffness, toff, passes, et, nmax,
         phi, depth, sstar,
         eff.chatter_wn, eff.chatter_zeta, eff.chatter_k, rows, state.mode, state.ht, state.hx, state.hy, state.meta,
         gap, force, peak, mean, axial, chip, engaged,
@@ -258,12 +272,13 @@ def _depth_at(depth: np.ndarray, sstar: np.ndarray, m: int, k: int, e: int, s: f
 @njit
 def _instant(
     m: int, k: int, s: float, forms: np.ndarray, nf: int, phi: np.ndarray, depth: np.ndarray, sstar: np.ndarray,
-    fxt: float, fyt: float, dq: np.ndarray, toff: np.ndarray, et: np.ndarray, kt: float, ke: float, kte: float,
+    back: np.ndarray, dq: np.ndarray, toff: np.ndarray, et: np.ndarray, kt: float, ke: float, kte: float,
     kre: float, stiff: float, dsum: np.ndarray, wd: np.ndarray, wh: np.ndarray,
 ) -> tuple[float, float, float, float, int]:
     """Force on the tool at fraction ``s`` of substep ``k``; also largest tooth depth, chip, engaged teeth.
 
-    ``dq`` holds the regenerative displacements at that instant; ``forms`` is work space.
+    ``back`` holds the member's tool-centre displacements over the last tooth periods
+    (:func:`.chip.build_forms`), ``dq`` the regenerative displacements at that instant; ``forms`` is work space.
     """
     ne = phi.shape[2]
     dsum[:] = 0.0
@@ -273,7 +288,7 @@ def _instant(
         wh[e] = 0.0
         if d > 0.0:
             p = phi[m, k, e] + s * (phi[m, k + 1, e] - phi[m, k, e])
-            build_forms(forms, nf, fxt, fyt, dq, toff[m, et[e]])
+            build_forms(forms, nf, back, dq, toff[m, et[e]])
             wh[e] = chip_now(forms, nf, 1.0, 0.0, p)
             if wh[e] > 0.0:
                 dsum[et[e]] += d
@@ -310,7 +325,8 @@ def _instant(
 
 @njit
 def _integrate(
-    h: float, ns: np.ndarray, omega: np.ndarray, angle: np.ndarray, feed: np.ndarray, radius: np.ndarray,
+    h: float, ns: np.ndarray, omega: np.ndarray, angle: np.ndarray, feed: np.ndarray, back: np.ndarray,
+    radius: np.ndarray,
     pitch: np.ndarray, coef: np.ndarray, stiffness: np.ndarray, toff: np.ndarray, passes: np.ndarray,
     et: np.ndarray, nmax: int, phi: np.ndarray, depth: np.ndarray, sstar: np.ndarray, wn: np.ndarray,
     zeta: np.ndarray, kc: np.ndarray, rows: np.ndarray, mode: np.ndarray, ht: np.ndarray, hx: np.ndarray,
@@ -320,7 +336,8 @@ def _integrate(
     """Sequential part of :func:`cut_step_effects` (means, instants, peak, tool mode), per member.
 
     Member ``m`` has ``ns[m]`` substeps and is row ``rows[m]`` of the state
-    arrays (``angle``, ``mode``, ``ht``, ``hx``, ``hy``, ``meta``).
+    arrays (``angle``, ``mode``, ``ht``, ``hx``, ``hy``, ``meta``); ``back[m]`` its tool-centre
+    displacements over the last tooth periods (:func:`.chip.build_forms`).
     """
     B = phi.shape[0]
     ne = phi.shape[2]
@@ -337,6 +354,7 @@ def _integrate(
         stiff = stiffness[m]
         fxt = feed[m, 0]
         fyt = feed[m, 1]
+        bk = back[m]
         R = radius[m]
         nf = passes[m]
         chat = wn[m] > 0.0
@@ -354,7 +372,7 @@ def _integrate(
                 for e in range(ne):
                     lo, hi, d, w = _piece(phi, depth, sstar, m, k, e)
                     if w > 0.0:
-                        build_forms(forms, nf, fxt, fyt, dq, toff[m, et[e]])
+                        build_forms(forms, nf, bk, dq, toff[m, et[e]])
                         if chip_now(forms, nf, 1.0, 0.0, 0.5 * (lo + hi)) > 0.0:
                             dtooth[et[e]] += d
             sub[:] = 0.0
@@ -363,7 +381,7 @@ def _integrate(
                 if not w > 0.0:
                     continue
                 alpha, beta = deflection_factors(kt, ke, kre, dtooth[et[e]], stiff)
-                build_forms(forms, nf, fxt, fyt, dq, toff[m, et[e]])
+                build_forms(forms, nf, bk, dq, toff[m, et[e]])
                 if span >= SHORT_SPAN:
                     add_piece(kt, ke, kte, kre, d, forms, nf, alpha, beta, fxt, fyt, lo, hi, R, om, 1.0 / span,
                               sub, tmp, cuts)
@@ -377,7 +395,7 @@ def _integrate(
             for e in range(ne):
                 st = sstar[m, k, e]
                 if not math.isnan(st):
-                    fx, fy, _, _, _ = _instant(m, k, st, forms, nf, phi, depth, sstar, fxt, fyt, dq, toff, et, kt,
+                    fx, fy, _, _, _ = _instant(m, k, st, forms, nf, phi, depth, sstar, bk, dq, toff, et, kt,
                                                ke, kte, kre, stiff, dsum, wd, wh)
                     peak = max(peak, math.sqrt(fx * fx + fy * fy))
             if chat:
@@ -386,7 +404,7 @@ def _integrate(
                 theta1 = angle[g] + span * (k + 1)
                 history_push(ht, hx, hy, meta, g, theta1, qx, qy, gap[m])
                 regenerative_displacements(dq, nf, ht, hx, hy, meta, g, theta1, qx, qy, pitch[m])
-            fx, fy, dm, hm, ni = _instant(m, k, 1.0, forms, nf, phi, depth, sstar, fxt, fyt, dq, toff, et, kt, ke,
+            fx, fy, dm, hm, ni = _instant(m, k, 1.0, forms, nf, phi, depth, sstar, bk, dq, toff, et, kt, ke,
                                           kte, kre, stiff, dsum, wd, wh)
             peak = max(peak, math.sqrt(fx * fx + fy * fy))
             if k == n - 1:

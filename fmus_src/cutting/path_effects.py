@@ -43,7 +43,7 @@ from .chip import add_piece, add_piece_point, build_forms, chip_now, deflection_
 from .effect_model import (
     CHATTER_SUBSTEPS_PER_PERIOD, E_KC, E_STIFF, E_TANH, E_WN, E_ZETA, MAX_BANDS, MAX_PASSES, helix_bands,
 )
-from .kernel import chord_feed, stalled_cut
+from .kernel import chord_feed, chords_back, stalled_cut
 from .path_kernel import (
     ERR_OFF_PATH, ERR_STALLED, ERR_SUBSTEPS, INCLUSIVE_TOL, PAR_FLUTES, PAR_RADIUS, PAR_STEPS, ST_HISTORY, ST_THETA,
     blank_member, drop_history, fail_member, interval_buffers, member_motion, substeps, table_at, write_member,
@@ -163,7 +163,7 @@ def _piece_force(kt: float, ke: float, kte: float, kre: float, scale: float, tmp
 @njit
 def _force_helix_exact(
     phi0: float, flutes: int, pitch: float, tanh: float, radius: float, ia: np.ndarray, ib: np.ndarray,
-    it: np.ndarray, cnt: int, bottom: float, ztip: float, fxt: float, fyt: float, dq: np.ndarray, nf: int,
+    it: np.ndarray, cnt: int, bottom: float, ztip: float, back: np.ndarray, dq: np.ndarray, nf: int,
     toff: np.ndarray, kt: float, ke: float, kte: float, kre: float, stiff: float, forms: np.ndarray,
     lo: np.ndarray, hi: np.ndarray, pint: np.ndarray, tmp: np.ndarray, cuts: np.ndarray, detail: bool,
 ) -> tuple[float, float, float, float, int]:
@@ -197,7 +197,7 @@ def _force_helix_exact(
         np_ = _helix_pieces(_wrap(phi0 + j * pitch), tanh, radius, ia, ib, it, cnt, bottom, ztip, lo, hi)
         if np_ == 0:
             continue
-        build_forms(forms, nf, fxt, fyt, dq, toff[j])
+        build_forms(forms, nf, back, dq, toff[j])
         depth = 0.0
         for i in range(np_):
             pint[i, :] = 0.0
@@ -234,13 +234,14 @@ def _force_helix_exact(
 @njit
 def force_at_effects(
     phi0: float, flutes: int, pitch: float, nb: int, lag: np.ndarray, z_lo: np.ndarray, z_hi: np.ndarray,
-    ia: np.ndarray, ib: np.ndarray, it: np.ndarray, cnt: int, bottom: float, ztip: float, fxt: float, fyt: float,
+    ia: np.ndarray, ib: np.ndarray, it: np.ndarray, cnt: int, bottom: float, ztip: float, back: np.ndarray,
     dq: np.ndarray, nf: int, toff: np.ndarray, kt: float, ke: float, kte: float, kre: float, stiff: float,
     dsum: np.ndarray, forms: np.ndarray,
 ) -> tuple[float, float, float, float, int]:
     """Force on the tool at one instant (tooth 0 at ``phi0``) with the effect terms, teeth cut in bands.
 
-    ``dq`` holds the regenerative displacements at that instant, ``toff`` the
+    ``back`` holds the tool-centre displacements over the last tooth periods
+    (:func:`.chip.build_forms`), ``dq`` the regenerative displacements at that instant, ``toff`` the
     runout offsets (nmax, passes) of the member, ``forms`` is work space. Used
     for straight flutes (one band); a helical flute is integrated exactly over
     the axial depth by :func:`_force_helix_exact` instead (the step calls
@@ -260,7 +261,7 @@ def force_at_effects(
         return 0.0, 0.0, 0.0, 0.0, 0
     for j in range(flutes):
         dsum[j] = 0.0
-        build_forms(forms, nf, fxt, fyt, dq, toff[j])
+        build_forms(forms, nf, back, dq, toff[j])
         for b in range(nb):
             phi = _wrap(phi0 + j * pitch - lag[b])
             d = _band_depth(_top_at(phi, ia, ib, it, cnt), bottom, ztip, z_lo[b], z_hi[b])
@@ -275,7 +276,7 @@ def force_at_effects(
         if not dsum[j] > 0.0:
             continue
         alpha, beta = deflection_factors(kt, ke, kre, dsum[j], stiff)
-        build_forms(forms, nf, fxt, fyt, dq, toff[j])
+        build_forms(forms, nf, back, dq, toff[j])
         dj = 0.0
         for b in range(nb):
             phi = _wrap(phi0 + j * pitch - lag[b])
@@ -341,6 +342,7 @@ max_substeps
     ia, ib, it, ja, jb, jt = interval_buffers(alpha.shape[1])
     acc, sub, tmp, cuts, forms, dq, dtooth, dsum = effect_workspace(toff.shape[1])
     cuts_forms = np.zeros((MAX_PASSES, 3))
+    back = np.zeros((MAX_PASSES, 2))
     hlo, hhi, pint, htmp, hcuts = helix_workspace()
     lag = np.zeros(MAX_BANDS)
     z_lo = np.zeros(MAX_BANDS)
@@ -371,6 +373,8 @@ max_substeps
             drop_history(st, m)
             continue
         fxt, fyt = chord_feed(st[ST_HISTORY:, m], ddx, ddy, h, om, flutes)  # the tooth-period chord
+        # the surfaces left 1 .. nf teeth back: the tool-centre displacement since each was left
+        chords_back(st[ST_HISTORY:, m], ddx, ddy, h, om, flutes, fxt, fyt, nf, back)
         theta0 = st[ST_THETA, m]
         span = om * h / n
         dt = h / n
@@ -418,7 +422,7 @@ max_substeps
                     dtooth[j] = 0.0
                     if not stiff > 0.0:
                         continue
-                    build_forms(forms, nf, fxt, fyt, dq, toff[m, j])
+                    build_forms(forms, nf, back, dq, toff[m, j])
                     for b in range(nb):
                         pa = _wrap(phi_k + j * pitch - lag[b])
                         if span < SHORT_SPAN:
@@ -444,7 +448,7 @@ max_substeps
                         dtooth[j] += deepest
                 for j in range(flutes):
                     al, be = deflection_factors(kt, ke, kre, dtooth[j], stiff)
-                    build_forms(forms, nf, fxt, fyt, dq, toff[m, j])
+                    build_forms(forms, nf, back, dq, toff[m, j])
                     for b in range(nb):
                         if span < SHORT_SPAN:
                             pm = _wrap(phi_k + 0.5 * span + j * pitch - lag[b])
@@ -483,18 +487,18 @@ max_substeps
                                     if helix:
                                         fx, fy, _, _, _ = _force_helix_exact(
                                             edge - j * pitch + lag[b], flutes, pitch, tanh, radius, ia, ib, it, cm,
-                                            bottom, ztip, fxt, fyt, dq, nf, toff[m], kt, ke, kte, kre, stiff,
+                                            bottom, ztip, back, dq, nf, toff[m], kt, ke, kte, kre, stiff,
                                             cuts_forms, hlo, hhi, pint, htmp, hcuts, False)
                                     else:
                                         fx, fy, _, _, _ = force_at_effects(
                                             edge - j * pitch + lag[b], flutes, pitch, nb, lag, z_lo, z_hi, ia, ib,
-                                            it, cm, bottom, ztip, fxt, fyt, dq, nf, toff[m], kt, ke, kte, kre,
+                                            it, cm, bottom, ztip, back, dq, nf, toff[m], kt, ke, kte, kre,
                                             stiff, dsum, cuts_forms)
                                     peak = max(peak, math.sqrt(fx * fx + fy * fy))
                 for edge, hit in ((phi_k, at_start), (phi_k + span, at_end)):
                     if hit:
                         fx, fy, _, _, _ = _force_helix_exact(
-                            edge, flutes, pitch, tanh, radius, ia, ib, it, cm, bottom, ztip, fxt, fyt, dq, nf, toff[m],
+                            edge, flutes, pitch, tanh, radius, ia, ib, it, cm, bottom, ztip, back, dq, nf, toff[m],
                             kt, ke, kte, kre, stiff, cuts_forms, hlo, hhi, pint, htmp, hcuts, False)
                         peak = max(peak, math.sqrt(fx * fx + fy * fy))
             for i in range(4):
@@ -514,12 +518,12 @@ max_substeps
                 if helix:
                     fx, fy, dm, hm, ne = _force_helix_exact(
                         theta0 + om * h * f1, flutes, pitch, tanh, radius, ja, jb, jt, cj, max(zt1, z_floor), zt1,
-                        fxt, fyt, dq, nf, toff[m], kt, ke, kte, kre, stiff, cuts_forms, hlo, hhi, pint, htmp, hcuts,
+                        back, dq, nf, toff[m], kt, ke, kte, kre, stiff, cuts_forms, hlo, hhi, pint, htmp, hcuts,
                         True)
                 else:
                     fx, fy, dm, hm, ne = force_at_effects(
                         theta0 + om * h * f1, flutes, pitch, nb, lag, z_lo, z_hi, ja, jb, jt, cj, max(zt1, z_floor),
-                        zt1, fxt, fyt, dq, nf, toff[m], kt, ke, kte, kre, stiff, dsum, cuts_forms)
+                        zt1, back, dq, nf, toff[m], kt, ke, kte, kre, stiff, dsum, cuts_forms)
             else:
                 fx, fy, dm, hm, ne = 0.0, 0.0, 0.0, 0.0, 0
             peak = max(peak, math.sqrt(fx * fx + fy * fy))

@@ -22,7 +22,9 @@ are not mistaken for cutting physics.
   ``c(t) - c(t - T)`` over the last tooth period ``T`` (Altintas ch. 2; the
   independent truth's definition). The component takes it so from its own
   record of the steps (:func:`fmus_src.cutting.kernel.chord_feed`), also
-  where the feed changes within ``T`` (a cut that stops in the material).
+  where the feed changes within ``T`` (a cut that stops in the material);
+  against a surface left ``m`` teeth back (runout, chatter) the displacement
+  over ``m`` periods (:func:`fmus_src.cutting.kernel.chords_back`).
 * **Speed**: all steps of all members in one compiled call
   (:func:`fmus_src.cutting.path_replay.compiled_path_steps`, bit-identical to
   stepping the component), the step-by-step loop as the fallback.
