@@ -14,8 +14,9 @@ reference they are tested against (``MCU.use_compiled = False``,
 """
 from __future__ import annotations
 
-import importlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
+
+from ..lazy_exports import lazy_exports
 
 #: Public name -> submodule that defines it, imported on first access (PEP 562): a machine file's check of
 #: the drive step (:mod:`.step_cap`, :mod:`.friction`) does not load numba through the components.
@@ -40,18 +41,8 @@ __all__ = [
 ]
 
 
-def __getattr__(name: str) -> Any:
-    """Import a public name on first access (PEP 562); submodules import as usual."""
-    module = _LAZY.get(name)
-    if module is None:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(module, __name__), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(__all__))
+#: Imports a public name on first access (PEP 562); submodules import as usual.
+__getattr__, __dir__ = lazy_exports(__name__, _LAZY, globals(), __all__)
 
 
 if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs
