@@ -92,7 +92,7 @@ from ..errors import CncTwinError
 from ..jit import NUMBA_AVAILABLE
 from .axial import AX_MRR, AX_THRUST, AX_TORQUE, AXIAL_RATIO_DEFAULT, axial_cuts, stalled_plunges
 from .effect_model import CHATTER_SUBSTEPS_PER_PERIOD, MAX_PASSES, EffectParameters, EffectState
-from .engagement import PATH_SPACING, NearField, SweptPath
+from .engagement import PATH_SPACING, NearField, SweptPath, path_capacity
 from .kernel import (CHIP_HISTORY_WIDTH, StepResult, chord_advance_all, chord_feeds, chords_back_all, cut_step,
                      stalled_cuts)
 from .kernel_effects import cut_step_effects
@@ -210,11 +210,11 @@ class CuttingLoad(Component):
         position = self._position()
         spacing = PATH_SPACING * self._radius
         lag = self._radius + 2.0 * np.maximum(self.stock.dx, self.stock.dy)
-        capacity = int(np.ceil(np.max(lag / spacing))) + 4
+        capacity = path_capacity(lag, spacing)
         if self._tools.listed:  # room for the near field of the smallest cutter of the table
             smallest = self._tools.smallest_radius()
             cell = 2.0 * np.maximum(self.stock.dx, self.stock.dy)
-            capacity = max(capacity, int(np.ceil(np.max((smallest + cell) / (PATH_SPACING * smallest)))) + 4)
+            capacity = max(capacity, path_capacity(smallest + cell, PATH_SPACING * smallest))
         self.path = SweptPath(position, spacing, lag, capacity)
         # motion state per member: the tool tip at the start of the step, then its chip history (kernel.chord_feed)
         self._motion = np.zeros((self.batch, 3 + CHIP_HISTORY_WIDTH))
@@ -480,6 +480,8 @@ class CuttingLoad(Component):
             path.head = np.where(pop, (path.head + 1) % path.capacity, path.head)
             path.count = np.where(pop, path.count - 1, path.count)
             self.stock.remove_sweep(first, second, self._radius, pop)
+        # the previous tool position (the slot after the last point, SweptPath.advance) is the tool's
+        path.points[rows, (path.head[rows] + path.count[rows]) % path.capacity] = p[rows]
 
     def _do_step(self, t: float, h: float) -> None:
         if self._whole_step_compiled:

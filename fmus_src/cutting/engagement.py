@@ -32,10 +32,12 @@ max(tool-tip z, z_min), clipped at zero.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
+from ..jit import njit
 from .stock import ZMapStock, disc_sweep_cover
 
 #: Rim tolerance of the near-field test, m: a point within 1 nm of the rim of
@@ -46,6 +48,70 @@ PATH_SPACING = 0.1
 #: XY distance within which a lower tool position only lowers the last stored
 #: point of :class:`SweptPath` (the same axis), m.
 SAME_XY_TOL = 1e-9
+#: Turn tolerance of :class:`SweptPath`, m: the previous tool position is stored
+#: when the last stored point lies more than this off the line of the latest
+#: move (a corner of the actual path, :func:`turn_point`), so the stored
+#: polyline does not cut corners and the Z-map walls it leaves contain the
+#: tool's actual sweep.
+TURN_TOL = 1e-6
+#: Ring-buffer slots of :class:`SweptPath` beyond ``lag / spacing`` (turn points
+#: and the slot holding the previous tool position).
+TURN_SLOTS = 64
+
+
+def path_capacity(lag: np.ndarray, spacing: np.ndarray) -> int:
+    """Stored points per member of a :class:`SweptPath` with this near-field length and spacing.
+
+    Parameters
+    ----------
+    lag, spacing : ndarray
+        Near-field length and point spacing, m.
+
+    Returns
+    -------
+    int
+        ``ceil(max(lag / spacing)) + 4 + TURN_SLOTS``.
+    """
+    return int(np.ceil(np.max(np.asarray(lag) / np.asarray(spacing)))) + 4 + TURN_SLOTS
+
+
+@njit
+def turn_point(lx: float, ly: float, lz: float, qx: float, qy: float, qz: float, px: float, py: float,
+               pz: float) -> bool:
+    """Whether the previous tool position ``Q`` must be stored as a corner of the path.
+
+    The stored polyline runs from the last stored point ``L``; the tool moved
+    from ``Q`` (previous step's end) to ``P`` (this step's end). ``Q`` is a
+    corner when ``L`` lies more than :data:`TURN_TOL` off the line through
+    ``Q`` along ``Q -> P`` (the chord ``L -> P`` and its successors would cut
+    the corner at ``Q`` by up to that), or when the move turns back
+    (``(Q - L) . (P - Q) < 0``) with ``|LQ| > TURN_TOL``. Both in 3D: a lift
+    (or a plunge) after a feed is a corner too, so a pass's last stretch is
+    committed at its depth, not along a ramp from it to the retract. On an arc
+    of radius ``r`` this stores a point every ``sqrt(2 r TURN_TOL)`` or so (the
+    chord error then stays below about ``TURN_TOL / 4``); on a straight move
+    never. Both moves must exceed :data:`SAME_XY_TOL`. (Scalars; the numpy
+    :meth:`SweptPath.advance` and the compiled commit call this same test.)
+
+    Parameters
+    ----------
+    lx, ly, lz, qx, qy, qz, px, py, pz : float
+        ``L``, ``Q`` and ``P``, m.
+
+    Returns
+    -------
+    bool
+    """
+    ax, ay, az = qx - lx, qy - ly, qz - lz
+    bx, by, bz = px - qx, py - qy, pz - qz
+    lq = math.sqrt(ax * ax + ay * ay + az * az)
+    qp = math.sqrt(bx * bx + by * by + bz * bz)
+    if not (lq > SAME_XY_TOL and qp > SAME_XY_TOL):
+        return False
+    if ax * bx + ay * by + az * bz < 0.0:
+        return lq > TURN_TOL
+    cx, cy, cz = ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
+    return math.sqrt(cx * cx + cy * cy + cz * cz) > TURN_TOL * qp
 
 
 def periphery_points(
@@ -112,10 +178,15 @@ class SweptPath:
     its XY distance ``s`` to it (``0 < s < spacing``, ``s`` more than
     :data:`SAME_XY_TOL`: a plunge after an approach that ended short of the
     last point is stored on the tool's axis, not up to ``spacing`` off it; a
-    ramp shallower than 45 deg still stores a point every ``spacing``). At the
-    last point's XY (within :data:`SAME_XY_TOL`) the last point keeps the
-    lowest tip height. The oldest segment is handed to the Z-map once the
-    stored path after it is at least ``lag`` long (XY path length).
+    ramp shallower than 45 deg still stores a point every ``spacing``). Before
+    that, the previous tool position is stored where the path turns there
+    (:func:`turn_point`): a chord across a corner of the actual (lagging,
+    rounding) path would commit a wall up to ``spacing / 2`` inside the tool's
+    sweep, and a later pass below would read that cell column at its full
+    height. At the last point's XY (within :data:`SAME_XY_TOL`) the last point
+    keeps the lowest tip height. The oldest segment is handed to the Z-map once
+    the stored path after it is at least ``lag`` long (XY path length). The
+    slot after the last point holds the previous tool position.
 
     Parameters
     ----------
@@ -124,7 +195,9 @@ class SweptPath:
     spacing, lag : ndarray, shape (B,)
         Minimum XY distance between stored points and near-field length, m.
     capacity : int
-        Stored points per member (the oldest segment is committed early when full).
+        Stored points per member, including the slot of the previous position (the oldest segment is
+        committed early when full; no turn point is stored in the last two free slots); see
+        :func:`path_capacity`.
     """
 
     def __init__(self, start: np.ndarray, spacing: np.ndarray, lag: np.ndarray, capacity: int) -> None:
@@ -135,6 +208,7 @@ class SweptPath:
         self.points = np.zeros((self.batch, self.capacity, 3))
         self.arc = np.zeros((self.batch, self.capacity))
         self.points[:, 0] = start
+        self.points[:, 1] = start  # the previous tool position (the slot after the last point)
         self.head = np.zeros(self.batch, dtype=np.int64)
         self.count = np.ones(self.batch, dtype=np.int64)
         self._rows = np.arange(self.batch)
@@ -155,6 +229,19 @@ class SweptPath:
 
     def advance(self, position: np.ndarray) -> None:
         """Record the tool position at the end of a communication step (shape (B, 3), m)."""
+        # a corner at the previous position: store it first (turn_point)
+        prev = self.points[self._rows, self._index(self.count)].copy()
+        last = self.points[self._rows, self._index(self.count - 1)]
+        for b in range(self.batch):
+            # (not in the last free slots: the position itself may still need one, and the slot after it)
+            if self.count[b] < self.capacity - 2 and turn_point(last[b, 0], last[b, 1], last[b, 2], prev[b, 0],
+                                                               prev[b, 1], prev[b, 2], position[b, 0],
+                                                               position[b, 1], position[b, 2]):
+                new_b = (self.head[b] + self.count[b]) % self.capacity
+                self.arc[b, new_b] = self.arc[b, (new_b - 1) % self.capacity] + math.hypot(
+                    prev[b, 0] - last[b, 0], prev[b, 1] - last[b, 1])
+                self.points[b, new_b] = prev[b]
+                self.count[b] += 1
         last_i = self._index(self.count - 1)
         last = self.points[self._rows, last_i]
         step = np.hypot(position[:, 0] - last[:, 0], position[:, 1] - last[:, 1])
@@ -171,6 +258,7 @@ class SweptPath:
             self.points[rows, new_i] = position[rows]
             self.arc[rows, new_i] = arc_last + step[rows]
             self.count[rows] += 1
+        self.points[self._rows, self._index(self.count)] = position
 
     def pop_ready(self, force_room: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Remove the oldest segment of members whose near field is long enough.

@@ -47,7 +47,7 @@ import numpy as np
 from ..jit import NUMBA_AVAILABLE, njit
 from ..jit_cache import guard_cache
 from .component import PATH_SPACING, CuttingError, CuttingLoad
-from .engagement import RIM_TOL, SweptPath
+from .engagement import RIM_TOL, SweptPath, path_capacity
 from . import engagement, stock
 from .axial import AX_MRR, AX_THRUST, axial_cut
 from .stock import ZMapStock, sweep_cover_z
@@ -408,7 +408,7 @@ def build_engagement_table(
 
     r_arr = np.array([radius])
     lag = r_arr + 2.0 * np.maximum(stock.dx, stock.dy)
-    capacity = int(np.ceil(np.max(lag / (PATH_SPACING * r_arr)))) + 4
+    capacity = path_capacity(lag, PATH_SPACING * r_arr)
     swept = SweptPath(centres[:1], PATH_SPACING * r_arr, lag, capacity)
     heights = stock.heights[0]
     grid = np.array([stock.lower[0, 0], stock.lower[0, 1], stock.dx[0], stock.dy[0]])

@@ -36,7 +36,7 @@ from ..jit import njit
 from ..jit_cache import guard_cache
 from . import axial, engagement, kernel, stock, tool_table
 from .axial import AX_MRR, AX_THRUST, AX_TORQUE, axial_cut, stalled_plunge
-from .engagement import PATH_SPACING, RIM_TOL, SAME_XY_TOL, SweptPath
+from .engagement import PATH_SPACING, RIM_TOL, SAME_XY_TOL, SweptPath, turn_point
 from .kernel import (H_COUNT, OMEGA_FLOOR, SECTION_ROUNDS, SECTIONS, StepResult, chord_advance, chord_feed,
                      stalled_cut, substep_counts)
 from .stock import StockError, ZMapStock, sweep_cover_z
@@ -471,7 +471,15 @@ def commit_rows(heights: np.ndarray, grid: np.ndarray, cells: np.ndarray, rho: n
     """
     cap = points.shape[1]
     for b in range(points.shape[0]):
-        # advance
+        # advance: a corner at the previous position first (SweptPath.advance, engagement.turn_point)
+        last_i = (head[b] + count[b] - 1) % cap
+        prev_i = (head[b] + count[b]) % cap
+        if count[b] < cap - 2 and turn_point(points[b, last_i, 0], points[b, last_i, 1], points[b, last_i, 2],
+                                             points[b, prev_i, 0], points[b, prev_i, 1], points[b, prev_i, 2],
+                                             position[b, 0], position[b, 1], position[b, 2]):
+            arc[b, prev_i] = arc[b, last_i] + math.hypot(points[b, prev_i, 0] - points[b, last_i, 0],
+                                                         points[b, prev_i, 1] - points[b, last_i, 1])
+            count[b] += 1
         last_i = (head[b] + count[b] - 1) % cap
         lx, ly, lz = points[b, last_i, 0], points[b, last_i, 1], points[b, last_i, 2]
         step = math.hypot(position[b, 0] - lx, position[b, 1] - ly)
@@ -483,6 +491,9 @@ def commit_rows(heights: np.ndarray, grid: np.ndarray, cells: np.ndarray, rho: n
             count[b] += 1
         elif step <= SAME_XY_TOL:
             points[b, last_i, 2] = np.minimum(lz, position[b, 2])
+        prev_i = (head[b] + count[b]) % cap
+        for c in range(3):
+            points[b, prev_i, c] = position[b, c]
         # pop_ready(force_room=True) until nothing is ready, each popped segment removed from the Z-map
         while True:
             i_second = (head[b] + min(1, count[b] - 1)) % cap
@@ -504,8 +515,8 @@ def flush_member(heights: np.ndarray, grid: np.ndarray, cells: np.ndarray, rho: 
 
     The tool position is appended to the ring buffer (the open segment from the last stored point becomes a
     stored one), then every stored segment is removed from the Z-map with ``radius`` (the tool that swept
-    them, :func:`_remove_segment`), oldest first, leaving the position as the only stored point. The numpy
-    reference is :meth:`.component.CuttingLoad._flush_path`.
+    them, :func:`_remove_segment`), oldest first, leaving the position as the only stored point (and as the
+    previous position, in the slot after it). The numpy reference is :meth:`.component.CuttingLoad._flush_path`.
     """
     cap = points.shape[1]
     last_i = (head[b] + count[b] - 1) % cap
@@ -522,6 +533,11 @@ def flush_member(heights: np.ndarray, grid: np.ndarray, cells: np.ndarray, rho: 
         head[b] = i_second
         count[b] -= 1
         _remove_segment(heights, grid, cells, rho, b, points, i_first, i_second, radius)
+    # the previous tool position (engagement.SweptPath: the slot after the last point) is the tool's
+    prev_i = (head[b] + count[b]) % cap
+    points[b, prev_i, 0] = px
+    points[b, prev_i, 1] = py
+    points[b, prev_i, 2] = pz
 
 
 @njit
