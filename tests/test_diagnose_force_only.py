@@ -112,11 +112,12 @@ def test_clock_of_a_force_only_recording_comes_from_the_cutting_load(clean_case,
 
 
 @pytest.mark.xfail(strict=False, reason=(
-    "helper-corners (Z-map turn points, 2026-11-29): the recording's Z-map run with a 10 um runout changed at the "
-    "step-over corner (up to 18.9 N at the start of line 7, rms 1.2 N fy on line 6; 0.46 N at most without "
-    "runout), and the diagnosis now leaves fx_N windows on lines 6 and 7 unexplained (rms 4.0 and 2.6 N); the "
-    "runout is still named. Also with the engagement table's reference pass without turn points. Not resolved: "
-    "see README 'Corners of the path'."))
+    "runout at the step-over corner (README 'Corners of the path', open): both the recording's Z-map run and the "
+    "path-mode replay decide whether the long tooth (R + e) is in material at the nominal radius R, which at a "
+    "turn drops or keeps its Kline-DeVor chip min(c0.u + 2e, c1.u) by um-level geometry. Measured on the twin's "
+    "own run (its clock): at t = 5.063, 5.661 and 5.670 s c0.u = 0.43, -3.09, 1.46 um and c1.u = 11.4, 6.9, "
+    "7.2 um (23.5, 14.3, 14.9 N expected); the Z-map gives 0, 0 and 17.6 N, the replay 25.4, 13.0 and 0 N, so "
+    "fx_N windows on lines 6 and 7 stay unexplained (rms 4.0 and 2.6 N); the runout is still named."))
 def test_runout_in_a_force_only_recording_is_named(tmp_path):
     folder = _dynamometer_case(tmp_path / "runout", {"eccentricity_um": 10.0, "phase_deg": 0.0}, seed=8)
     d = diagnose(folder)
