@@ -142,6 +142,8 @@ def test_optimize_reports_the_post_pass_and_it_never_costs_objective(tmp_path):
     assert tidy["objective_after"] <= tidy["objective_before"]
     # the search's own best (the run without the pass) is where the pass started
     assert tidy["objective_before"] == pytest.approx(min(h["best"] for h in off.history))
+    # the same search and push ran in both jobs (the push runs before the pass): the difference is the pass's
+    assert tidy["evaluations"] == on.evaluations - off.evaluations
     for move in tidy["moves"]:
         assert move["line"] in (6, 7, 8) and move["from_line"] in (6, 7, 8)
     assert on.after["max_cutting_load_N"] <= 60.0

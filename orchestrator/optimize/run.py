@@ -415,13 +415,17 @@ def _push(ctx, evaluator: CachedEvaluator, candidates: list[tuple], settings: Op
 
 def _tidy(ctx, evaluator: CachedEvaluator, candidates: list[tuple], settings: OptimizeSettings
           ) -> TidyResult | None:
-    """The equal-feeds post-pass on the best feasible individual (time and cost, default method), or None."""
+    """The equal-feeds post-pass on the best feasible individual (time and cost, default method), or None;
+    ``evaluations`` counts the distinct simulations it added."""
     if not settings.tidy or not _single_objective_pass(settings, candidates):
         return None
     L = ctx.n_lines
     best = np.array(candidates[0], float)
-    return tidy_genes(ctx, evaluator, _score(ctx, settings), best[:L], best[L:],
-                      max_candidates=max(8, int(settings.pop)))
+    before = evaluator.evaluations
+    result = tidy_genes(ctx, evaluator, _score(ctx, settings), best[:L], best[L:],
+                        max_candidates=max(8, int(settings.pop)))
+    result.evaluations = evaluator.evaluations - before
+    return result
 
 
 def _resimulate(ctx, text: str):

@@ -54,6 +54,9 @@ class TidyResult:
         ``feed_after_mm_per_min``, ``spindle_before_rpm``, ``spindle_after_rpm``.
     rounds : int
         Rounds run.
+    evaluations : int
+        Distinct simulations the pass added, set by the caller that owns the evaluator's cache
+        (:func:`~.run.optimize`); 0 otherwise.
     """
 
     feeds: np.ndarray
@@ -62,11 +65,12 @@ class TidyResult:
     objective_after: float
     moves: list[dict[str, Any]] = field(default_factory=list)
     rounds: int = 0
+    evaluations: int = 0
 
     def as_dict(self) -> dict[str, Any]:
         """JSON-ready summary (``report.json``'s ``tidy``)."""
         return {"objective_before": self.objective_before, "objective_after": self.objective_after,
-                "rounds": self.rounds, "moves": self.moves}
+                "rounds": self.rounds, "evaluations": self.evaluations, "moves": self.moves}
 
 
 def equal_cut_classes(ctx: ProblemContext, tolerance: float = EQUAL_CUT_TOLERANCE) -> np.ndarray:
