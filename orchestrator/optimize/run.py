@@ -398,32 +398,18 @@ def _single_objective_pass(settings: OptimizeSettings, candidates: list[tuple]) 
     return settings.method == "default" and settings.objective != "pareto" and bool(candidates)
 
 
-def _push(ctx, evaluator: CachedEvaluator, candidates: list[tuple], settings: OptimizeSettings
-          ) -> PushResult | None:
-    """The onto-the-load-limit post-pass on the best feasible individual (time and cost, default method), or
-    None; ``evaluations`` counts the distinct simulations it added."""
-    if not settings.push or not _single_objective_pass(settings, candidates):
+def _post_pass(run_pass: Callable[..., PushResult | TidyResult], enabled: bool, ctx, evaluator: CachedEvaluator,
+               candidates: list[tuple], settings: OptimizeSettings) -> PushResult | TidyResult | None:
+    """A post-pass (:func:`.push.push_genes` or :func:`.tidy.tidy_genes`) on the best feasible individual (time
+    and cost, default method), or None when it is off or does not apply; ``evaluations`` counts the distinct
+    simulations it added."""
+    if not enabled or not _single_objective_pass(settings, candidates):
         return None
     L = ctx.n_lines
     best = np.array(candidates[0], float)
     before = evaluator.evaluations
-    result = push_genes(ctx, evaluator, _score(ctx, settings), best[:L], best[L:],
-                        max_candidates=max(8, int(settings.pop)))
-    result.evaluations = evaluator.evaluations - before
-    return result
-
-
-def _tidy(ctx, evaluator: CachedEvaluator, candidates: list[tuple], settings: OptimizeSettings
-          ) -> TidyResult | None:
-    """The equal-feeds post-pass on the best feasible individual (time and cost, default method), or None;
-    ``evaluations`` counts the distinct simulations it added."""
-    if not settings.tidy or not _single_objective_pass(settings, candidates):
-        return None
-    L = ctx.n_lines
-    best = np.array(candidates[0], float)
-    before = evaluator.evaluations
-    result = tidy_genes(ctx, evaluator, _score(ctx, settings), best[:L], best[L:],
-                        max_candidates=max(8, int(settings.pop)))
+    result = run_pass(ctx, evaluator, _score(ctx, settings), best[:L], best[L:],
+                      max_candidates=max(8, int(settings.pop)))
     result.evaluations = evaluator.evaluations - before
     return result
 
@@ -618,11 +604,11 @@ def optimize(program: str | Path | None = None, case: str | Path | Case | None =
         bar.close()
         L = ctx.n_lines
         candidates, front = _candidates(ctx, evaluator.cache, settings)
-        pushed = _push(ctx, evaluator, candidates, settings)
+        pushed = _post_pass(push_genes, settings.push, ctx, evaluator, candidates, settings)
         if pushed is not None:
             key = tuple(float(v) for v in np.concatenate([pushed.feeds, pushed.spindles]))
             candidates = [key] + [k for k in candidates if k != key]
-        tidied = _tidy(ctx, evaluator, candidates, settings)
+        tidied = _post_pass(tidy_genes, settings.tidy, ctx, evaluator, candidates, settings)
         if pushed is not None:  # every feasible program evaluated, best first: the pushed ones lead the fallbacks
             candidates, _ = _candidates(ctx, evaluator.cache, settings)
         if tidied is not None or pushed is not None:
