@@ -111,3 +111,21 @@ def test_machine_file_key_switches_the_check_and_names_the_line_of_a_bad_value(t
     line = next(i for i, l in enumerate(bad.read_text().splitlines(), 1) if l.startswith("in_position_before_rapid"))
     with pytest.raises(MachineFileError, match=rf"bad.toml:{line}:.*in_position_before_rapid"):
         load_machine(bad)
+
+
+def test_the_compiled_position_loop_is_scipys_first_order_filter_bit_for_bit():
+    """``position_loop_response`` is ``lfilter([0, 1 - a], [1, -a], r)`` (scipy's own operations, in order)."""
+    from scipy.signal import lfilter
+
+    from fmus_src.nck.servo_settle import position_loop_response
+
+    rng = np.random.default_rng(25)
+    for kv in (1.0, 33.3, 50.0, 300.0):
+        a = math.exp(-kv * TS)
+        ramp = np.minimum(np.arange(2000) * 1e-5, 0.0123)  # a move to rest, m
+        noisy = np.cumsum(rng.normal(0.0, 1e-5, 3000))
+        for r in (ramp, noisy, np.zeros(1), -ramp):
+            assert np.array_equal(position_loop_response(r, a), lfilter([0.0, 1.0 - a], [1.0, -a], r))
+    # the recurrence by hand: y[0] = 0, y[k + 1] = a y[k] + (1 - a) r[k]
+    y = position_loop_response(np.array([1.0, 1.0, 1.0]), 0.5)
+    assert y.tolist() == [0.0, 0.5, 0.75]
