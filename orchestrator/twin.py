@@ -277,8 +277,6 @@ def build_twin(
     cutting = None
     if options.cutting and case.stock is not None:
         if options.cutting_mode == "path":
-            if case.several_tools():  # the table of options.engagement was built for [tool]
-                engagement_table(case)  # raises, naming the case file
             cutting = PathCuttingLoad("cutting", batch=batch, **cutting_parameters(case))
             cutting.attach_table(options.engagement or engagement_table(case, options, program_text))
         elif options.cutting_mode == "zmap":
@@ -409,6 +407,16 @@ def reference_path(case: Case, options: TwinOptions | None = None, program_text:
     Samples closer than 1 µm to the previous kept one are dropped, so the
     path is a polyline in travel order starting at the start position.
     """
+    return reference_path_and_tools(case, options, program_text)[0]
+
+
+def reference_path_and_tools(case: Case, options: TwinOptions | None = None, program_text: str | None = None
+                             ) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`reference_path` and the tool in the spindle at each of its points (T number, shape (K,) int).
+
+    A kept point's tool is the one in the spindle when the reference reached it (after an M6 the tool-change
+    position keeps the old tool; the first point after it has the new one).
+    """
     options = options or TwinOptions()
     start = np.asarray(options.start_mm, dtype=float) * 1e-3
     params = nck_parameters(case.machine)
@@ -418,12 +426,13 @@ def reference_path(case: Case, options: TwinOptions | None = None, program_text:
     if program_text is not None:
         nck.set_program_text(program_text, str(case.program))
     nck.setup(0.0)
-    samples = nck.plan_.member(0).position
+    plan = nck.plan_.member(0)
+    samples = plan.position
     keep = [0]
     for k in range(1, len(samples)):
         if np.linalg.norm(samples[k] - samples[keep[-1]]) > 1e-6:
             keep.append(k)
-    return samples[keep]
+    return samples[keep], np.asarray(plan.tool, dtype=np.int64)[keep]
 
 
 def engagement_table(case: Case, options: TwinOptions | None = None, program_text: str | None = None) -> EngagementTable:
@@ -432,14 +441,20 @@ def engagement_table(case: Case, options: TwinOptions | None = None, program_tex
     The table depends only on the reference path and the tool and stock parameters: an earlier table of the
     same content is returned (:func:`orchestrator.memo.remember`; the reference pass takes about 3 s on the
     diagnosis tests' short programs, a diagnosis of a dynamometer file needed it three times).
+
+    A case whose tool table lists a cutter other than ``[tool]`` (:meth:`~orchestrator.case.Case.several_tools`)
+    gets the cutter of each path point (:meth:`~orchestrator.case.Case.tool_for` of the tool in the spindle
+    there): each station is swept, and later cut, with its own cutter (:mod:`fmus_src.cutting.table`).
     """
     if case.stock is None:
         raise SystemDescriptionError(f"{case.program}: an engagement table needs a stock (the case has none)")
-    if case.several_tools():
-        raise SystemDescriptionError(
-            f"{case.source or case.folder}: [tools] lists cutters other than [tool]; the path-mode cutting load's "
-            "engagement table is built for one cutter: use cutting_mode 'zmap'")
-    path = reference_path(case, options, program_text)
+    path, tools = reference_path_and_tools(case, options, program_text)
     params = cutting_parameters(case)
-    key = digest(path, {k: v for k, v in params.items() if k == "tool_diameter" or k.startswith("stock_")})
-    return remember("engagement_table", key, lambda: EngagementTable.from_parameters(path, params))
+    cutters = None
+    if case.several_tools():
+        used = {int(t): case.tool_for(int(t)) for t in np.unique(tools)}
+        cutters = (np.array([used[int(t)].diameter_mm * 1e-3 for t in tools]),
+                   np.array([used[int(t)].flutes for t in tools], dtype=np.int64))
+    key = digest(path, {k: v for k, v in params.items() if k == "tool_diameter" or k.startswith("stock_")},
+                 *(() if cutters is None else cutters))
+    return remember("engagement_table", key, lambda: EngagementTable.from_parameters(path, params, cutters=cutters))

@@ -10,7 +10,10 @@ T1 (6 mm, 2 flutes), then with T2 (10 mm, 4 flutes) at its own F and S:
   teeth, one tooth at 90 deg; for four teeth, the two engaged teeth 90 deg apart sum to that value at every
   angle: (Fx, Fy) = Kt a fz (-Ke, 1));
 * the compiled master loop, the Python master and the numpy kernel give the same recording bit for bit;
-* a case whose table lists T1 equal to [tool] runs bit for bit as the case without a table (paper part).
+* a case whose table lists T1 equal to [tool] runs bit for bit as the case without a table (paper part);
+* the path mode (the optimiser's search): each engagement-table station carries the cutter that swept it, the
+  slots meet the same hand values and the Z-map mode's results, and the optimiser searches such a case in
+  path mode.
 """
 from __future__ import annotations
 
@@ -176,10 +179,114 @@ def test_without_tool_an_unlisted_tool_is_refused_naming_the_m6_and_the_case(tmp
         build_twin(case)
 
 
-def test_path_mode_refuses_several_cutters(two_tools):
+@pytest.fixture(scope="module")
+def two_tools_path(two_tools):
     case, _ = two_tools
-    with pytest.raises(Exception, match=r"engagement table is built for one cutter"):
-        build_twin(case, options=TwinOptions(cutting_mode="path"))
+    return simulate(case=case, plot=False, options=TwinOptions(cutting_mode="path"))
+
+
+def test_path_mode_cuts_each_slot_with_its_own_cutter(two_tools, two_tools_path):
+    """The path mode (the optimiser's search model): the engagement table's stations carry the cutter that
+    sweeps them; each slot removes its own width and peaks at its own hand value, as the Z-map mode."""
+    case, zmap = two_tools
+    from orchestrator.twin import engagement_table
+
+    table = engagement_table(case)
+    assert table.several_cutters and table.cutters() == [(3e-3, 2), (5e-3, 4)]  # T1 ([tool]), then T2
+    assert table.radius == 3e-3  # the default cutter's, checked against tool_diameter
+    result = two_tools_path
+    assert result.success, result.message
+    peak, removed = _per_line(result.recording)
+    kt = case.machine.si(f"material.{case.material}")["kt"]
+    ke = case.machine.si(f"material.{case.material}")["ke"]
+    assert removed[5] + removed[6] + removed[7] == pytest.approx(6.0 * 1.0 * BLOCK_X_MM, rel=1e-3)  # 72 mm3
+    assert removed[11] + removed[12] + removed[13] == pytest.approx(10.0 * 1.0 * BLOCK_X_MM, rel=1e-3)  # 120 mm3
+    fz1 = 300.0 / (2 * 6000.0) * MM  # 34.38 N
+    assert peak[6] == pytest.approx(kt * 1 * MM * fz1 * math.sqrt(1 + ke * ke), abs=0.05)
+    fz2 = 600.0 / (4 * 4000.0) * MM  # 51.57 N (cut with T1's 2 teeth: 103 N)
+    assert peak[12] == pytest.approx(kt * 1 * MM * fz2 * math.sqrt(1 + ke * ke), abs=0.1)
+    # path and Z-map mode agree on the same run
+    peak_z, removed_z = _per_line(zmap.recording)
+    assert result.summary["cycle_time_s"] == zmap.summary["cycle_time_s"]
+    for line in (6, 12):
+        assert peak[line] == pytest.approx(peak_z[line], abs=0.05)
+        assert removed[line] == pytest.approx(removed_z[line], rel=1e-3)
+
+
+def test_path_mode_compiled_loop_and_python_master_agree_bit_for_bit(tmp_path):
+    program = PROGRAM.replace("X-5. Y10.", "X2. Y10.").replace("X17. F300", "X6. F600")  # a short slot 1
+    case = load_case(_case_folder(tmp_path, program=program))
+    runs = []
+    for compiled in (True, False):
+        twin = build_twin(case, options=TwinOptions(cutting_mode="path"))
+        twin.nck.set("tool_change_time", 0.2)
+        settings = MasterSettings(step=twin.options.step, time_limit=4.6, stop_when=twin.stop_when,
+                                  limits=twin.limits or {}, check_every=10, compiled=compiled)
+        master = Master(twin.system, settings, twin.probes)
+        if compiled:
+            assert compiled_support(master) is None, compiled_support(master)
+        runs.append(master.run())
+    _assert_same(runs[0], runs[1])
+    rec = runs[0].recording
+    line = np.asarray(rec["line"]).ravel()
+    peak = np.asarray(rec["fc_peak_N"]).ravel()
+    assert np.nanmax(peak[line == 6]) > 10.0 and np.nanmax(peak[line == 12]) > 10.0  # both slots cut
+
+
+def test_path_mode_refuses_what_it_cannot_carry_for_several_cutters(two_tools):
+    from fmus_src.cutting.component import CuttingError
+    from fmus_src.cutting.path_component import PathCuttingLoad
+    from fmus_src.cutting.table import EngagementTable
+    from orchestrator.diagnose.cutting_table import one_cutter_table
+    from orchestrator.diagnose.errors import DiagnosisError
+    from orchestrator.twin import cutting_parameters, engagement_table, reference_path
+
+    case, _ = two_tools
+    params = cutting_parameters(case)
+    one = EngagementTable.from_parameters(reference_path(case), params)  # built without the cutters
+    several = engagement_table(case)
+
+    def setup(table, **extra):
+        cut = PathCuttingLoad("cutting", **{**params, **extra})
+        cut.attach_table(table)
+        cut.setup(0.0)
+
+    with pytest.raises(CuttingError, match=r"lists T2 \(10 mm, 4 flutes\).*built for one cutter"):
+        setup(one)
+    with pytest.raises(CuttingError, match=r"10 mm, 4-flute cutter that member 0's tool table .* does not list"):
+        setup(several, tool_1_diameter=8e-3)
+    with pytest.raises(CuttingError, match=r"several cutters and an effect term that depends on the teeth"):
+        setup(several, runout_eccentricity=1e-5)
+    setup(several)  # the case's own parameters
+    with pytest.raises(DiagnosisError, match=r"case.toml: \[tools\] lists cutters other than \[tool\]"):
+        one_cutter_table(case)
+
+
+def test_station_cutters_follow_the_tool_that_reached_each_path_point():
+    """A straight path: points 0-2 reached with a 6 mm 2-flute cutter, 3-4 with a 10 mm 4-flute one. A station
+    takes the cutter of the point that ends its segment; a member takes its station's (ceil(s / ds))."""
+    from fmus_src.cutting import path_kernel as pk
+    from fmus_src.cutting.table import build_engagement_table
+
+    path = np.column_stack([np.arange(5) * MM, np.zeros(5), np.full(5, 5 * MM)])  # in the air above the block
+    cutters = (np.array([6, 6, 6, 10, 10]) * MM, np.array([2, 2, 2, 4, 4]))
+    table = build_engagement_table(path, 6 * MM, [0, 0, -MM], [MM, MM, 0], 1e-4, spacing=0.25 * MM,
+                                   cutters=cutters)
+    s = np.arange(17) * 0.25 * MM  # stations; segment 2 (2-3 mm) ends at point 3, the 10 mm cutter's
+    assert table.cutter_radius.tolist() == [3 * MM if x < 2 * MM else 5 * MM for x in s]
+    assert table.cutter_flutes.tolist() == [2 if x < 2 * MM else 4 for x in s]
+    par = np.zeros((5, 3))
+    st = np.zeros((pk.ST_ROWS, 3))
+    st[pk.ST_S] = [1.9 * MM, 2.0 * MM, 2.1 * MM]  # -> stations 8 (2 mm, on segment 2), 8, 9
+    pk.station_cutters(par, st, table.cutter_radius, table.cutter_flutes, table.spacing)
+    assert par[pk.PAR_RADIUS].tolist() == [5 * MM] * 3 and par[pk.PAR_FLUTES].tolist() == [4] * 3
+    st[pk.ST_S] = [1.74 * MM, 0.0, 1.5 * MM]  # stations 7, 0, 6: the 6 mm cutter
+    pk.station_cutters(par, st, table.cutter_radius, table.cutter_flutes, table.spacing)
+    assert par[pk.PAR_RADIUS].tolist() == [3 * MM] * 3 and par[pk.PAR_FLUTES].tolist() == [2] * 3
+    one = build_engagement_table(path, 6 * MM, [0, 0, -MM], [MM, MM, 0], 1e-4, spacing=0.25 * MM)
+    assert not one.several_cutters and one.cutter_radius.size == 0
+    pk.station_cutters(par, st, one.cutter_radius, one.cutter_flutes, one.spacing)  # one cutter: untouched
+    assert par[pk.PAR_RADIUS].tolist() == [3 * MM] * 3
 
 
 def test_members_with_their_own_tables_in_two_threads_match_the_python_master(tmp_path):
@@ -206,13 +313,25 @@ def test_members_with_their_own_tables_in_two_threads_match_the_python_master(tm
     assert not np.array_equal(peak[slot2, 0], peak[slot2, 1])
 
 
-def test_the_optimiser_searches_several_cutters_on_the_zmap_model(two_tools):
-    from orchestrator.optimize.reference import build_reference
+def test_the_optimiser_searches_several_cutters_in_path_mode(tmp_path):
+    """A short two-tool case: T1 (6 mm, 2 flutes) slots 4 mm at F300 S6000 (34.38 N), T2 (10 mm, 4 flutes)
+    4 mm at F600 S4000 (51.57 N). The search runs in path mode, and the written program, re-simulated on the
+    Z-map model, stays within the 60 N limit."""
+    import json
 
-    case, _ = two_tools
-    reference = build_reference(case)
-    assert reference.context.engagement is None
-    assert "tool table ([tools]) lists cutters other than [tool]" in reference.context.search_model_note
+    from orchestrator.optimize import OptimizeSettings, optimize
+
+    program = PROGRAM.replace("X-5. Y10.", "X4. Y10.").replace("X17. F300", "X12. F300")
+    program = program.replace("X-6. Y28.", "X3. Y28.").replace("X18. F600", "X12. F600")
+    folder = _case_folder(tmp_path / "case", program=program)
+    settings = OptimizeSettings(objective="time", load_limit_N=60.0, feed_range=(100, 800), pop=4, gens=1,
+                                seed=1)
+    result = optimize(case=folder, settings=settings, out=tmp_path / "opt")
+    report = json.loads((tmp_path / "opt" / "report.json").read_text())
+    assert report["search_cutting_model"] == "path"
+    assert not any("Z-map" in note for note in report["notes"])
+    assert report["before"]["max_cutting_load_N"] == pytest.approx(51.57, abs=0.1)  # slot 2, the Z-map run
+    assert result.after["max_cutting_load_N"] <= 60.0  # the written program, re-simulated on the Z-map model
 
 
 def test_tool_table_packing_lookup_and_errors():

@@ -20,6 +20,13 @@ The effect terms are those of :class:`.component.CuttingLoad` (same
 parameters and outputs); with runout, helix, edge force, deflection or
 chatter on the step runs in :func:`.path_effects.path_step_effects`.
 
+Several cutters (a tool table): a table built with the cutter of each path
+point (:func:`.table.build_engagement_table`'s ``cutters``) gives each
+station's radius and teeth, and every member cuts with the cutter of the
+station it is at (:func:`.path_kernel.station_cutters`); each of them must be
+in the members' tool table, and the effect terms that depend on the teeth
+(runout, helix, edge force, deflection, chatter) are refused with them.
+
 The table is handed over either as a Python object
 (:meth:`PathCuttingLoad.attach_table`, before ``setup``) or as an ``.npz``
 file named by the String parameter ``engagement_table`` (FMU use).
@@ -111,17 +118,39 @@ class PathCuttingLoad(CuttingLoad):
                         f"{ref} m (rebuild the table for this stock)"
                     )
 
-    def _check_one_cutter(self) -> None:
-        """The tool table lists no cutter other than ``tool_diameter`` / ``flutes`` (the table's one cutter)."""
+    def _check_cutters(self, table: EngagementTable) -> None:
+        """The members' tool table matches the engagement table's cutters.
+
+        A table of one cutter: the tool table lists no cutter other than ``tool_diameter`` / ``flutes``. A
+        table of several cutters (:attr:`.table.EngagementTable.several_cutters`): every station's cutter is
+        one of each member's tool table (``tool_diameter`` / ``flutes`` or a listed slot), and no effect term
+        that depends on the teeth (runout, helix, edge force, deflection, chatter) is on.
+        """
         tools = ToolTable.from_values(self.values, self.batch, self.name, CuttingError)
+        if table.several_cutters:
+            for r, z in table.cutters():
+                have = (np.abs(tools.radius - r) <= MATCH_TOL * r) & (tools.flutes == z) & (tools.number != 0)
+                missing = np.flatnonzero(~have.any(axis=1))
+                if missing.size:
+                    raise CuttingError(
+                        f"{self.name}: the engagement table's path is cut with a {2e3 * r:g} mm, {z}-flute cutter "
+                        f"that member {int(missing[0])}'s tool table (tool_diameter / flutes, tool_<i>_*) does not "
+                        "list; expected the tool table the engagement table was built with")
+            if self._eff.geometric:
+                raise CuttingError(
+                    f"{self.name}: the engagement table's path is cut with several cutters and an effect term "
+                    "that depends on the teeth (runout, helix, edge force, deflection or chatter) is on; the path "
+                    "mode models those for one cutter: run this program on the Z-map cutting load (CuttingLoad)")
+            return
         other = (tools.radius != tools.radius[:, :1]) | (tools.flutes != tools.flutes[:, :1])
         if other.any():
             m, k = (int(i[0]) for i in np.nonzero(other))
             raise CuttingError(
                 f"{self.name}: the tool table lists T{int(tools.number[m, k])} ({2e3 * tools.radius[m, k]:g} mm, "
                 f"{int(tools.flutes[m, k])} flutes) beside the {2e3 * tools.radius[m, 0]:g} mm, "
-                f"{int(tools.flutes[m, 0])}-flute tool_diameter / flutes; the path mode's engagement table is "
-                "built for one cutter: run a program with several cutters on the Z-map cutting load (CuttingLoad)")
+                f"{int(tools.flutes[m, 0])}-flute tool_diameter / flutes, but the engagement table was built for one "
+                "cutter: build it with the cutter of each path point (build_engagement_table's cutters, "
+                "orchestrator.twin.engagement_table does) or run on the Z-map cutting load (CuttingLoad)")
 
     # ------------------------------------------------------------------ lifecycle
     def _setup(self, t0: float) -> None:
@@ -138,7 +167,6 @@ class PathCuttingLoad(CuttingLoad):
             self._table = EngagementTable.load(fname)
         table = self._table
         self._check_table(table)
-        self._check_one_cutter()
         position = self._position()
         self._par = np.stack([
             0.5 * np.asarray(v["tool_diameter"], dtype=np.float64),
@@ -167,6 +195,7 @@ class PathCuttingLoad(CuttingLoad):
         self._out[pk.OUT_ANGLE] = theta
         v["engaged_teeth"][...] = 0
         self._setup_effects(theta)
+        self._check_cutters(table)
         flutes = np.asarray(v["flutes"], dtype=np.int64)
         self._runout = self._eff.runout_offsets(flutes, int(flutes.max()))
         self._passes = self._eff.passes(flutes)
@@ -185,6 +214,7 @@ class PathCuttingLoad(CuttingLoad):
         if np.any(eff.droop != 0):
             inp = self._inp.copy()
             inp[3] = actual
+        pk.station_cutters(self._par, self._st, tb.cutter_radius, tb.cutter_flutes, tb.spacing)  # several cutters
         par = self._par
         wear = self._wear()
         if np.any(eff.wear_rate != 0):

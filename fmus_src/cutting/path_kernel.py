@@ -755,6 +755,39 @@ def path_work(kmax: int, flutes_max: int) -> tuple[np.ndarray, np.ndarray, np.nd
 
 
 @njit
+def station_cutters(par: np.ndarray, st: np.ndarray, radius: np.ndarray, flutes: np.ndarray, ds: float) -> None:
+    """Each member takes the cutter of the station at or just ahead of its cursor (a table of several cutters).
+
+    Called before each step of :func:`path_step` / :func:`path_step_into` /
+    :func:`.path_effects.path_step_effects`: the station ``ceil(s / ds)`` (the one that ends the stretch the
+    member is on, as :func:`.path_axial.path_axial` reads it) gives the member's radius and teeth, as the tool
+    in the spindle gives them in the Z-map mode (:func:`.zmap_numba.switch_tool`). The chip history is kept
+    (the tooth period follows the new teeth).
+
+    Parameters
+    ----------
+    par : ndarray, shape (5, B)
+        The members' parameters (rows ``PAR_*``); ``PAR_RADIUS`` [m] and ``PAR_FLUTES`` written.
+    st : ndarray, shape (ST_ROWS, B)
+        The members' state (arc length ``ST_S`` [m] read).
+    radius, flutes : ndarray, shape (S,) or (0,)
+        The table's ``cutter_radius`` [m] and ``cutter_flutes``; empty (one cutter): nothing is written.
+    ds : float
+        Station spacing, m.
+    """
+    n_st = radius.shape[0]
+    if n_st == 0:
+        return
+    for m in range(par.shape[1]):
+        s = st[ST_S, m]
+        if not math.isfinite(s):
+            continue
+        i = min(max(int(math.ceil(s / ds - 1e-9)), 0), n_st - 1)
+        par[PAR_RADIUS, m] = radius[i]
+        par[PAR_FLUTES, m] = flutes[i]
+
+
+@njit
 def path_step(
     h: float, inp: np.ndarray, par: np.ndarray, st: np.ndarray, out: np.ndarray, engaged: np.ndarray,
     verts: np.ndarray, vs: np.ndarray, ds: float, count: np.ndarray, alpha: np.ndarray, beta: np.ndarray,

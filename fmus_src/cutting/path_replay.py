@@ -7,8 +7,8 @@
 steps and members, on copies of the state the component built at set-up
 (the component itself is left as set up). It returns ``None`` when the
 component is not in a state it covers (numba missing, not set up or already
-stepped, a member already failed, no table, inputs that are not finite or a
-time vector that does not increase) or when a member fails on the way (the
+stepped, a member already failed, no table or a table of several cutters,
+inputs that are not finite or a time vector that does not increase) or when a member fails on the way (the
 kernel's status): the caller then steps the component itself, which fails
 the member with its own message.
 
@@ -37,6 +37,8 @@ def _covered(comp: PathCuttingLoad, t: np.ndarray, positions: np.ndarray, step_o
     if not (NUMBA_AVAILABLE and isinstance(comp, PathCuttingLoad) and comp.state == "initialized"):
         return False
     if comp._table is None or "_st" not in comp.__dict__ or comp.failed_members.any() or comp._status.any():
+        return False
+    if comp._table.several_cutters:  # replay_path steps one cutter per member: the component switches them
         return False
     n = t.shape[0]
     if t.ndim != 1 or n < 2 or positions.shape != (n, 3) or step_omega.shape != (n - 1,):

@@ -34,6 +34,16 @@ deviations from the reference pass are honoured.
 The end edges (the axial chip of plunges, :mod:`.axial`): per station, the
 end disc's engagement on the move from the previous station, per unit of
 descent (``axial_area``, ``axial_span``; read by :mod:`.path_axial`).
+
+Several cutters (a tool table, :mod:`.tool_table`): given the cutter of each
+path point (the tool in the spindle when the reference reached it), each
+station is swept with the cutter of the path segment it lies on (the tool at
+the segment's end), as the Z-map mode switches cutters at a tool change: the
+recent path is committed with the old radius (:func:`.zmap_numba.flush`), then
+the near field's spacing and lag become the new cutter's. The table keeps each
+station's radius and teeth (``cutter_radius``, ``cutter_flutes``), which the
+path kernels use for the members there (:func:`.path_kernel.station_cutters`).
+A table of one cutter keeps none: the one-cutter table bit for bit.
 """
 from __future__ import annotations
 
@@ -51,7 +61,7 @@ from .engagement import RIM_TOL, SweptPath, path_capacity
 from . import engagement, stock
 from .axial import AX_MRR, AX_THRUST, axial_cut
 from .stock import ZMapStock, sweep_cover_z
-from .zmap_numba import ZMapArrays, commit
+from .zmap_numba import ZMapArrays, commit, flush
 
 #: Tops closer than this are one interval, m.
 TOP_TOL = 1e-7
@@ -229,6 +239,11 @@ class EngagementTable:
         The end edges' engagement per unit of descent (:mod:`.path_axial`): ``sum d dA / dz`` [m2] and
         ``sum d dA / r / dz`` [m] of the move from the previous station (0 where the path does not move
         down); zeros when absent (a table saved before they existed: no axial chip).
+    cutter_radius : ndarray, shape (S,) or (0,), optional
+        Radius of the cutter that sweeps each station, m (several cutters, a tool table); empty (the
+        default) when the whole path is cut by the one cutter of ``radius``.
+    cutter_flutes : ndarray of int64, shape (S,) or (0,), optional
+        Teeth of that cutter; empty with ``cutter_radius``.
     """
 
     vertices: np.ndarray
@@ -245,11 +260,34 @@ class EngagementTable:
     stock_cell: float
     axial_area: np.ndarray | None = None
     axial_span: np.ndarray | None = None
+    cutter_radius: np.ndarray | None = None
+    cutter_flutes: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         for name in ("axial_area", "axial_span"):
             if getattr(self, name) is None:
                 object.__setattr__(self, name, np.zeros(self.count.shape[0]))
+        radius = np.zeros(0) if self.cutter_radius is None else np.asarray(self.cutter_radius, dtype=np.float64)
+        flutes = (np.zeros(0, dtype=np.int64) if self.cutter_flutes is None
+                  else np.asarray(self.cutter_flutes, dtype=np.int64))
+        if radius.shape != flutes.shape or radius.size not in (0, self.count.shape[0]):
+            raise CuttingError(f"engagement table: cutter_radius {radius.shape} and cutter_flutes {flutes.shape}; "
+                               f"expected both empty or both of shape ({self.count.shape[0]},), one per station")
+        object.__setattr__(self, "cutter_radius", np.ascontiguousarray(radius))
+        object.__setattr__(self, "cutter_flutes", np.ascontiguousarray(flutes))
+
+    @property
+    def several_cutters(self) -> bool:
+        """Whether the stations are swept by more than one cutter (``cutter_radius`` / ``cutter_flutes`` set)."""
+        return self.cutter_radius.size > 0
+
+    def cutters(self) -> list[tuple[float, int]]:
+        """The distinct cutters of the stations, ``(radius m, teeth)``, in order of first use (``[]``: one cutter,
+        :attr:`radius`)."""
+        seen: dict[tuple[float, int], None] = {}
+        for r, z in zip(self.cutter_radius.tolist(), self.cutter_flutes.tolist()):
+            seen.setdefault((r, z), None)
+        return list(seen)
 
     @property
     def length(self) -> float:
@@ -265,7 +303,8 @@ class EngagementTable:
     def nbytes(self) -> int:
         """Memory held by the table arrays, bytes."""
         return int(sum(a.nbytes for a in (self.vertices, self.vertex_s, self.count, self.alpha, self.beta, self.top,
-                                          self.axial_area, self.axial_span)))
+                                          self.axial_area, self.axial_span, self.cutter_radius,
+                                          self.cutter_flutes)))
 
     def save(self, path: str | Path) -> None:
         """Write the table to a ``.npz`` file."""
@@ -273,7 +312,8 @@ class EngagementTable:
             path, vertices=self.vertices, vertex_s=self.vertex_s, spacing=self.spacing, count=self.count,
             alpha=self.alpha, beta=self.beta, top=self.top, radius=self.radius, z_floor=self.z_floor,
             stock_lower=self.stock_lower, stock_upper=self.stock_upper, stock_cell=self.stock_cell,
-            axial_area=self.axial_area, axial_span=self.axial_span,
+            axial_area=self.axial_area, axial_span=self.axial_span, cutter_radius=self.cutter_radius,
+            cutter_flutes=self.cutter_flutes,
         )
 
     @classmethod
@@ -302,18 +342,20 @@ class EngagementTable:
             radius=float(f["radius"]), z_floor=float(f["z_floor"]), stock_lower=f["stock_lower"],
             stock_upper=f["stock_upper"], stock_cell=float(f["stock_cell"]),
             axial_area=f.get("axial_area"), axial_span=f.get("axial_span"),
+            cutter_radius=f.get("cutter_radius"), cutter_flutes=f.get("cutter_flutes"),
         )
 
     @classmethod
     def from_parameters(
         cls, path: np.ndarray, parameters: Mapping[str, object], spacing: float = 2e-5, angle_samples: int = 360,
-        max_intervals: int = 8,
+        max_intervals: int = 8, cutters: tuple[np.ndarray, np.ndarray] | None = None,
     ) -> "EngagementTable":
         """Build a table from the path and a CuttingLoad parameter mapping (SI, scalar values).
 
         Uses ``tool_diameter``, ``stock_{x,y,z}_{min,max}`` and ``stock_cell``
         (defaults of :class:`~.component.CuttingLoad` where absent), e.g. the
-        dictionary ``cutting_parameters(case)`` of the twin.
+        dictionary ``cutting_parameters(case)`` of the twin. ``cutters``: the
+        cutter of each path point, as :func:`build_engagement_table`.
         """
         default = {v.name: v.start for v in CuttingLoad.variables if v.causality == "parameter"}
 
@@ -327,11 +369,12 @@ class EngagementTable:
         lower = [get(f"stock_{a}_min") for a in "xyz"]
         upper = [get(f"stock_{a}_max") for a in "xyz"]
         return build_engagement_table(path, get("tool_diameter"), lower, upper, get("stock_cell"), spacing,
-                                      angle_samples, max_intervals)
+                                      angle_samples, max_intervals, cutters)
 
 
-def _clean_path(path: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Drop consecutive duplicates; return vertices (V, 3) and cumulative 3D arc length (V,)."""
+def _clean_path(path: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Drop consecutive duplicates; return vertices (V, 3), cumulative 3D arc length (V,) and the kept points'
+    indices (V,)."""
     p = np.asarray(path, dtype=np.float64)
     if p.ndim != 2 or p.shape[1] != 3 or p.shape[0] < 1:
         raise CuttingError(f"engagement table: path must have shape (K, 3) with K >= 1, got {p.shape}")
@@ -342,7 +385,7 @@ def _clean_path(path: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     keep = np.concatenate([[True], step > DUPLICATE_TOL])
     v = p[keep]
     s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(v, axis=0), axis=1))])
-    return v, s
+    return v, s, np.flatnonzero(keep)
 
 
 def _points_at(vertices: np.ndarray, vertex_s: np.ndarray, s: np.ndarray) -> np.ndarray:
@@ -357,6 +400,7 @@ def _points_at(vertices: np.ndarray, vertex_s: np.ndarray, s: np.ndarray) -> np.
 def build_engagement_table(
     path: np.ndarray, tool_diameter: float, stock_lower: np.ndarray, stock_upper: np.ndarray, stock_cell: float,
     spacing: float = 2e-5, angle_samples: int = 360, max_intervals: int = 8,
+    cutters: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> EngagementTable:
     """Reference pass: engagement intervals along ``path`` (see module docstring).
 
@@ -379,6 +423,11 @@ def build_engagement_table(
         Samples of the immersion angle per revolution before bisection.
     max_intervals : int
         Intervals kept per station.
+    cutters : (ndarray, ndarray), shapes (K,), optional
+        Diameter [m] and teeth of the cutter in the spindle at each path point (several cutters, a tool
+        table): a station is swept with the cutter of the path point that ends its segment, and the table
+        keeps each station's radius and teeth. None (the default): ``tool_diameter`` everywhere and no
+        per-station cutters.
 
     Returns
     -------
@@ -387,9 +436,9 @@ def build_engagement_table(
     Raises
     ------
     CuttingError
-        On a malformed path or non-positive spacing, diameter or sample counts.
+        On a malformed path or non-positive spacing, diameter, sample counts or cutters.
     """
-    vertices, vertex_s = _clean_path(path)
+    vertices, vertex_s, kept = _clean_path(path)
     for name, value in (("tool_diameter", tool_diameter), ("spacing", spacing)):
         if not (math.isfinite(value) and value > 0.0):
             raise CuttingError(f"engagement table: {name} = {value!r}; expected a positive length in m")
@@ -397,6 +446,7 @@ def build_engagement_table(
         raise CuttingError(f"engagement table: angle_samples = {angle_samples}, max_intervals = {max_intervals}; "
                            "expected >= 8 and >= 1")
     radius = 0.5 * float(tool_diameter)
+    table_radius = radius  # the default cutter's (tool_diameter), checked against the members' parameters
     lower = np.asarray(stock_lower, dtype=np.float64).reshape(1, 3)
     upper = np.asarray(stock_upper, dtype=np.float64).reshape(1, 3)
     stock = ZMapStock(lower, upper, np.array([float(stock_cell)]))
@@ -405,10 +455,17 @@ def build_engagement_table(
     ds = length / n_st if n_st > 0 else float(spacing)
     s_st = np.arange(n_st + 1) * ds
     centres = _points_at(vertices, vertex_s, s_st)
+    cutter_radius, cutter_flutes = _station_cutters(cutters, np.asarray(path).shape[0], kept, vertex_s, s_st)
+    if cutter_radius.size:
+        radius = float(cutter_radius[0])
 
     r_arr = np.array([radius])
-    lag = r_arr + 2.0 * np.maximum(stock.dx, stock.dy)
+    cell = 2.0 * np.maximum(stock.dx, stock.dy)
+    lag = r_arr + cell
     capacity = path_capacity(lag, PATH_SPACING * r_arr)
+    if cutter_radius.size:  # room for the near field of the smallest cutter (as CuttingLoad's set-up)
+        smallest = np.array([float(cutter_radius.min())])
+        capacity = max(capacity, path_capacity(smallest + cell, PATH_SPACING * smallest))
     swept = SweptPath(centres[:1], PATH_SPACING * r_arr, lag, capacity)
     heights = stock.heights[0]
     grid = np.array([stock.lower[0, 0], stock.lower[0, 1], stock.dx[0], stock.dy[0]])
@@ -427,9 +484,18 @@ def build_engagement_table(
     top = np.zeros((n_st + 1, max_intervals))
     buf = [np.zeros(angle_samples) for _ in range(3)]
     compiled = use_compiled_commit
-    zmap = ZMapArrays.of(stock) if compiled else None
+    zmap = ZMapArrays.of(stock) if compiled or cutter_radius.size else None
     for i in range(n_st + 1):
         c = centres[i]
+        if cutter_radius.size and cutter_radius[i] != r_arr[0]:
+            # a tool change (the Z-map mode's switch_tool): the recent path is committed with the old radius at
+            # the last station, then the near field is the new cutter's
+            flush(zmap, swept, np.array([True]), centres[max(i - 1, 0)][None, :], r_arr)
+            r_arr = np.array([float(cutter_radius[i])])
+            radius = float(r_arr[0])
+            swept.spacing = PATH_SPACING * r_arr
+            swept.lag = r_arr + cell
+            reach = radius + float(stock.rho[0])
         near_block = solid and (
             lower[0, 0] - reach <= c[0] <= upper[0, 0] + reach and lower[0, 1] - reach <= c[1] <= upper[0, 1] + reach
             and c[2] < upper[0, 2]
@@ -461,9 +527,45 @@ def build_engagement_table(
             stock.remove_sweep(start, end, r_arr, mask)
     return EngagementTable(
         vertices=vertices, vertex_s=vertex_s, spacing=ds, count=count, alpha=alpha, beta=beta, top=top,
-        radius=radius, z_floor=z_floor, stock_lower=lower[0].copy(), stock_upper=upper[0].copy(),
-        stock_cell=float(stock_cell), axial_area=axial_area, axial_span=axial_span,
+        radius=table_radius, z_floor=z_floor, stock_lower=lower[0].copy(), stock_upper=upper[0].copy(),
+        stock_cell=float(stock_cell), axial_area=axial_area, axial_span=axial_span, cutter_radius=cutter_radius,
+        cutter_flutes=cutter_flutes,
     )
+
+
+def _station_cutters(cutters: tuple[np.ndarray, np.ndarray] | None, points: int, kept: np.ndarray,
+                     vertex_s: np.ndarray, s_st: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Radius [m] and teeth of each station's cutter: that of the path point ending the station's segment.
+
+    ``cutters`` holds the diameter [m] and teeth of each of the ``points`` path points, ``kept`` the indices
+    of the vertices (:func:`_clean_path`), ``s_st`` the stations' arc lengths [m]. Returns empty arrays when
+    ``cutters`` is None.
+
+    Raises
+    ------
+    CuttingError
+        When the arrays do not have one entry per path point or a cutter is not a positive finite diameter
+        with at least one tooth (naming the first such point).
+    """
+    if cutters is None:
+        return np.zeros(0), np.zeros(0, dtype=np.int64)
+    diameter = np.asarray(cutters[0], dtype=np.float64)
+    flutes = np.asarray(cutters[1])
+    if diameter.shape != (points,) or flutes.shape != (points,):
+        raise CuttingError(f"engagement table: cutters of shapes {diameter.shape} and {flutes.shape}; expected "
+                           f"({points},) each, one diameter and tooth count per path point")
+    bad = ~(np.isfinite(diameter) & (diameter > 0.0)) | ~(flutes >= 1) | (flutes != np.round(flutes))
+    if bad.any():
+        k = int(np.flatnonzero(bad)[0])
+        raise CuttingError(f"engagement table: path point {k} has a cutter of {diameter[k]!r} m and {flutes[k]!r} "
+                           "teeth; expected a positive diameter in m and a whole number of teeth >= 1")
+    v_radius = 0.5 * diameter[kept]
+    v_flutes = flutes[kept].astype(np.int64)
+    if kept.size == 1:
+        end = np.zeros(s_st.size, dtype=np.int64)
+    else:  # the segment of each station (as _points_at), and the vertex at its end
+        end = np.clip(np.searchsorted(vertex_s, s_st, side="right") - 1, 0, kept.size - 2) + 1
+    return np.ascontiguousarray(v_radius[end]), np.ascontiguousarray(v_flutes[end])
 
 
 # the cached kernels call stock.sweep_cover_z and read engagement.RIM_TOL: recompile when those change

@@ -65,9 +65,10 @@ _NCK = (None, None) + (_Members(0, copy=False),) * 2 + (None,) * 6 + (_Members(0
 _MCU = (_Members(2), _Members(2), _Members(0), None, None, None, None, _COUNTER, _Members(0), _Members(2),
         _Members(0))
 _DRIVES = (_Members(2), _Members(1), _Members(1), _Members(1), _Members(1), None, _Members(1))
-# path mode: par, state, engaged; table and settings (shared); clocks, status; ka; axial table (shared); z at start
+# path mode: par, state, engaged; table and settings (shared); clocks, status; ka; axial table (shared); z at start;
+# the table's station cutters (shared)
 _CUT = ((_Members(1), _Members(1), _Members(0)) + (None,) * 11 + (_Members(0),) * 4
-        + (_Members(0, copy=False), None, None, _Members(0)))
+        + (_Members(0, copy=False), None, None, _Members(0), None, None))
 _RO = _Members(0, copy=False)
 # Z-map heights, grid, cells, rho; ring buffer points, arc, head, count; spacing, lag; start position, angle;
 # radius, flutes (spacing, lag, radius and flutes written at a tool change); steps, Kt, Ke, Ka; clocks (time,

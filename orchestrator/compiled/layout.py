@@ -69,7 +69,7 @@ _CUT_KNOWN = frozenset((
     "stock_y_max", "stock_z_max", "stock_cell", "angle_steps_per_tooth", "initial_spindle_angle",
     "engagement_table", "path_tolerance",
     "ka",  # the end edges' thrust ratio (fmus_src.cutting.path_axial)
-)) | TABLE_PARAMETERS  # a tool table with one cutter (PathCuttingLoad refuses others at set-up)
+)) | TABLE_PARAMETERS  # the tool table (PathCuttingLoad checks it against its table's cutters)
 
 _INTEGRATORS = {"rk4": INTEGRATOR_RK4, "exponential": INTEGRATOR_EXPONENTIAL}
 
@@ -315,13 +315,16 @@ class Layout:
                         float(c._margin), float(c._tolerance), int(MAX_SUBSTEPS),  # noqa: SLF001
                         c._effect_state.cutting_time, c._effect_state.torque, c._effect_state.angle,  # noqa: SLF001
                         c._status, c._ka, np.ascontiguousarray(tb.axial_area, dtype=np.float64),  # noqa: SLF001
-                        np.ascontiguousarray(tb.axial_span, dtype=np.float64), c._z_old)  # noqa: SLF001
+                        np.ascontiguousarray(tb.axial_span, dtype=np.float64), c._z_old,  # noqa: SLF001
+                        np.ascontiguousarray(tb.cutter_radius, dtype=np.float64),
+                        np.ascontiguousarray(tb.cutter_flutes, dtype=np.int64))
         else:
             self._cut = None
             self.cut = (np.zeros((5, B)), np.zeros((7, B)), np.zeros(B, dtype=np.int64), np.zeros((1, 3)),
                         np.zeros(1), 1.0, np.zeros(1, dtype=np.int64), np.zeros((1, 1)), np.zeros((1, 1)),
                         np.zeros((1, 1)), 0.0, 0.0, 0.0, 1, np.zeros(B), np.zeros(B), np.zeros(B),
-                        np.zeros(B, dtype=np.int64), np.zeros(B), np.zeros(1), np.zeros(1), np.zeros(B))
+                        np.zeros(B, dtype=np.int64), np.zeros(B), np.zeros(1), np.zeros(1), np.zeros(B),
+                        np.zeros(0), np.zeros(0, dtype=np.int64))
         self._bind_zmap(by_kind[KIND_ZMAP][0] if by_kind[KIND_ZMAP] else None)
         self.bound = True
 

@@ -46,7 +46,7 @@ from fmus_src.servo.control_numba import axis_alarm, axis_member
 from fmus_src.servo.exponential_numba import exponential_member
 from fmus_src.servo.stick_slip_numba import OK, advance_kernel
 from fmus_src.cutting.path_axial import path_axial
-from fmus_src.cutting.path_kernel import ST_Z, max_flutes, path_step_into, path_work
+from fmus_src.cutting.path_kernel import ST_Z, max_flutes, path_step_into, path_work, station_cutters
 from fmus_src.cutting.zmap_numba import IO_ROWS, zmap_component_step
 
 #: Component kinds of the compiled loop.
@@ -73,7 +73,7 @@ CUT_OUTPUTS = ("fx", "fy", "fc", "fc_peak", "fx_mean", "fy_mean", "spindle_torqu
 CUT_EFFECT_OUTPUTS = ("spindle_speed_actual", "tool_vibration_x", "tool_vibration_y", "cutting_time")
 #: ``fz``: the end edges' thrust (axial chip; path mode: :func:`fmus_src.cutting.path_axial.path_axial`).
 CUT_ROWS = CUT_INPUTS + CUT_OUTPUTS + ("engaged_teeth",) + CUT_EFFECT_OUTPUTS + ("fz",)
-#: ``tool``: the tool in the spindle (PathCuttingLoad models one cutter; the input is not read).
+#: ``tool``: the tool in the spindle (not read: PathCuttingLoad takes each station's cutter from its table).
 CUT_ROWS = CUT_ROWS + ("tool",)
 #: Rows of the Z-map cutting load (``CuttingLoad``), in the order of ``zmap_component_step``'s ``io``.
 ZMAP_ROWS = IO_ROWS
@@ -204,7 +204,9 @@ def run_chunk(
     """
     c_par = cut[0]
     c_alpha = cut[7]
-    intervals, acc, rot, rot_key = path_work(c_alpha.shape[1], max_flutes(c_par))
+    c_cflu = cut[23]  # the table's station cutters: the rotation cache holds the most teeth of any of them
+    intervals, acc, rot, rot_key = path_work(c_alpha.shape[1], max(max_flutes(c_par),
+                                                                   c_cflu.max() if c_cflu.shape[0] else 1))
     cursor = np.zeros(V.shape[1], dtype=np.int64)
     comp_h = np.empty(comp_rate.shape[0])
     for c in range(comp_rate.shape[0]):
@@ -256,7 +258,7 @@ def _run_chunk(
     (m_gains, m_state, m_width, m_ratio, m_tp, m_tv, m_ticks, m_next, m_inpos, m_limits, m_alarm) = mcu
     (d_params, d_pos, d_vel, d_dir, d_step, d_integ, d_status) = drives
     (c_par, c_st, c_engaged, c_verts, c_vs, c_ds, c_count, c_alpha, c_beta, c_top, c_zfloor, c_margin, c_tol,
-     c_maxsub, c_time, c_torque, c_angle, c_status, c_ka, c_axa, c_axj, c_zold) = cut
+     c_maxsub, c_time, c_torque, c_angle, c_status, c_ka, c_axa, c_axj, c_zold, c_crad, c_cflu) = cut
     (z_heights, z_grid, z_cells, z_rho, z_points, z_arc, z_head, z_count, z_spacing, z_lag, z_prev, z_theta,
      z_radius, z_flutes, z_steps, z_kt, z_ke, z_ka, z_time, z_torque, z_angle, z_status, z_diag, z_maxsub,
      z_tnum, z_trad, z_tflu) = zmap
@@ -371,6 +373,7 @@ def _run_chunk(
                 else:  # KIND_CUT
                     for b in range(B):
                         c_zold[b] = c_st[ST_Z, b]
+                    station_cutters(c_par, c_st, c_crad, c_cflu, c_ds)  # several cutters: each station's own
                     n_bad = path_step_into(h_i, V[base:base + 4], c_par, c_st, V[base + 4:base + 16], c_engaged,
                                            c_verts, c_vs, c_ds, c_count, c_alpha, c_beta, c_top, c_zfloor, c_margin,
                                            c_tol, c_maxsub, c_status, c_intervals, c_acc, c_rot, c_rot_key)

@@ -31,12 +31,12 @@ import numpy as np
 
 from ..case import Case
 from ..recording import Recording
-from ..twin import engagement_table
 from .align import noise_floor
 from .cutting_align import (FINE_OFFSETS, PHASE_STEPS, Cuts, best_phase, cut_segments, fine_phase, initial_angle,
                             phase_speed, spindle_samples)
 from .cutting_library import component_values, cutting_variants
 from .cutting_replay import ForceInputs, ForceReplay, force_inputs, run_force_replay, step_speeds
+from .cutting_table import one_cutter_table
 from .errors import DiagnosisError
 from .library import Column, Variant
 from .select import Selection, select
@@ -173,7 +173,7 @@ def prepare_cutting(case: Case, recording: Recording, spindle_command=None, say=
                              "diagnosis needs the dynamometer forces")
     inputs = force_inputs(recording, rows)
     say("building the engagement table of the program")
-    table = engagement_table(case)
+    table = one_cutter_table(case)
     mat = case.machine.si(f"material.{case.material}")
     kt, ke = float(mat["kt"]), float(mat["ke"])
     flutes = int(case.tool.flutes)

@@ -20,7 +20,7 @@ from ..atomic import atomic_write_json, atomic_write_text
 from ..case import Case, load_case
 from ..machine import Machine
 from ..recording import Recording
-from ..twin import engagement_table
+from .cutting_table import one_cutter_table
 from .prepare import twin_commands
 from .truth import Recorder, record, simulate_truth
 from .truth_cutting import (CuttingRun, Dynamometer, cutting_parameters_packed, fine_grid, merge_recordings,
@@ -117,7 +117,7 @@ def write_cutting_case(folder: Path, effects: Mapping[str, Mapping[str, float]] 
     dyn = dynamometer or Dynamometer()
     rec = replace(recorder or Recorder(), time_offset_s=offset)
     nc = twin_commands(case, machine)
-    table = engagement_table(case)
+    table = one_cutter_table(case)
     drives = {a: dict(v) for a, v in (drive_effects or {}).items()}
     first = simulate_truth(machine, nc, drives, axes=("x", "y", "z"))
     t_f = fine_grid(LOGGER_START_S, float(first.t[-1]))

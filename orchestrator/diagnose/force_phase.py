@@ -33,9 +33,10 @@ from fmus_src.threads import usable_cores
 from ..case import Case
 from ..machine import Machine
 from ..recording import Recording
-from ..twin import cutting_parameters, engagement_table
+from ..twin import cutting_parameters
 from .align import _affine_misfit, cut_groups, cutting_indicator, load_envelope
 from .cutting_replay import ForceInputs, run_force_replay, step_speeds
+from .cutting_table import one_cutter_table
 
 #: Force shapes replayed per spindle angle: baseline, radial/tangential ratio, tangential and radial edge force.
 SHAPES = ("baseline", "ke", "kte", "kre")
@@ -258,7 +259,7 @@ def phase_matched_offset(case: Case, machine: Machine, twin: Recording, t_rec: n
     from scipy.optimize import minimize
 
     c = replace(case, machine=machine)
-    table = engagement_table(c)
+    table = one_cutter_table(c)
     t_rec = np.asarray(t_rec, float)
     y = load_envelope(t_rec, np.hypot(fx, fy), window_s)(t_rec)
     groups = cut_groups(t_rec, cutting_indicator(y) > 0.5, window_s) or [np.arange(t_rec.size)]

@@ -134,8 +134,9 @@ def build_reference(case: Case, program_text: str | None = None, ranges: Ranges 
         material that the servo turns back from short of its end; the pecks
         of G83, which turn back in air at R, are followed), the Z-map mode is
         used: ``context.engagement`` is then None and
-        ``context.search_model_note`` says why, naming the line. So is it for a case whose tool table
-        (``[tools.T<n>]``) lists a cutter other than ``[tool]`` (the table is built for one cutter).
+        ``context.search_model_note`` says why, naming the line. A case whose tool table
+        (``[tools.T<n>]``) lists cutters other than ``[tool]`` is searched in the path mode too: the table
+        is built with the cutter of each path point (:func:`~orchestrator.twin.engagement_table`).
     """
     from ..simulate import failure_message  # names the line executing at a failure, as cnctwin simulate does
 
@@ -146,15 +147,11 @@ def build_reference(case: Case, program_text: str | None = None, ranges: Ranges 
     text = program_text if program_text is not None else case.program.read_text(encoding="utf-8")
     ranges = ranges or Ranges()
     # the engagement along the path is the same for every individual (only F and S change): compute it once
-    several = cutting_mode == "path" and case.several_tools()  # the engagement table models one cutter
-    engagement = (engagement_table(case, TwinOptions(step=step), program_text=text)
-                  if cutting_mode == "path" and not several else None)
+    engagement = engagement_table(case, TwinOptions(step=step), program_text=text) if cutting_mode == "path" else None
     probe = ProblemContext(case, text, np.zeros(0, int), np.zeros(0, int), {}, np.zeros(0), np.zeros(0), ranges,
                            float(load_limit_N), {}, step, time_limit_s, engagement=engagement)
     run = run_twin(probe, None, None, 1, channels=None)
-    search_model_note = ("the case's tool table ([tools]) lists cutters other than [tool] and the path-mode cutting "
-                         "load's engagement table is built for one cutter: the search ran on the Z-map cutting "
-                         "model (slower)") if several else ""
+    search_model_note = ""
     if not run.success and engagement is not None and OFF_PATH in run.message:
         # the path mode lost the tool on its own reference path (e.g. a reversal on one line inside material that
         # the servo does not reach): every evaluation removes material from its own Z-map instead
