@@ -228,7 +228,8 @@ class EngagementTable:
     top : ndarray, shape (S, K)
         Top of material over each interval, m.
     radius : float
-        Tool radius the table was built for, m.
+        Tool radius the table was built for (``tool_diameter / 2``; with several cutters the default one,
+        each station's own in ``cutter_radius``), m.
     z_floor : float
         Stock ``z_min``, m (axial depth is measured from ``max(z_tip, z_floor)``).
     stock_lower, stock_upper : ndarray, shape (3,)
