@@ -18,6 +18,7 @@ T1 (6 mm, 2 flutes), then with T2 (10 mm, 4 flutes) at its own F and S:
 from __future__ import annotations
 
 import math
+import re
 import shutil
 from pathlib import Path
 
@@ -332,6 +333,23 @@ def test_the_optimiser_searches_several_cutters_in_path_mode(tmp_path):
     assert not any("Z-map" in note for note in report["notes"])
     assert report["before"]["max_cutting_load_N"] == pytest.approx(51.57, abs=0.1)  # slot 2, the Z-map run
     assert result.after["max_cutting_load_N"] <= 60.0  # the written program, re-simulated on the Z-map model
+
+
+def test_the_optimiser_keeps_the_zmap_model_for_tooth_effects_with_several_cutters(two_tools, monkeypatch):
+    """Runout (or helix, edge force, deflection, chatter) with several cutters: the path mode refuses the pair,
+    so the search runs on the Z-map model and the note says why."""
+    from orchestrator.optimize import reference
+
+    case, _ = two_tools
+    monkeypatch.setattr(reference, "cutting_effect_parameters", lambda machine: {"runout_eccentricity": 1e-5})
+    assert "turns on runout_eccentricity" in reference.path_mode_limit(case)
+    monkeypatch.setattr(reference, "cutting_effect_parameters", lambda machine: {"wear_rate": 1e-3})
+    assert reference.path_mode_limit(case) == ""  # wear scales Kt: any cutter
+    monkeypatch.setattr(reference, "cutting_effect_parameters", lambda machine: {"helix_angle": 0.5})
+    ref = reference.build_reference(case)
+    assert ref.context.engagement is None
+    assert re.search(r"turns on helix_angle, which the path-mode cutting load models for one cutter: the search "
+                     r"ran on the Z-map cutting model", ref.context.search_model_note)
 
 
 def test_tool_table_packing_lookup_and_errors():

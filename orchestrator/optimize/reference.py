@@ -9,7 +9,7 @@ from fmus_src.nck.blocks import Arc, Linear
 from fmus_src.nck.writer import inch_lines
 
 from ..case import Case
-from ..twin import TwinOptions, build_twin, engagement_table
+from ..twin import TwinOptions, build_twin, cutting_effect_parameters, engagement_table
 from .context import ProblemContext, Ranges, check_context, classify_lines
 from .evaluate import Evaluation, figures, run_twin
 from .errors import OptimizeError
@@ -88,6 +88,26 @@ def member_off_path(cache: dict) -> str:
     return ""
 
 
+#: Effect terms (component parameters) that depend on the teeth: the path mode models them for one cutter
+#: (``PathCuttingLoad`` refuses them with a table of several cutters).
+TOOTH_EFFECTS = ("runout_eccentricity", "helix_angle", "edge_force_tangential", "edge_force_radial",
+                 "tool_stiffness", "chatter_frequency")
+
+
+def path_mode_limit(case: Case) -> str:
+    """Why the path mode cannot search ``case`` from the start, or ``""``: a tool table of several cutters
+    together with an effect term of the machine file's ``[cutting.effects]`` that depends on the teeth
+    (:data:`TOOTH_EFFECTS`)."""
+    if not case.several_tools():
+        return ""
+    on = sorted(k for k, v in cutting_effect_parameters(case.machine).items() if k in TOOTH_EFFECTS and v != 0)
+    if not on:
+        return ""
+    return (f"the case's tool table ([tools]) lists cutters other than [tool] and the machine file's "
+            f"[cutting.effects] turns on {', '.join(on)}, which the path-mode cutting load models for one cutter: "
+            "the search ran on the Z-map cutting model (slower)")
+
+
 def search_on_zmap(ctx: ProblemContext, reason: str) -> None:
     """Move the search of ``ctx`` to the Z-map cutting model because a member of the search lost the path
     mode's path while the original followed it (``reason``: that member's failure, naming the line); the
@@ -136,7 +156,9 @@ def build_reference(case: Case, program_text: str | None = None, ranges: Ranges 
         used: ``context.engagement`` is then None and
         ``context.search_model_note`` says why, naming the line. A case whose tool table
         (``[tools.T<n>]``) lists cutters other than ``[tool]`` is searched in the path mode too: the table
-        is built with the cutter of each path point (:func:`~orchestrator.twin.engagement_table`).
+        is built with the cutter of each path point (:func:`~orchestrator.twin.engagement_table`); only
+        with an effect term that depends on the teeth on (:func:`path_mode_limit`) it is searched on the
+        Z-map mode, with a note.
     """
     from ..simulate import failure_message  # names the line executing at a failure, as cnctwin simulate does
 
@@ -147,11 +169,13 @@ def build_reference(case: Case, program_text: str | None = None, ranges: Ranges 
     text = program_text if program_text is not None else case.program.read_text(encoding="utf-8")
     ranges = ranges or Ranges()
     # the engagement along the path is the same for every individual (only F and S change): compute it once
-    engagement = engagement_table(case, TwinOptions(step=step), program_text=text) if cutting_mode == "path" else None
+    limit = path_mode_limit(case) if cutting_mode == "path" else ""  # what the path mode cannot carry
+    engagement = (engagement_table(case, TwinOptions(step=step), program_text=text)
+                  if cutting_mode == "path" and not limit else None)
     probe = ProblemContext(case, text, np.zeros(0, int), np.zeros(0, int), {}, np.zeros(0), np.zeros(0), ranges,
                            float(load_limit_N), {}, step, time_limit_s, engagement=engagement)
     run = run_twin(probe, None, None, 1, channels=None)
-    search_model_note = ""
+    search_model_note = limit
     if not run.success and engagement is not None and OFF_PATH in run.message:
         # the path mode lost the tool on its own reference path (e.g. a reversal on one line inside material that
         # the servo does not reach): every evaluation removes material from its own Z-map instead
