@@ -12,8 +12,9 @@ call of the compiled kernel the component itself would call:
   :func:`~fmus_src.servo.control_numba.axis_member` / :func:`~fmus_src.servo.control_numba.axis_alarm`);
 * drive axes: :func:`fmus_src.servo.stick_slip_numba.advance_kernel` or, member by member,
   :func:`fmus_src.servo.exponential_numba.exponential_member` (the drive's ``integrator``);
-* path-mode cutting: :func:`fmus_src.cutting.path_kernel.path_step_into` (``path_step`` on work space allocated
-  once per call of :func:`run_chunk`);
+* path-mode cutting: :func:`fmus_src.cutting.path_kernel.station_cutters` (a table of several cutters: each
+  member's radius and teeth), then :func:`fmus_src.cutting.path_kernel.path_step_into` (``path_step`` on work
+  space allocated once per call of :func:`run_chunk`);
 * Z-map cutting (effect terms off): :func:`fmus_src.cutting.zmap_numba.zmap_component_step`, the whole
   ``CuttingLoad._do_step`` (step kernel, outputs, clocks, path advance and Z-map removal).
 

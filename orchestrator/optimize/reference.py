@@ -95,9 +95,20 @@ TOOTH_EFFECTS = ("runout_eccentricity", "helix_angle", "edge_force_tangential", 
 
 
 def path_mode_limit(case: Case) -> str:
-    """Why the path mode cannot search ``case`` from the start, or ``""``: a tool table of several cutters
-    together with an effect term of the machine file's ``[cutting.effects]`` that depends on the teeth
-    (:data:`TOOTH_EFFECTS`)."""
+    """Why the path mode cannot search ``case`` from the start, or ``""``.
+
+    Parameters
+    ----------
+    case : Case
+        The case to optimise.
+
+    Returns
+    -------
+    str
+        The note for ``report.json`` when the case's tool table lists cutters other than ``[tool]`` and the
+        machine file's ``[cutting.effects]`` turns on an effect term that depends on the teeth
+        (:data:`TOOTH_EFFECTS`); ``""`` otherwise.
+    """
     if not case.several_tools():
         return ""
     on = sorted(k for k, v in cutting_effect_parameters(case.machine).items() if k in TOOTH_EFFECTS and v != 0)
