@@ -215,19 +215,27 @@ def test_path_mode_cuts_each_slot_with_its_own_cutter(two_tools, two_tools_path)
 
 
 def test_path_mode_compiled_loop_and_python_master_agree_bit_for_bit(tmp_path):
+    """One member, and 8 members in two blocks of threads (the table's station cutters shared by them)."""
     program = PROGRAM.replace("X-5. Y10.", "X2. Y10.").replace("X17. F300", "X6. F600")  # a short slot 1
     case = load_case(_case_folder(tmp_path, program=program))
     runs = []
-    for compiled in (True, False):
-        twin = build_twin(case, options=TwinOptions(cutting_mode="path"))
+    for compiled, batch, threads in ((True, 1, 1), (False, 1, 1), (True, 8, 2)):
+        twin = build_twin(case, batch=batch, options=TwinOptions(cutting_mode="path"))
         twin.nck.set("tool_change_time", 0.2)
         settings = MasterSettings(step=twin.options.step, time_limit=4.6, stop_when=twin.stop_when,
-                                  limits=twin.limits or {}, check_every=10, compiled=compiled)
+                                  limits=twin.limits or {}, check_every=10, compiled=compiled, threads=threads)
         master = Master(twin.system, settings, twin.probes)
         if compiled:
             assert compiled_support(master) is None, compiled_support(master)
         runs.append(master.run())
     _assert_same(runs[0], runs[1])
+    assert np.asarray(runs[2].recording.data["fc_peak_N"]).shape[1] == 8
+    for ch in runs[0].recording.channels:  # every member of the blocks equals the single run
+        one = np.asarray(runs[0].recording.data[ch]).reshape(-1)  # (n,): one member
+        many = np.asarray(runs[2].recording.data[ch])
+        for m in range(many.shape[1] if many.ndim == 2 else 1):  # the time axis is (n,) for both
+            column = many[:, m] if many.ndim == 2 else many
+            np.testing.assert_array_equal(column, one, err_msg=f"{ch}, member {m}")
     rec = runs[0].recording
     line = np.asarray(rec["line"]).ravel()
     peak = np.asarray(rec["fc_peak_N"]).ravel()
