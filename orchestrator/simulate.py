@@ -12,7 +12,7 @@ from fmus_src.nck.blocks import ToolChange
 
 from .atomic import atomic_write_json
 from .case import Case, CaseError, case_for_program, load_case, missing_file
-from .cost import CostModel
+from .cost import CostModel, case_tool_lives
 from .master import Master, MasterSettings
 from .plots import overview_png
 from .recording import Recording
@@ -156,7 +156,8 @@ def simulate(
         recording.message = message
     stop = run.stopped_at[0] if run.stopped_at.size else math.nan
     cycle_time = float(stop - settings.t0) if math.isfinite(stop) else float(run.t_end - settings.t0)
-    summary = summarize(recording, cycle_time, CostModel.from_machine(resolved.machine), resolved.tool.diameter_mm)
+    cost_model = CostModel.from_machine(resolved.machine)
+    summary = summarize(recording, cycle_time, cost_model, *case_tool_lives(cost_model, resolved))
     summary["program"] = str(resolved.program)
     summary["machine"] = resolved.machine.name
     changes = [(b.line, b.tool) for b in twin.nck.program_.blocks if isinstance(b, ToolChange)]
