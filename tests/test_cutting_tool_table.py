@@ -268,6 +268,8 @@ def test_the_ssp_export_of_a_two_tool_case_runs_as_the_case(two_tools, tmp_path)
     assert system.success, system.message
     for ch in result.recording.channels:
         np.testing.assert_array_equal(system.recording.data[ch], result.recording.data[ch], err_msg=ch)
+    # the cost per tool from the .ssv's tool table (the SSP file holds no cost keys: the machine's Table 3 values)
+    assert system.summary["cost"]["tools"] == result.summary["cost"]["tools"]
 
 
 def test_notes_name_only_the_tools_the_table_does_not_list():
