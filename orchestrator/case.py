@@ -67,7 +67,7 @@ class Tool:
     flutes : int
         Number of teeth.
     price_KRW : float or None
-        Pt, KRW per tool (None: the machine file's ``[cost] tool_price``).
+        Pt, KRW per tool (None: the machine file's ``[cost] tool_price_KRW``).
     taylor_C, taylor_n : float or None
         Taylor constant (m/min) and exponent of the tool life (None: the machine file's ``[cost]``).
     """
