@@ -22,7 +22,7 @@ from .machine import Machine, MachineFileError, _line_of, load_machine, resolve_
 _TOP_KEYS = {"program", "recording", "stock", "tool", "tools", "machine", "material", "offsets"}
 _SECTION_KEYS = {
     "stock": {"min", "max"},
-    "tool": {"diameter_mm", "flutes"},
+    "tool": {"diameter_mm", "flutes", "price_KRW", "taylor_C", "taylor_n"},
     "machine": {"parameters"},
     "offsets": {"radius_mm", "length_mm"},
 }
@@ -48,12 +48,39 @@ class Stock:
     max_mm: tuple[float, float, float]
 
 
+#: Optional cost keys of ``[tool]`` / ``[tools.T<n>]`` -> (what is expected, lowest, lowest allowed, highest).
+_COST_KEYS = {
+    "price_KRW": ("a price in KRW per tool, >= 0", 0.0, True, math.inf),
+    "taylor_C": ("the Taylor constant C in m/min (cutting speed for a 1 min life), > 0", 0.0, False, math.inf),
+    "taylor_n": ("the Taylor exponent n, > 0 and <= 1", 0.0, False, 1.0),
+}
+
+
 @dataclass(frozen=True)
 class Tool:
-    """Flat end mill."""
+    """Flat end mill, and what it costs.
+
+    Attributes
+    ----------
+    diameter_mm : float
+        Cutter diameter, mm.
+    flutes : int
+        Number of teeth.
+    price_KRW : float or None
+        Pt, KRW per tool (None: the machine file's ``[cost] tool_price_KRW``).
+    taylor_C, taylor_n : float or None
+        Taylor constant (m/min) and exponent of the tool life (None: the machine file's ``[cost]``).
+    """
 
     diameter_mm: float = 6.0
     flutes: int = 2
+    price_KRW: float | None = None
+    taylor_C: float | None = None
+    taylor_n: float | None = None
+
+    def same_cutter(self, other: "Tool") -> bool:
+        """Whether ``other`` has this tool's geometry (diameter and teeth; its cost keys aside)."""
+        return (self.diameter_mm, self.flutes) == (other.diameter_mm, other.flutes)
 
 
 @dataclass(frozen=True)
@@ -128,7 +155,7 @@ class Case:
     def several_tools(self) -> bool:
         """Whether the tool table lists a cutter whose geometry differs from ``[tool]``'s (the cutting load then
         switches geometry at tool changes)."""
-        return any(t != self.tool for t in self.tools.values())
+        return any(not t.same_cutter(self.tool) for t in self.tools.values())
 
 
 def _vector(path: Path, text: str, section: str, key: str, value: Any) -> tuple[float, float, float]:
@@ -253,7 +280,8 @@ def load_case(path: str | Path, machine_override: str | Path | None = None) -> C
 
 
 def _tool(path: Path, text: str, section: str, t: dict[str, Any]) -> Tool:
-    """``[tool]`` or ``[tools.T<n>]`` (``section``) -> :class:`Tool`; both keys required, checked."""
+    """``[tool]`` or ``[tools.T<n>]`` (``section``) -> :class:`Tool`; both geometry keys required, the optional
+    cost keys (``price_KRW``, ``taylor_C``, ``taylor_n``) checked."""
     diameter = t.get("diameter_mm", Tool.diameter_mm)
     flutes = t.get("flutes", Tool.flutes)
     if isinstance(diameter, bool) or not isinstance(diameter, (int, float)) \
@@ -273,7 +301,17 @@ def _tool(path: Path, text: str, section: str, t: dict[str, Any]) -> Tool:
                             f"({'the cutter diameter in mm' if key == 'diameter_mm' else 'the number of teeth'}); "
                             + (f"without a [tool] table the case uses {Tool.diameter_mm:g} mm, {Tool.flutes} flutes"
                                if section == "tool" else "each listed tool states both"))
-    return Tool(float(diameter), int(flutes))
+    cost: dict[str, float] = {}
+    for key, (expected, low, low_ok, high) in _COST_KEYS.items():
+        if key not in t:
+            continue
+        value = t[key]
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
+                or not (value >= low if low_ok else value > low) or value > high:
+            raise CaseError(f"{path}:{_line_of(text, section, key)}: [{section}] {key} must be {expected}, "
+                            f"got {value!r}")
+        cost[key] = float(value)
+    return Tool(float(diameter), int(flutes), **cost)
 
 
 def _tools(path: Path, text: str, table: Any) -> dict[int, Tool]:

@@ -8,11 +8,12 @@ from typing import Any, Callable
 
 import numpy as np
 
+from fmus_src.cutting.tool_table import N_TOOL_TABLE
 from fmus_src.nck.blocks import ToolChange
 
 from .atomic import atomic_write_json
 from .case import Case, CaseError, case_for_program, load_case, missing_file
-from .cost import CostModel
+from .cost import CostModel, ToolLife, case_tool_lives
 from .master import Master, MasterSettings
 from .plots import overview_png
 from .recording import Recording
@@ -156,7 +157,8 @@ def simulate(
         recording.message = message
     stop = run.stopped_at[0] if run.stopped_at.size else math.nan
     cycle_time = float(stop - settings.t0) if math.isfinite(stop) else float(run.t_end - settings.t0)
-    summary = summarize(recording, cycle_time, CostModel.from_machine(resolved.machine), resolved.tool.diameter_mm)
+    cost_model = CostModel.from_machine(resolved.machine)
+    summary = summarize(recording, cycle_time, cost_model, *case_tool_lives(cost_model, resolved))
     summary["program"] = str(resolved.program)
     summary["machine"] = resolved.machine.name
     changes = [(b.line, b.tool) for b in twin.nck.program_.blocks if isinstance(b, ToolChange)]
@@ -172,6 +174,17 @@ def simulate(
         if plot and len(recording) > 1:
             result.files["overview"] = overview_png(recording, out / "overview.png", title=resolved.program.name)
     return result
+
+
+def _table_tool_lives(values: dict[str, Any], model: CostModel) -> dict[int, ToolLife]:
+    """The cutting component's tool table (``tool_<i>_number``, ``tool_<i>_diameter`` in m) as tool lives with
+    ``model``'s price and Taylor constants (an SSP file holds no cost keys), by tool number."""
+    tools = {}
+    for i in range(1, N_TOOL_TABLE + 1):
+        number, diameter = values.get(f"tool_{i}_number"), values.get(f"tool_{i}_diameter")
+        if number is not None and diameter is not None and int(number[0]) > 0:
+            tools[int(number[0])] = model.tool(float(diameter[0]) * 1e3)
+    return tools
 
 
 def simulate_system_file(
@@ -221,10 +234,13 @@ def simulate_system_file(
     stop = run.stopped_at[0] if run.stopped_at.size else math.nan
     cycle_time = float(stop - settings.t0) if math.isfinite(stop) else float(run.t_end - settings.t0)
     if "line" in recording:
-        diameter_mm = 6.0
+        model = CostModel()
+        diameter_mm, tools = 6.0, {}
         if "cutting" in system.components:
-            diameter_mm = float(system.components["cutting"].values["tool_diameter"][0]) * 1e3
-        summary = summarize(recording, cycle_time, CostModel(), diameter_mm)
+            values = system.components["cutting"].values
+            diameter_mm = float(values["tool_diameter"][0]) * 1e3
+            tools = _table_tool_lives(values, model)
+        summary = summarize(recording, cycle_time, model, diameter_mm, tools)
     else:
         summary = {"success": run.success, "message": run.message, "cycle_time_s": cycle_time}
     summary["system"] = str(system_file)

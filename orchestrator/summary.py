@@ -2,12 +2,12 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Collection
+from collections.abc import Collection, Mapping
 from typing import Any
 
 import numpy as np
 
-from .cost import CostModel, production_cost
+from .cost import CostModel, ToolLife, production_cost, tool_use_json
 from .recording import Recording
 
 AXES = ("x", "y", "z")
@@ -63,7 +63,8 @@ def summarize(
     recording: Recording,
     cycle_time_s: float,
     cost_model: CostModel | None = None,
-    tool_diameter_mm: float = 6.0,
+    tool_diameter_mm: float | ToolLife = 6.0,
+    tools: Mapping[int, ToolLife] | None = None,
 ) -> dict[str, Any]:
     """Summary of a single-member run, as written to ``summary.json``.
 
@@ -75,8 +76,12 @@ def summarize(
         Time from program start to program end, s.
     cost_model : CostModel, optional
         When given, ``cost_KRW`` (Eq. 19–22) is included.
-    tool_diameter_mm : float
-        Cutter diameter for the cutting speed in Taylor's equation, mm.
+    tool_diameter_mm : float or ToolLife
+        The cutter of every tool ``tools`` does not list (the case's ``[tool]``): its diameter for the cutting
+        speed in Taylor's equation, mm, or its :class:`~orchestrator.cost.ToolLife`.
+    tools : mapping int -> ToolLife, optional
+        The case's tool table (``[tools.T<n>]``). The tool wear goes, sample by sample, to the tool in the
+        spindle (the recording's ``tool`` channel; without it, one tool).
     """
     summary: dict[str, Any] = {
         "success": bool(recording.success),
@@ -91,12 +96,15 @@ def summarize(
     if load_channel:
         summary["max_cutting_load_N"] = float(np.nanmax(recording[load_channel]))
     if cost_model is not None and "spindle_rpm" in recording:
-        cost = production_cost(recording.t, recording["spindle_rpm"], tool_diameter_mm, cost_model, cycle_time_s)
+        in_spindle = recording["tool"] if "tool" in recording else None
+        cost = production_cost(recording.t, recording["spindle_rpm"], tool_diameter_mm, cost_model, cycle_time_s,
+                               in_spindle, tools)
         summary["cost_KRW"] = cost.total_KRW
         summary["cost"] = {
             "tool_KRW": cost.tool_KRW,
             "machining_KRW": cost.machining_KRW,
             "tool_life_used": cost.tool_life_used,
+            "tools": tool_use_json(cost),
         }
     summary["lines"] = line_table(recording)
     return summary

@@ -332,6 +332,7 @@ TWIN_CHANNELS: tuple[tuple[str, str, str], ...] = (
     ("spindle_power_W", "cutting.spindle_power", "W"),
     ("mrr_mm3_per_min", "cutting.mrr", "mm3/min"),
     ("feed_mm_per_min", "nck.feed_ref", "mm/min"),
+    ("tool", "nck.tool", "1"),   # the tool in the spindle (T number of the last M6, 0 before): the cost per tool
 )
 
 

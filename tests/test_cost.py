@@ -46,3 +46,56 @@ def test_faster_spindle_wears_the_tool_faster():
     assert lives[0] > lives[1] > lives[2]
     # Taylor: T2/T1 = (V1/V2)^(1/n)
     assert lives[1] / lives[2] == pytest.approx(2.0 ** (1 / 0.15), rel=1e-12)
+
+
+def _old_single_sum(t, rpm, d, model, tp):
+    """The cost as computed before tools were told apart: one Miner's sum over the whole history."""
+    v = math.pi * d * np.abs(rpm) / 1000.0
+    rate = (v / model.taylor_C) ** (1.0 / model.taylor_n) / 60.0
+    used = float(np.sum(0.5 * (rate[1:] + rate[:-1]) * np.diff(t)))
+    krw = model.labor_KRW_per_s + model.depreciation_KRW_per_s
+    tool = used * model.tool_price_KRW + used * model.tool_change_time_s * krw
+    return used, tool, tool + tp * krw
+
+
+def test_one_tool_after_tool_0_costs_bit_for_bit_the_single_sum():
+    """T1 M6 at t = 2 s with the spindle at rest (the bundled parts): tool 0 uses no life and is not listed;
+    T1's Miner sum and the cost are the single sum over the whole history, bit for bit."""
+    from orchestrator.cost import ToolUse
+
+    model = CostModel.from_machine(load_machine("default"))
+    t = np.arange(20001) * 1e-3
+    rpm = np.clip((t - 3.0) * 4000.0, 0.0, 6000.0) * (t < 15.0)  # ramp to 6000 rpm, run, stop at 15 s
+    tool = np.where(t < 2.0, 0.0, 1.0)
+    used, tool_krw, total = _old_single_sum(t, rpm, 6.0, model, 20.0)
+    for in_spindle in (None, tool, np.ones_like(t)):
+        cost = production_cost(t, rpm, 6.0, model, 20.0, in_spindle)
+        assert (cost.tool_life_used, cost.tool_KRW, cost.total_KRW) == (used, tool_krw, total)
+    assert production_cost(t, rpm, 6.0, model, 20.0, tool).tools == {1: ToolUse(used, tool_krw)}
+    assert production_cost(t, rpm, 6.0, model, 20.0).tools == {0: ToolUse(used, tool_krw)}  # no tool channel
+
+
+def test_two_tools_each_wear_with_their_own_diameter_price_and_taylor_constants():
+    """T1 (6 mm, the machine's Pt and Taylor C, n) 10 s at 6000 rpm; the spindle stops, T2 (10 mm, its own
+    Pt = 50000 KRW, C = 400 m/min, n = 0.25) 15 s at 4000 rpm. Each step of the speed between two 1 ms
+    samples adds half a sample to the trapezoid: 10.0005 s and 15.0005 s at speed."""
+    model = CostModel.from_machine(load_machine("default"))
+    t = np.arange(30001) * 1e-3
+    tool = np.where(t < 12.0, 1.0, 2.0)
+    rpm = np.where(t <= 10.0 + 1e-9, 6000.0, np.where(t >= 15.0 - 1e-9, 4000.0, 0.0))
+    tools = {2: model.tool(10.0, price_KRW=50000.0, taylor_C=400.0, taylor_n=0.25)}
+    cost = production_cost(t, rpm, 6.0, model, 30.0, tool, tools)
+    tl1 = (300.0 / (math.pi * 6.0 * 6000.0 / 1000.0)) ** (1 / 0.15) * 60.0   # V = 113.1 m/min: 40 051 s
+    tl2 = (400.0 / (math.pi * 10.0 * 4000.0 / 1000.0)) ** (1 / 0.25) * 60.0  # V = 125.7 m/min: 6160 s
+    used1, used2 = 10.0005 / tl1, 15.0005 / tl2
+    assert cost.tools[1].life_used == pytest.approx(used1, rel=1e-9)
+    assert cost.tools[2].life_used == pytest.approx(used2, rel=1e-9)
+    tc_krw = 60.0 * (2.778 + 0.063)
+    assert cost.tools[1].KRW == pytest.approx(used1 * (20000.0 + tc_krw), rel=1e-9)
+    assert cost.tools[2].KRW == pytest.approx(used2 * (50000.0 + tc_krw), rel=1e-9)
+    assert cost.tool_life_used == pytest.approx(used1 + used2, rel=1e-12)
+    assert cost.total_KRW == pytest.approx(30.0 * 2.841 + used1 * (20000.0 + tc_krw) + used2 * (50000.0 + tc_krw),
+                                           rel=1e-9)
+    # with [tool]'s 6 mm for both (before): T2's life would have been (10/6)^(1/0.15) = 30.1 times longer
+    one = production_cost(t, rpm, 6.0, model, 30.0)
+    assert one.tool_life_used == pytest.approx(used1 + 15.0005 / model.tool_life_s(4000.0, 6.0), rel=1e-9)

@@ -407,6 +407,8 @@ def test_the_ssp_export_of_a_two_tool_case_runs_as_the_case(two_tools, tmp_path)
     assert system.success, system.message
     for ch in result.recording.channels:
         np.testing.assert_array_equal(system.recording.data[ch], result.recording.data[ch], err_msg=ch)
+    # the cost per tool from the .ssv's tool table (the SSP file holds no cost keys: the machine's Table 3 values)
+    assert system.summary["cost"]["tools"] == result.summary["cost"]["tools"]
 
 
 def test_notes_name_only_the_tools_the_table_does_not_list():
@@ -432,3 +434,97 @@ def test_the_diagnosis_memo_key_tells_tool_tables_apart(tmp_path):
     plain = replace(case, tools={})
     assert run_key(case, case.machine) != run_key(plain, case.machine)
     assert run_key(plain, case.machine) == run_key(replace(plain), case.machine)
+
+
+PRICED_T2 = "flutes = 4\nprice_KRW = 50000.0\ntaylor_C = 400.0\ntaylor_n = 0.25\n"
+
+
+def test_each_tool_wears_with_its_own_cutter_and_price(two_tools, tmp_path):
+    """The cost's Miner sum goes, sample by sample, to the tool in the spindle (the recording's ``tool``): T1
+    (6 mm, the machine's Pt 20000 KRW, C 300, n 0.15) and T2 (10 mm; with its own Pt 50000 KRW, C 400, n 0.25
+    in case.toml). Hand value: the sum over samples of dt / Tl, Tl = (C / V)^(1/n) min, V = pi D_k S (the
+    rectangle rule over the 1 ms samples, against the cost's trapezoid: within 1e-4)."""
+    from orchestrator.cost import CostModel, case_tool_lives
+    from orchestrator.summary import summarize
+
+    case, result = two_tools
+    rec = result.recording
+    t, rpm, tool = rec.t, np.abs(rec["spindle_rpm"]), rec["tool"]
+    assert set(np.unique(tool).tolist()) == {0.0, 1.0, 2.0}  # T0 until line 2's M6, T1, T2 from line 8's
+    tp = result.summary["cycle_time_s"]
+    n = np.searchsorted(t, t[0] + tp + 1e-9)
+    t, rpm, tool = t[:n], rpm[:n], tool[:n]
+    dt = np.diff(t)
+    tc_krw = 60.0 * (2.778 + 0.063)
+
+    def hand(k, d_mm, c, exponent):
+        at = (tool[:-1] == k) & (rpm[:-1] > 0.0)  # at rest the tool does not wear (Tl infinite)
+        tl_s = (c / (np.pi * d_mm * rpm[:-1][at] / 1000.0)) ** (1.0 / exponent) * 60.0
+        return float(np.sum(dt[at] / tl_s))
+
+    plain = result.summary["cost"]["tools"]
+    assert set(plain) == {"T1", "T2"}  # T0: the spindle stood before the first M6
+    assert plain["T1"]["tool_life_used"] == pytest.approx(hand(1, 6.0, 300.0, 0.15), rel=1e-4)
+    assert plain["T2"]["tool_life_used"] == pytest.approx(hand(2, 10.0, 300.0, 0.15), rel=1e-4)
+    assert plain["T2"]["tool_KRW"] == pytest.approx(plain["T2"]["tool_life_used"] * (20000.0 + tc_krw), rel=1e-12)
+    # at least the time T1 ran at S6000 / Tl(pi 6 mm 6000 rpm); at most all its turning time at that life
+    at_speed = np.sum(dt[(tool[:-1] == 1) & (rpm[:-1] == 6000.0)])
+    turning = np.sum(dt[(tool[:-1] == 1) & (rpm[:-1] > 0.0)])
+    tl_1 = (300.0 / (np.pi * 6.0 * 6000.0 / 1000.0)) ** (1 / 0.15) * 60.0
+    assert at_speed / tl_1 < plain["T1"]["tool_life_used"] < turning / tl_1
+    assert result.summary["cost"]["tool_life_used"] == pytest.approx(
+        plain["T1"]["tool_life_used"] + plain["T2"]["tool_life_used"], rel=1e-12)
+
+    priced = load_case(_case_folder(tmp_path, case=CASE.replace("flutes = 4\n", PRICED_T2)))
+    assert priced.tools[2].price_KRW == 50000.0 and priced.tool.price_KRW is None
+    assert priced.several_tools() and priced.tools[2].same_cutter(case.tools[2])  # the cost keys cut nothing
+    model = CostModel.from_machine(priced.machine)
+    cost = summarize(rec, tp, model, *case_tool_lives(model, priced))["cost"]
+    used2 = hand(2, 10.0, 400.0, 0.25)
+    assert cost["tools"]["T1"] == plain["T1"]
+    assert cost["tools"]["T2"]["tool_life_used"] == pytest.approx(used2, rel=1e-4)
+    assert cost["tools"]["T2"]["tool_KRW"] == pytest.approx(used2 * (50000.0 + tc_krw), rel=1e-4)
+    assert cost["tool_KRW"] == pytest.approx(cost["tools"]["T1"]["tool_KRW"] + cost["tools"]["T2"]["tool_KRW"],
+                                             rel=1e-12)
+
+
+def test_tool_cost_keys_are_checked_naming_case_toml_the_line_and_the_key(tmp_path):
+    base = CASE.format(tool=TOOL_1).replace('[machine]\nparameters = "default"\n', "")
+    bad = {  # line 11: [tools.T3], 12 diameter_mm, 13 flutes, 14 the cost key
+        "price_KRW = -1.0": r"case.toml:14: \[tools.T3\] price_KRW must be a price in KRW per tool, >= 0, got -1.0",
+        'price_KRW = "20000"': r"case.toml:14: \[tools.T3\] price_KRW must be .* got '20000'",
+        "taylor_C = 0.0": r"case.toml:14: \[tools.T3\] taylor_C must be the Taylor constant C in m/min",
+        "taylor_n = 1.5": r"case.toml:14: \[tools.T3\] taylor_n must be the Taylor exponent n, > 0 and <= 1, got 1.5",
+        "taylor_n = true": r"case.toml:14: \[tools.T3\] taylor_n must be .* got True",
+        "taylor_n = nan": r"case.toml:14: \[tools.T3\] taylor_n must be .* got nan",
+    }
+    _case_folder(tmp_path)
+    for key, pattern in bad.items():
+        (tmp_path / "case.toml").write_text(base + f"[tools.T3]\ndiameter_mm = 3.0\nflutes = 2\n{key}\n")
+        with pytest.raises(CaseError, match=pattern):
+            load_case(tmp_path)
+    (tmp_path / "case.toml").write_text(base.replace("flutes = 2\n", "flutes = 2\nprice_KRW = -5\n", 1))
+    with pytest.raises(CaseError, match=r"case.toml:8: \[tool\] price_KRW must be a price"):
+        load_case(tmp_path)
+    (tmp_path / "case.toml").write_text(base + "[tools.T3]\ndiameter_mm = 3.0\nflutes = 2\ntaylor_k = 0.2\n")
+    with pytest.raises(CaseError, match=r"case.toml:14: unknown field 'taylor_k' in \[tools.T3\]; expected "
+                                        r"\['diameter_mm', 'flutes', 'price_KRW', 'taylor_C', 'taylor_n'\]"):
+        load_case(tmp_path)
+    (tmp_path / "case.toml").write_text(base + "[tools.T3]\ndiameter_mm = 3.0\nflutes = 2\nprice_KRW = 0\n"
+                                               "taylor_C = 250\ntaylor_n = 1\n")
+    tool = load_case(tmp_path).tools[3]
+    assert (tool.price_KRW, tool.taylor_C, tool.taylor_n) == (0.0, 250.0, 1.0)
+
+
+def test_the_optimisers_evaluation_records_the_cost_per_tool(two_tools):
+    """The evaluation records the tool in the spindle: the reference run's ``before`` has the cost per tool of
+    simulate's summary.json (its spindle and tool histories are the NC kernel's; the cutting model of the search
+    may end the run a step or so apart: within 1e-3)."""
+    from orchestrator.optimize.reference import build_reference
+
+    case, result = two_tools
+    member = build_reference(case).evaluation.member(0)
+    assert set(member["tools"]) == {"T1", "T2"}
+    for name, use in result.summary["cost"]["tools"].items():
+        assert member["tools"][name] == pytest.approx(use, rel=1e-3)
+    assert member["tool_life_used"] == pytest.approx(sum(u["tool_life_used"] for u in member["tools"].values()))

@@ -118,7 +118,7 @@ def test_population_split_by_memory_budget_changes_no_figure(short_ref, monkeypa
     spindles = np.array([[3000.0, 3000.0], [5000.0, 5000.0], [4000.0, 6000.0]])
     whole = evaluate_population(ctx, feeds, spindles)
     steps = ctx.time_limit_s / ctx.step
-    per_member = 8 * 6 * (steps + 2)  # 3 recorded channels per step + 3 plan positions per 1 ms period
+    per_member = 8 * 7 * (steps + 2)  # 4 recorded channels per step + 3 plan positions per 1 ms period
     assert evaluate_module.members_per_run(ctx, int(2.5 * per_member)) == 2
     monkeypatch.setattr(evaluate_module, "EVAL_MEMORY_BYTES", int(1.5 * per_member))  # one member per run
     runs = []
@@ -130,6 +130,7 @@ def test_population_split_by_memory_budget_changes_no_figure(short_ref, monkeypa
                  "success", "feasible"):
         np.testing.assert_array_equal(getattr(split, name), getattr(whole, name), err_msg=name)
     assert split.reason == whole.reason
+    assert list(split.tool_use) == list(whole.tool_use) and set(whole.tool_use[0]) == {0}  # no M6: tool 0 throughout
 
 
 def test_per_line_time_and_load_from_hand_samples():

@@ -10,7 +10,8 @@ Figures per member ``b``
   twin's stop condition (program done and in position);
 * production cost ``Cp`` (Eq. 19–22, :func:`orchestrator.cost.production_cost`):
   Taylor tool life with Miner's sum over the member's actual (ramped) spindle
-  speed history up to ``Tp``;
+  speed history up to ``Tp``, each sample's wear to the tool in the spindle
+  (``nck.tool``) with that tool's diameter, price and Taylor constants;
 * cutting load ``Fcf``: the largest ``fc_peak`` (largest resultant cutting
   force within each communication step, Eq. 13) up to ``Tp``;
 * per cutting line: time the NC kernel executed it and its largest load.
@@ -28,14 +29,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..cost import CostModel, production_cost
+from ..cost import CostModel, ToolUse, case_tool_lives, production_cost
 from ..master import Master, MasterSettings
 from ..recording import Recording
 from ..twin import TwinOptions, build_twin
 from .context import ProblemContext
 
 #: Channels an evaluation records (a full recording of a large batch would not fit in memory).
-EVAL_CHANNELS = ("line", "spindle_rpm", "fc_peak_N")
+EVAL_CHANNELS = ("line", "spindle_rpm", "fc_peak_N", "tool")
 #: Memory one batched run of an evaluation may hold for its members' recordings and NC plans, bytes. A larger
 #: population of a long program runs in several batched runs, one after the other (:func:`members_per_run`).
 EVAL_MEMORY_BYTES = 1 << 30
@@ -65,6 +66,9 @@ class Evaluation:
         ``success`` and ``max_load_N <= load_limit_N``.
     reason : list of str
         Empty for feasible members, else why not.
+    tool_use : sequence of dict int -> ToolUse
+        Per member, each tool's life used and cost (:attr:`orchestrator.cost.CostBreakdown.tools`); empty for a
+        failed member (and for every member when not given).
     """
 
     cycle_time_s: np.ndarray
@@ -76,6 +80,12 @@ class Evaluation:
     success: np.ndarray
     feasible: np.ndarray
     reason: list[str] = field(default_factory=list)
+    tool_use: tuple[dict[int, ToolUse], ...] | list[dict[int, ToolUse]] = ()
+
+    def _tool_use(self, b: int) -> dict[int, ToolUse]:
+        """Member ``b``'s tool use (empty when not known, e.g. an Evaluation pickled before it existed)."""
+        use = getattr(self, "tool_use", ())
+        return use[b] if b < len(use) else {}
 
     @property
     def batch(self) -> int:
@@ -88,7 +98,7 @@ class Evaluation:
         return Evaluation(
             self.cycle_time_s[idx], self.cost_KRW[idx], self.max_load_N[idx], self.tool_life_used[idx],
             self.line_time_s[idx], self.line_max_load_N[idx], self.success[idx], self.feasible[idx],
-            [self.reason[i] for i in idx.tolist()],
+            [self.reason[i] for i in idx.tolist()], [self._tool_use(i) for i in idx.tolist()],
         )
 
     @staticmethod
@@ -99,6 +109,7 @@ class Evaluation:
                 "cycle_time_s", "cost_KRW", "max_load_N", "tool_life_used", "line_time_s", "line_max_load_N",
                 "success", "feasible")),
             reason=[r for p in parts for r in p.reason],
+            tool_use=[p._tool_use(b) for p in parts for b in range(p.batch)],
         )
 
     def member(self, b: int) -> dict[str, object]:
@@ -111,6 +122,8 @@ class Evaluation:
             "cost_KRW": clean(self.cost_KRW[b]),
             "max_cutting_load_N": clean(self.max_load_N[b]),
             "tool_life_used": clean(self.tool_life_used[b]),
+            "tools": {f"T{k}": {"tool_life_used": clean(u.life_used), "tool_KRW": clean(u.KRW)}
+                      for k, u in sorted(self._tool_use(b).items())},
             "feasible": bool(self.feasible[b]),
             "reason": self.reason[b],
         }
@@ -216,8 +229,9 @@ def figures(ctx: ProblemContext, run, batch: int) -> Evaluation:
     lines = _column(rec, "line", batch)
     rpm = _column(rec, "spindle_rpm", batch)
     load = _column(rec, "fc_peak_N", batch) if "fc_peak_N" in rec else np.zeros_like(rpm)
+    in_spindle = _column(rec, "tool", batch) if "tool" in rec else None
     model = CostModel.from_machine(ctx.case.machine)
-    diameter = ctx.case.tool.diameter_mm
+    default_tool, tools = case_tool_lives(model, ctx.case)
     failed = np.asarray(getattr(run, "failed", np.zeros(batch, bool)), dtype=bool)
     if failed.shape != (batch,):
         failed = np.zeros(batch, bool)
@@ -229,6 +243,7 @@ def figures(ctx: ProblemContext, run, batch: int) -> Evaluation:
     line_load = np.full((batch, L), np.nan)
     success = np.zeros(batch, bool)
     reasons = []
+    tool_use: list[dict[int, ToolUse]] = [{} for _ in range(batch)]
     dt = np.zeros_like(t)
     dt[:-1] = np.diff(t)
     for b in range(batch):
@@ -242,8 +257,10 @@ def figures(ctx: ProblemContext, run, batch: int) -> Evaluation:
             continue
         tp = float(stopped[b] - t[0])
         n = int(np.searchsorted(t, stopped[b], side="right"))
-        c = production_cost(t[:n], rpm[:n, b], diameter, model, tp)
+        c = production_cost(t[:n], rpm[:n, b], default_tool, model, tp,
+                            None if in_spindle is None else in_spindle[:n, b], tools)
         out["time"][b], out["cost"][b], out["used"][b] = tp, c.total_KRW, c.tool_life_used
+        tool_use[b] = dict(c.tools)
         out["load"][b] = float(np.nanmax(load[:n, b])) if n else 0.0
         w = dt[:n].copy()
         if n:
@@ -255,7 +272,7 @@ def figures(ctx: ProblemContext, run, batch: int) -> Evaluation:
     for b in np.flatnonzero(success & ~feasible):
         reasons[b] = f"cutting load {out['load'][b]:.1f} N exceeds the limit {ctx.load_limit_N:g} N"
     return Evaluation(out["time"], out["cost"], out["load"], out["used"], line_time, line_load, success,
-                      feasible, reasons)
+                      feasible, reasons, tool_use)
 
 
 def evaluate_population(ctx: ProblemContext, feeds: np.ndarray, spindles: np.ndarray,
