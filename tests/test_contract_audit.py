@@ -1,0 +1,57 @@
+"""Inputs the recording and diagnosis contracts allow (or forbid) that no other test tried (the contract audit).
+
+Each test names the clause of ``shared/spec/recording.md`` or ``shared/spec/diagnosis.md`` it checks; expected
+values are derived by hand from the program or the file, not pasted from a run.
+"""
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import pytest
+
+from orchestrator.recording import Recording, RecordingError
+from orchestrator.validation import validate_recording
+
+# ----------------------------------------------------------------------------- "line: source line number (1-based,
+#                                                                  in the program file) of the block being executed"
+#: A main program calling a one-block subprogram twice (M98 ... L2): the blocks run on lines 2, 7, 7, 4, 5.
+SUBPROGRAM = ("G90 G17 G21 G94\n"   # 1
+              "G0 X0 Y0 Z5.\n"      # 2
+              "M98 P1001 L2\n"      # 3: a call, no block of its own
+              "G0 Y10.\n"           # 4
+              "M30\n"               # 5
+              "O1001\n"             # 6
+              "G91 G1 X5. F600\n"   # 7: runs twice
+              "G90\n"               # 8: modal only
+              "M99\n")              # 9
+
+
+def _lines(values: list[float]) -> Recording:
+    return Recording.from_channels({"t_s": 0.1 * np.arange(len(values)), "line": np.array(values, float)})
+
+
+@pytest.mark.parametrize("lines", [
+    [2, 2, 7, 7, 4, 5],          # as the twin records it: back from 7 to 4 after the subprogram returns
+    [2, 3, 7, 3, 7, 4, 5],       # a controller that reports the M98 line while it calls
+    [2, 7, 5],                   # a sparse logger that misses line 4
+])
+def test_a_subprogram_program_may_go_back_to_the_line_after_its_call(lines):
+    validate_recording(_lines(lines), "sub.nc", program_text=SUBPROGRAM)
+
+
+@pytest.mark.parametrize("lines, row, value, before", [
+    ([2, 4, 7, 5], 3, 7, 4),     # line 7 runs only before line 4
+    ([2, 7, 4, 2], 4, 2, 4),     # line 2 runs once, first
+])
+def test_lines_out_of_the_subprograms_execution_order_name_the_row(lines, row, value, before):
+    with pytest.raises(RecordingError, match=rf"^<memory>: column 'line', row {row} .*: line {value} after line "
+                                             rf"{before} is not in the order sub\.nc executes its blocks in"):
+        validate_recording(_lines(lines), "sub.nc", program_text=SUBPROGRAM)
+
+
+def test_a_straight_program_still_refuses_a_line_going_back():
+    text = "G90 G0 X0 Y0 Z5.\nG1 X5. F600\nG1 Y5.\nM30\n"
+    with pytest.raises(RecordingError, match=r"row 3 .*the line goes back from 3 to 2; p\.nc has no loops or "
+                                             r"subprograms"):
+        validate_recording(_lines([1, 3, 2, 4]), "p.nc", program_text=text)
