@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from orchestrator.recording import Recording, RecordingError
+from tests.test_input_fuzz_regressions import diagnosis_case
 from orchestrator.validation import validate_recording
 
 # ----------------------------------------------------------------------------- "line: source line number (1-based,
@@ -55,3 +56,17 @@ def test_a_straight_program_still_refuses_a_line_going_back():
     with pytest.raises(RecordingError, match=r"row 3 .*the line goes back from 3 to 2; p\.nc has no loops or "
                                              r"subprograms"):
         validate_recording(_lines([1, 3, 2, 4]), "p.nc", program_text=text)
+
+
+# ----------------------------------------------------------------------------- "Every column is optional except t_s"
+def test_currents_and_lines_without_positions_say_the_drive_diagnosis_needs_an_actual_position(tmp_path):
+    """``t_s, line, x_tcmd_A`` is a legal recording, but the following error needs ``x_mm``: the message used to
+    be 'no axis moves (commanded stroke below 10 µm)' for a program that moves X by 20 mm."""
+    from orchestrator.diagnose import DiagnosisError, diagnose
+
+    # the short program's G1 X20. is its line 4; 40 samples 5 ms apart
+    body = "".join(f"{0.005 * k:.3f},4,0.5\n" for k in range(40))
+    folder = diagnosis_case(tmp_path / "c", "t_s,line,x_tcmd_A\n" + body)
+    with pytest.raises(DiagnosisError, match=r"recording\.csv: no axis has its actual position \('x_mm', 'y_mm' or "
+                                             r"'z_mm'\) in more than half of the rows; .*\['t_s', 'line', 'x_tcmd_A'\]"):
+        diagnose(folder)

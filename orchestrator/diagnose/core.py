@@ -40,7 +40,7 @@ from .cutting_core import CuttingResult, diagnose_cutting
 from .cutting_load import model_loads
 from .cutting_merge import holdout_cutting, merge_cutting
 from .errors import DiagnosisError
-from .force_only import force_only_recording, needs_force_clock
+from .force_only import force_only_recording, measures_positions, needs_force_clock
 from .library import CHANNEL_SCALE, machine_keys
 from .locate import Locator, residual_windows
 from .model import Model, Simulated, simulate
@@ -476,15 +476,21 @@ def diagnose(
         raise DiagnosisError(f"{case.recording}: the recording has no line and no moving position or command, so "
                              f"the feed drives cannot be diagnosed (its columns are {recording.channels}); {hint}"
                              f"{near_miss_hint(recording.channels, SPEC_COLUMNS)}")
-    if do_cut and needs_force_clock(recording):
-        # a dynamometer on its own clock (forces only): aligned by its cutting load, the twin's path added
+    if do_cut and (needs_force_clock(recording) or not measures_positions(_cnc_rows(recording))):
+        # a dynamometer on its own clock (forces only), or forces with the controller's line or commands but no
+        # actual position: aligned by its cutting load, the twin's path added
         say("aligning the dynamometer's clock by the cutting load")
+        alone = needs_force_clock(recording)
         only = force_only_recording(case_m, recording, base_machine)
         recording, clock = only.recording, (only.offset, only.method)
-        notes.append("forces only (no line, no moving position): the tool path, spindle speed and lines are the "
-                     "twin's run with cutting at t - offset, not measured")
+        notes.append(("forces only (no line, no moving position)" if alone else
+                      "forces without a measured actual position (x_mm, y_mm, z_mm): the recorded line and commands "
+                      "are not used, and")
+                     + " the tool path, spindle speed and lines are the twin's run with cutting at t - offset, not "
+                       "measured")
         if drives:
-            notes.append("drive diagnosis skipped: no measured position, command or current of the feed drives")
+            notes.append("drive diagnosis skipped: no measured position of the feed drives" if not alone else
+                         "drive diagnosis skipped: no measured position, command or current of the feed drives")
         drives = False
     say("aligning the recording with the twin")
     forces = recorded_forces(recording)

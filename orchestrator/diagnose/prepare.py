@@ -441,6 +441,11 @@ def prepare(case: Case, recording: Recording, machine: Machine, axes: list[str] 
         validate_recording(recording, case.program, nc_parameters=nck_parameters(machine))
     except RecordingError as exc:
         raise DiagnosisError(str(exc)) from None
+    wanted = axes or [a for a in "xyz" if _finite_fraction(recording, f"{a}_mm") > 0.5]
+    if not wanted:
+        raise DiagnosisError(f"{src}: no axis has its actual position ('x_mm', 'y_mm' or 'z_mm') in more than half "
+                             "of the rows; the feed-drive diagnosis compares the following error (commanded minus "
+                             f"actual position); the recording has {recording.channels}")
     nc = nc if nc is not None else twin_commands(case, machine)
     t = np.asarray(recording.t, dtype=float)
     # --- time offset: block transitions first (pure timing), else velocities
@@ -505,7 +510,6 @@ def prepare(case: Case, recording: Recording, machine: Machine, axes: list[str] 
                                {a: np.asarray(nc[f"{a}_ref_mm"], float) for a in with_ref}, offset)
         method += "; refined on the recorded commands"
     t_prog = t - offset
-    wanted = axes or [a for a in "xyz" if _finite_fraction(recording, f"{a}_mm") > 0.5]
     commands, recorded, fe, cur = {}, {}, {}, {}
     nc_diff, ref_off = {}, {}
     for a in wanted:
