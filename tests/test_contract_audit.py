@@ -70,3 +70,26 @@ def test_currents_and_lines_without_positions_say_the_drive_diagnosis_needs_an_a
     with pytest.raises(DiagnosisError, match=r"recording\.csv: no axis has its actual position \('x_mm', 'y_mm' or "
                                              r"'z_mm'\) in more than half of the rows; .*\['t_s', 'line', 'x_tcmd_A'\]"):
         diagnose(folder)
+
+
+# ----------------------------------------------------------------------------- diagnosis.md: "Effects are listed
+#                                                                                 most certain first"
+def test_drive_and_cutting_effects_are_listed_most_certain_first():
+    """The cutting effects were appended after the drives' (and chatter put first among them whatever its
+    confidence): a 0.999 runout came after a 0.95 gravity, a 0.8 chatter before the runout."""
+    from types import SimpleNamespace
+
+    from orchestrator.diagnose.cutting_merge import merge_cutting
+
+    def effect(name, confidence):
+        return {"effect": name, "confidence": confidence}
+
+    d = SimpleNamespace(effects=[effect("gravity", 0.95), effect("backlash", 0.95)], unexplained=[],
+                        rms_before={}, rms_after={}, noise={}, alignment={"time_offset_s": 0.0, "channels": {}},
+                        log=[], notes=[], provenance={}, machine=None)
+    cres = SimpleNamespace(effects=[effect("chatter", 0.8), effect("runout", 0.999), effect("tool_wear", 0.95)],
+                           unexplained=[], rms_before={}, rms_after={}, noise={},
+                           alignment={"channels": {}, "spindle_angle_deg": 0.0}, log=[], notes=[], machine_values={})
+    merge_cutting(d, cres, SimpleNamespace(folder="case"))
+    # by confidence; equal confidences in the order each half gave them, drives first
+    assert [e["effect"] for e in d.effects] == ["runout", "gravity", "backlash", "tool_wear", "chatter"]
