@@ -476,7 +476,7 @@ def diagnose(
         raise DiagnosisError(f"{case.recording}: the recording has no line and no moving position or command, so "
                              f"the feed drives cannot be diagnosed (its columns are {recording.channels}); {hint}"
                              f"{near_miss_hint(recording.channels, SPEC_COLUMNS)}")
-    if do_cut and (needs_force_clock(recording) or not measures_positions(_cnc_rows(recording))):
+    if do_cut and (needs_force_clock(recording) or not measures_positions(_position_rows(_cnc_rows(recording)))):
         # a dynamometer on its own clock (forces only), or forces with the controller's line or commands but no
         # actual position: aligned by its cutting load, the twin's path added
         say("aligning the dynamometer's clock by the cutting load")
@@ -494,9 +494,14 @@ def diagnose(
         drives = False
     say("aligning the recording with the twin")
     forces = recorded_forces(recording)
-    drive_rec = _cnc_rows(recording) if do_cut else recording
+    drive_rec = _position_rows(_cnc_rows(recording) if do_cut else recording)
     prep = prepare(case, drive_rec, base_machine, axes, disturbance=forces, clock=clock)
     log: list[str] = [f"time offset: {prep.offset:.6f} s ({prep.offset_method})", *notes]
+    for a in prep.axes:  # a known column the drives do not use is said so (recording.md: never silently dropped)
+        ref = f"{a}_ref_mm"
+        if ref in drive_rec and not prep.ref_recorded[a] and np.isfinite(drive_rec[ref]).any():
+            log.append(f"{ref} is measured on {np.isfinite(drive_rec[ref]).mean():.0%} of the rows, half or fewer: "
+                       f"the twin's own commands drive the {a} servo, and {ref} is not compared")
     if prep.forces_source == "predicted":
         log.append("no fx_N/fy_N recorded: the replayed drives carry the twin's predicted cutting forces")
     elif prep.forces_source == "corrected":
@@ -609,6 +614,25 @@ def _revolution_s(nc: Recording) -> float:
     """One spindle revolution at the program's median running speed, s."""
     rpm = np.asarray(nc["spindle_rpm"], float)
     return 60.0 / float(np.median(rpm[rpm > 0])) if np.any(rpm > 0) else 0.01
+
+
+def _position_rows(recording: Recording) -> Recording:
+    """The rows with an actual position (``x_mm``, ``y_mm`` or ``z_mm``) when every axis's is on half the rows or fewer.
+
+    recording.md lets any column be empty on any row: a controller that logs positions on 2 rows of 5 (its
+    currents on all) wrote a legal file, which the drive diagnosis (axes with a position on more than half
+    the rows) refused. Those rows are an unevenly sampled log of the drives. Unchanged otherwise.
+    """
+    names = [f"{a}_mm" for a in "xyz" if f"{a}_mm" in recording]
+    if not names:
+        return recording
+    measured = [np.isfinite(np.asarray(recording[c], float)) for c in names]
+    if any(m.mean() > 0.5 for m in measured):
+        return recording
+    keep = np.logical_or.reduce(measured)
+    if keep.sum() < MIN_SAMPLES:
+        return recording
+    return recording.take(keep)
 
 
 def _cnc_rows(recording: Recording) -> Recording:
