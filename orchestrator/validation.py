@@ -190,19 +190,22 @@ def _check_execution_order(recording: Recording, rows: np.ndarray, seq: np.ndarr
         The program, for the message.
     """
     order = executed[np.concatenate([[True], np.diff(executed) != 0])]
-    blocks = set(order.tolist())
-    at = 0  # index in ``order`` of the line the recording is at
+    where = {int(v): np.flatnonzero(order == v) for v in np.unique(order)}  # line -> its places in the order
+    values = seq.astype(np.int64)
+    inside = np.isin(values, order)
+    rows, values = rows[inside], values[inside]
+    change = np.concatenate([[True], np.diff(values) != 0]) if values.size else np.zeros(0, bool)
+    at = 0  # place in ``order`` of the line the recording is at
     previous = None
-    for k, value in zip(rows.tolist(), seq.astype(np.int64).tolist()):
-        if value not in blocks or value == previous:
-            continue
-        found = np.flatnonzero(order[at:] == value)
-        if not found.size:
+    for k, value in zip(rows[change].tolist(), values[change].tolist()):
+        places = where[value]
+        i = int(np.searchsorted(places, at))
+        if i == places.size:
             raise RecordingError(
                 f"{_at(recording, k, 'line')}: line {value} after line {previous} is not in the order "
                 f"{program_name} executes its blocks in (subprogram calls and loops unrolled): is this the "
                 "recording of another program?")
-        at += int(found[0])
+        at = int(places[i])
         previous = value
 
 

@@ -617,7 +617,7 @@ def _revolution_s(nc: Recording) -> float:
 
 
 def _position_rows(recording: Recording) -> Recording:
-    """The rows with an actual position (``x_mm``, ``y_mm`` or ``z_mm``) when every axis's is on half the rows or fewer.
+    """The rows with an actual position (``x_mm``, ``y_mm``, ``z_mm``) when each axis's fills half the rows or fewer.
 
     recording.md lets any column be empty on any row: a controller that logs positions on 2 rows of 5 (its
     currents on all) wrote a legal file, which the drive diagnosis (axes with a position on more than half
