@@ -117,3 +117,18 @@ def test_the_twins_own_run_logged_in_1_ms_pairs_every_5_ms_names_no_effect(tmp_p
     assert result.effects == [], result.log
     for a in "xyz":
         assert result.rms_before[f"{a}_fe_um"] < 0.01
+
+
+# ----------------------------------------------------------------------------- exit status of the command line
+@pytest.mark.parametrize("argv, message", [
+    (["identify", "cutting", "CASE", "--out", "OUT", "--axes", "x"], "--axes applies to friction and servo only"),
+    (["identify", "friction", "CASE", "--out", "OUT", "--machine", "default"], "--machine applies to servo only"),
+])
+def test_an_option_the_identification_does_not_take_exits_2_like_every_user_error(argv, message, capsys):
+    """Every user error exits with status 2 and one 'cnctwin: error:' line (README, What happens when); these
+    two exited with status 1 (SystemExit with the message)."""
+    from orchestrator.cli import main
+
+    assert main(argv) == 2
+    assert capsys.readouterr().err.strip() == f"cnctwin: error: {message}" + (
+        " (friction and cutting use the case's)" if "machine" in message else "")
