@@ -100,23 +100,40 @@ def test_drive_and_cutting_effects_are_listed_most_certain_first():
 PAIRS_PROGRAM = "G21 G90 G17\nS3000 M3\nG0 X0 Y0 Z5.\nG1 X20. F600\nG1 Y10.\nM5\nM30\n"
 
 
-def test_the_twins_own_run_logged_in_1_ms_pairs_every_5_ms_names_no_effect(tmp_path):
-    """The twin's own run, logged from the program start in pairs of samples 1 ms apart every 5 ms. The start
-    fit of Z (at rest, its rapid about to start) found a velocity of nm/s on this noise-free file (0.17 um/s on a
-    longer run of it), which set the replayed Z sliding: a Z pitch error and feed-forward were named (baseline Z
-    following-error residual 0.83 um rms there). With a 0.1 um encoder's noise at least in the fit, Z starts at
-    rest and nothing is named."""
-    from orchestrator.diagnose import diagnose
+@pytest.fixture(scope="module")
+def pairs_case(tmp_path_factory):
+    """The twin's own run of PAIRS_PROGRAM, logged from the program start in 1 ms pairs every 5 ms."""
     from orchestrator.simulate import simulate
 
-    (tmp_path / "program.nc").write_text(PAIRS_PROGRAM)
-    (tmp_path / "case.toml").write_text('program = "program.nc"\nrecording = "recording.csv"\n')
-    own = simulate(case=tmp_path, plot=False).recording
-    own.take(np.arange(len(own)) % 5 < 2).write_csv(tmp_path / "recording.csv")
-    result = diagnose(tmp_path)
+    folder = tmp_path_factory.mktemp("pairs")
+    (folder / "program.nc").write_text(PAIRS_PROGRAM)
+    (folder / "case.toml").write_text('program = "program.nc"\nrecording = "recording.csv"\n')
+    own = simulate(case=folder, plot=False).recording
+    own.take(np.arange(len(own)) % 5 < 2).write_csv(folder / "recording.csv")
+    return folder
+
+
+def test_the_twins_own_run_logged_in_1_ms_pairs_every_5_ms_names_no_effect(pairs_case):
+    """The start fit of Z (at rest, its rapid about to start) found a velocity of nm/s on this noise-free file
+    (0.17 um/s on a longer run of it), which set the replayed Z sliding: a Z pitch error and feed-forward were
+    named (baseline Z following-error residual 0.83 um rms there). With a 0.1 um encoder's noise at least in the
+    fit, Z starts at rest and nothing is named."""
+    from orchestrator.diagnose import diagnose
+
+    result = diagnose(pairs_case)
     assert result.effects == [], result.log
     for a in "xyz":
         assert result.rms_before[f"{a}_fe_um"] < 0.01
+
+
+def test_servo_identification_on_the_twins_own_run_in_1_ms_pairs_is_exact(pairs_case):
+    """The same start fit gave Z Svp 0.86 and Svi 4.7 (the truth: 1 on every factor)."""
+    from orchestrator.identify import identify_servo
+
+    fit = identify_servo([pairs_case])
+    for a in "xyz":
+        for symbol in ("Spp", "Svp", "Svi"):
+            assert fit.scales_[a][symbol] == pytest.approx(1.0, abs=2e-3), (a, symbol)
 
 
 # ----------------------------------------------------------------------------- exit status of the command line

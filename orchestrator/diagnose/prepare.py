@@ -20,7 +20,7 @@ from .align import (
     consensus_bracket, fill_gaps, offset_bracket_from_lines, refine_offset, refine_offset_by_axes,
     time_offset_from_lines, time_offset_from_signal,
 )
-from ..identify.start_state import AxisStart, estimate_start, start_window
+from ..identify.start_state import LOG_POSITION_NOISE_M, AxisStart, estimate_start, start_window
 from .errors import DiagnosisError
 from .thrust_gate import thrust_bound
 
@@ -596,18 +596,15 @@ def starts(recording: Recording, axes: list[str], machine: Machine) -> dict[str,
     a log cut into a 500 mm/min move starts with the table on the command, 140 µm ahead of where the loop
     holds it, and catches up over several time constants.
     """
-    from .columns import POSITION_QUANTUM_UM  # local: columns imports this module
-
-    # at least a production log's finest position step (0.1 um) as quantisation noise, q / sqrt(12): the twin's
-    # own run logged from its start unevenly (1 ms pairs every 5 ms) fitted Z, at rest but 1 ms before its rapid,
-    # with 0.17 um/s; started sliding, the replay named a Z pitch error and feed-forward
-    floor = POSITION_QUANTUM_UM * 1e-6 / np.sqrt(12.0)
+    # at least a production log's finest position step as quantisation noise: the twin's own run logged from its
+    # start unevenly (1 ms pairs every 5 ms) fitted Z, at rest 1 ms before its rapid, with 0.17 um/s; started
+    # sliding, the replay named a Z pitch error and feed-forward
     t = np.asarray(recording.t, dtype=float)
     out = {}
     for a in axes:
         current = np.asarray(recording[f"{a}_tcmd_A"], dtype=float) if f"{a}_tcmd_A" in recording else None
         out[a] = estimate_start(t, np.asarray(recording[f"{a}_mm"], dtype=float) * 1e-3, current,
-                                start_window(machine, a), min_noise=floor)
+                                start_window(machine, a), min_noise=LOG_POSITION_NOISE_M)
     return out
 
 

@@ -35,6 +35,10 @@ from ..machine import Machine
 SIGNIFICANCE = 3.0
 #: Least number of samples of the start fit (a quadratic needs 3; 2 more give its standard errors).
 MIN_SAMPLES = 5
+#: Least position noise of a start fit [m]: the quantisation noise q / sqrt(12) of the finest position step of a
+#: production log, q = 0.1 um (FANUC detection unit IS-C; the diagnosis's ``columns.POSITION_QUANTUM_UM``).
+#: Without it a noise-free file (the twin's own run, 12 digits) made nm of curvature a significant velocity.
+LOG_POSITION_NOISE_M = 0.1e-6 / math.sqrt(12.0)
 
 
 @dataclass(frozen=True)
