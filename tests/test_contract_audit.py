@@ -5,14 +5,12 @@ values are derived by hand from the program or the file, not pasted from a run.
 """
 from __future__ import annotations
 
-import re
-
 import numpy as np
 import pytest
 
 from orchestrator.recording import Recording, RecordingError
-from tests.test_input_fuzz_regressions import diagnosis_case
 from orchestrator.validation import validate_recording
+from tests.test_input_fuzz_regressions import diagnosis_case
 
 # ----------------------------------------------------------------------------- "line: source line number (1-based,
 #                                                                  in the program file) of the block being executed"
