@@ -7,7 +7,9 @@ from __future__ import annotations
 
 import argparse
 import json
+
 from .cli import emit
+from .errors import CncTwinError
 
 
 def _cmd_identify(args: argparse.Namespace) -> int:
@@ -16,11 +18,11 @@ def _cmd_identify(args: argparse.Namespace) -> int:
     options: dict = {}
     if args.axes:
         if args.kind == "cutting":
-            raise SystemExit("cnctwin: error: --axes applies to friction and servo only")
+            raise CncTwinError("--axes applies to friction and servo only")
         options["axes"] = list(args.axes)
     if args.machine:
         if args.kind != "servo":
-            raise SystemExit("cnctwin: error: --machine applies to servo only (friction and cutting use the case's)")
+            raise CncTwinError("--machine applies to servo only (friction and cutting use the case's)")
         options["machine"] = args.machine
     fit = identify(args.kind, args.cases, out=args.out, method=args.method, seed=args.seed, resume=args.resume,
                    **options)

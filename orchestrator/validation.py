@@ -8,8 +8,9 @@ formed but cannot be what they claim to be:
   1e9 mm, a spindle at -5e6 rpm, a current of 1e5 A, a negative cutting load);
 * a ``line`` that is not a whole number, not a line of the program, or a line
   that holds no block (a comment, a blank line);
-* ``line`` going back in time (the supported dialect has no loops or
-  sub-programs, so a run executes its lines in increasing order);
+* ``line`` going back in time where the program does not: a program without subprograms (M98/M99) or
+  macro loops (GOTO, WHILE) executes its lines in increasing order; the lines of one with them must follow
+  the order the interpreter executes its blocks in;
 * a recording much longer than the program runs (the wrong recording for
   this program);
 * a case whose program or recording file is missing or whose stock lies
@@ -126,7 +127,8 @@ def _program_text(program: str | Path) -> tuple[str, str]:
         raise RecordingError(f"cannot check the recording against the program: {exc}") from None
 
 
-def _check_lines(recording: Recording, text: str, program_name: str) -> None:
+def _check_lines(recording: Recording, text: str, program_name: str,
+                 nc_parameters: Mapping[str, object]) -> None:
     line = np.asarray(recording["line"], dtype=float)
     known = ~np.isnan(line)
     whole = known & (np.floor(line) == line) & (line >= 1)
@@ -148,23 +150,80 @@ def _check_lines(recording: Recording, text: str, program_name: str) -> None:
                 f"(a comment or blank line cannot execute): is this the recording of another program?")
     seq = line[known]
     back = np.flatnonzero(np.diff(seq) < 0)
-    if back.size:
+    if not back.size:
+        return
+    executed = _executed_lines(text, program_name, nc_parameters)
+    if not (np.diff(executed) < 0).any():
         k = int(np.flatnonzero(known)[back[0] + 1])
         raise RecordingError(
             f"{_at(recording, k, 'line')}: the line goes back from {int(seq[back[0]])} to "
-            f"{int(seq[back[0] + 1])}; {program_name} has no loops, so a run executes its lines in increasing order")
+            f"{int(seq[back[0] + 1])}; {program_name} has no loops or subprograms, so a run executes its lines in "
+            "increasing order")
+    _check_execution_order(recording, np.flatnonzero(known), seq, executed, program_name)
 
 
-def _check_duration(recording: Recording, text: str, program_name: str, nc_parameters: Mapping[str, object]) -> None:
-    if len(recording) < 2:
-        return
+def _executed_lines(text: str, program_name: str, nc_parameters: Mapping[str, object]) -> np.ndarray:
+    """The program lines of the interpreted blocks in execution order (subprogram calls and loops unrolled)."""
+    kernel = _planned_kernel(text, program_name, nc_parameters)
+    return np.array([int(block.line) for block in kernel.program_.blocks], dtype=np.int64)
+
+
+def _check_execution_order(recording: Recording, rows: np.ndarray, seq: np.ndarray, executed: np.ndarray,
+                           program_name: str) -> None:
+    """Raise RecordingError when the recorded lines do not occur in the program's execution order.
+
+    A logger samples the block being executed, so the recorded lines that are lines of interpreted blocks must
+    be a subsequence of ``executed`` (consecutive repeats merged). Lines of statements that make no block
+    (``M98``, ``WHILE``, ``GOTO``), which a controller may report, are not placed in that order.
+
+    Parameters
+    ----------
+    recording : Recording
+        The recording, for the message.
+    rows : ndarray of int
+        0-based rows of the recorded lines ``seq``.
+    seq : ndarray of float
+        Recorded lines (whole numbers).
+    executed : ndarray of int
+        Lines of the interpreted blocks in execution order.
+    program_name : str
+        The program, for the message.
+    """
+    order = executed[np.concatenate([[True], np.diff(executed) != 0])]
+    where = {int(v): np.flatnonzero(order == v) for v in np.unique(order)}  # line -> its places in the order
+    values = seq.astype(np.int64)
+    inside = np.isin(values, order)
+    rows, values = rows[inside], values[inside]
+    change = np.concatenate([[True], np.diff(values) != 0]) if values.size else np.zeros(0, bool)
+    at = 0  # place in ``order`` of the line the recording is at
+    previous = None
+    for k, value in zip(rows[change].tolist(), values[change].tolist()):
+        places = where[value]
+        i = int(np.searchsorted(places, at))
+        if i == places.size:
+            raise RecordingError(
+                f"{_at(recording, k, 'line')}: line {value} after line {previous} is not in the order "
+                f"{program_name} executes its blocks in (subprogram calls and loops unrolled): is this the "
+                "recording of another program?")
+        at = int(places[i])
+        previous = value
+
+
+def _planned_kernel(text: str, program_name: str, nc_parameters: Mapping[str, object]) -> NCKernel:
+    """An NC kernel with the program interpreted and planned (``nc_parameters``: SI, as for the twin)."""
     kernel = NCKernel("nck", program_text=text, **nc_parameters)
     kernel.set_program_text(text, program_name)
     try:
         kernel.setup(0.0)
     except GCodeError as exc:
         raise RecordingError(f"cannot check the recording against the program: {exc}") from None
-    planned = float(kernel.duration_[0])
+    return kernel
+
+
+def _check_duration(recording: Recording, text: str, program_name: str, nc_parameters: Mapping[str, object]) -> None:
+    if len(recording) < 2:
+        return
+    planned = float(_planned_kernel(text, program_name, nc_parameters).duration_[0])
     span = float(recording.t[-1] - recording.t[0])
     allowed = MAX_DURATION_RATIO * planned + DURATION_SLACK_S
     if span > allowed:
@@ -225,7 +284,7 @@ def validate_recording(
     else:
         text, name = _program_text(program)  # type: ignore[arg-type]
     if "line" in recording:
-        _check_lines(recording, text, name)
+        _check_lines(recording, text, name, dict(nc_parameters or {}))
     _check_duration(recording, text, name, dict(nc_parameters or {}))
 
 

@@ -27,8 +27,11 @@ SHIFT_S = 1.7373
 NOISE_N = 0.5
 
 
-def _dynamometer_case(folder: Path, effects: dict[str, float], seed: int) -> Path:
-    """A case whose recording is the twin's forces (machine with ``effects``), shifted, with noise."""
+def _dynamometer_case(folder: Path, effects: dict[str, float], seed: int, line: bool = False) -> Path:
+    """A case whose recording is the twin's forces (machine with ``effects``), shifted, with noise.
+
+    ``line``: the twin's ``line`` too (a dynamometer merged with the controller's block number).
+    """
     folder.mkdir(parents=True, exist_ok=True)
     (folder / "program.nc").write_text(PROGRAM)
     (folder / "case.toml").write_text('recording = "recording.csv"\n' + (PAPER_PART / "case.toml").read_text())
@@ -37,6 +40,8 @@ def _dynamometer_case(folder: Path, effects: dict[str, float], seed: int) -> Pat
     twin = simulate(case=replace(case, machine=machine), plot=False).recording
     rng = np.random.default_rng(seed)
     channels = {"t_s": np.asarray(twin.t, float) + SHIFT_S}
+    if line:
+        channels["line"] = np.asarray(twin["line"], float)
     for c in ("fx_N", "fy_N"):
         channels[c] = np.asarray(twin[c], float) + rng.normal(0.0, NOISE_N, len(twin))
     Recording.from_channels(channels).write_csv(folder / "recording.csv")
@@ -158,3 +163,17 @@ def test_a_force_only_recording_without_the_cutting_diagnosis_says_why(clean_cas
     with pytest.raises(DiagnosisError, match=r"recording.csv: the recording has no line and no moving position "
                                              r"or command, so the feed drives cannot be diagnosed"):
         diagnose(folder, cutting=False)
+
+
+def test_forces_with_the_controllers_line_but_no_position_are_aligned_by_the_cutting_load(tmp_path):
+    """recording.md: every column but t_s is optional. ``t_s, line, fx_N, fy_N`` (no axis position) used to end
+    in 'no axis moves (commanded stroke below 10 µm)': the line sent it to the drive alignment, which needs a
+    position. It is a dynamometer's recording with a line: aligned by its cutting load, the drives skipped."""
+    folder = _dynamometer_case(tmp_path / "line", {}, seed=7, line=True)
+    d = diagnose(folder)
+    assert d.alignment["time_offset_s"] == pytest.approx(SHIFT_S, abs=1e-3)   # as the clean case's clock
+    assert d.effects == [] and d.unexplained == [], d.log
+    assert any("recorded line and commands are not used" in line for line in d.log)
+    assert any("drive diagnosis skipped: no measured position" in line for line in d.log)
+    for c in ("fx_N", "fy_N"):
+        assert d.rms_after[c] <= 1.1 * NOISE_N

@@ -280,3 +280,52 @@ def test_a_cutting_load_alone_says_which_columns_a_diagnosis_needs(tmp_path):
                                              r"100 samples each\) \('fc_N' is not enough: the cutting diagnosis "
                                              r"compares the force components\)$"):
         diagnose(folder)
+
+
+def test_positions_logged_on_a_third_of_the_rows_are_diagnosed_on_those_rows(air_runs, tmp_path):
+    """recording.md: an empty cell means 'not measured at this sample'. Positions on every third row, commands
+    and currents on every row, is a legal log; the drive diagnosis took only axes whose position fills more than
+    half the rows and refused it ('no axis moves'). It is diagnosed on the rows with a position: the twin's own
+    run, so nothing is named and the replay reproduces it."""
+    from orchestrator.diagnose import diagnose
+
+    folder, own, _ = air_runs
+    case = tmp_path / "thirds"
+    case.mkdir()
+    for name in ("program.nc", "case.toml"):
+        (case / name).write_text((folder / name).read_text())
+    _logged(case, own, np.arange(len(own)), 0.7)
+    rec = Recording.read_csv(case / "recording.csv")
+    channels = {c: np.asarray(rec[c], float).copy() for c in rec.channels}
+    for a in "xyz":
+        channels[f"{a}_mm"][np.arange(len(rec)) % 3 != 0] = np.nan
+    Recording.from_channels(channels).write_csv(case / "recording.csv")
+    result = diagnose(case)
+    assert result.effects == [], result.log
+    assert result.alignment["time_offset_s"] == pytest.approx(0.7, abs=1e-6)
+    for a in "xyz":
+        assert result.rms_before[f"{a}_fe_um"] < 0.01
+
+
+def test_commands_logged_on_a_third_of_the_rows_are_not_dropped_silently(air_runs, tmp_path):
+    """recording.md: readers never silently drop columns they know. Commands on every third row fill too little
+    of the log to drive the replay (half the rows or fewer): the twin's commands do, and the log says so."""
+    from orchestrator.diagnose import diagnose
+
+    folder, own, _ = air_runs
+    case = tmp_path / "thirds"
+    case.mkdir()
+    for name in ("program.nc", "case.toml"):
+        (case / name).write_text((folder / name).read_text())
+    _logged(case, own, np.arange(len(own)), 0.0)
+    rec = Recording.read_csv(case / "recording.csv")
+    channels = {c: np.asarray(rec[c], float).copy() for c in rec.channels}
+    for a in "xyz":
+        channels[f"{a}_ref_mm"][np.arange(len(rec)) % 3 != 0] = np.nan
+    Recording.from_channels(channels).write_csv(case / "recording.csv")
+    result = diagnose(case)
+    assert result.effects == [], result.log
+    share = f"{np.mean(np.arange(len(rec)) % 3 == 0):.0%}"   # 33 % (34 % when the row count is 1 mod 3)
+    for a in "xyz":
+        assert f"{a}_ref_mm is measured on {share} of the rows, half or fewer: the twin's own commands drive the " \
+               f"{a} servo" in "\n".join(result.log)

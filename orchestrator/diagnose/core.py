@@ -40,7 +40,7 @@ from .cutting_core import CuttingResult, diagnose_cutting
 from .cutting_load import model_loads
 from .cutting_merge import holdout_cutting, merge_cutting
 from .errors import DiagnosisError
-from .force_only import force_only_recording, needs_force_clock
+from .force_only import force_only_recording, measures_positions, needs_force_clock
 from .library import CHANNEL_SCALE, machine_keys
 from .locate import Locator, residual_windows
 from .model import Model, Simulated, simulate
@@ -476,21 +476,32 @@ def diagnose(
         raise DiagnosisError(f"{case.recording}: the recording has no line and no moving position or command, so "
                              f"the feed drives cannot be diagnosed (its columns are {recording.channels}); {hint}"
                              f"{near_miss_hint(recording.channels, SPEC_COLUMNS)}")
-    if do_cut and needs_force_clock(recording):
-        # a dynamometer on its own clock (forces only): aligned by its cutting load, the twin's path added
+    if do_cut and (needs_force_clock(recording) or not measures_positions(_position_rows(_cnc_rows(recording)))):
+        # a dynamometer on its own clock (forces only), or forces with the controller's line or commands but no
+        # actual position: aligned by its cutting load, the twin's path added
         say("aligning the dynamometer's clock by the cutting load")
+        alone = needs_force_clock(recording)
         only = force_only_recording(case_m, recording, base_machine)
         recording, clock = only.recording, (only.offset, only.method)
-        notes.append("forces only (no line, no moving position): the tool path, spindle speed and lines are the "
-                     "twin's run with cutting at t - offset, not measured")
+        notes.append(("forces only (no line, no moving position)" if alone else
+                      "forces without a measured actual position (x_mm, y_mm, z_mm): the recorded line and commands "
+                      "are not used, and")
+                     + " the tool path, spindle speed and lines are the twin's run with cutting at t - offset, not "
+                       "measured")
         if drives:
-            notes.append("drive diagnosis skipped: no measured position, command or current of the feed drives")
+            notes.append("drive diagnosis skipped: no measured position of the feed drives" if not alone else
+                         "drive diagnosis skipped: no measured position, command or current of the feed drives")
         drives = False
     say("aligning the recording with the twin")
     forces = recorded_forces(recording)
-    drive_rec = _cnc_rows(recording) if do_cut else recording
+    drive_rec = _position_rows(_cnc_rows(recording) if do_cut else recording)
     prep = prepare(case, drive_rec, base_machine, axes, disturbance=forces, clock=clock)
     log: list[str] = [f"time offset: {prep.offset:.6f} s ({prep.offset_method})", *notes]
+    for a in prep.axes:  # a known column the drives do not use is said so (recording.md: never silently dropped)
+        ref = f"{a}_ref_mm"
+        if ref in drive_rec and not prep.ref_recorded[a] and np.isfinite(drive_rec[ref]).any():
+            log.append(f"{ref} is measured on {np.isfinite(drive_rec[ref]).mean():.0%} of the rows, half or fewer: "
+                       f"the twin's own commands drive the {a} servo, and {ref} is not compared")
     if prep.forces_source == "predicted":
         log.append("no fx_N/fy_N recorded: the replayed drives carry the twin's predicted cutting forces")
     elif prep.forces_source == "corrected":
@@ -603,6 +614,25 @@ def _revolution_s(nc: Recording) -> float:
     """One spindle revolution at the program's median running speed, s."""
     rpm = np.asarray(nc["spindle_rpm"], float)
     return 60.0 / float(np.median(rpm[rpm > 0])) if np.any(rpm > 0) else 0.01
+
+
+def _position_rows(recording: Recording) -> Recording:
+    """The rows with an actual position (``x_mm``, ``y_mm``, ``z_mm``) when each axis's fills half the rows or fewer.
+
+    recording.md lets any column be empty on any row: a controller that logs positions on 2 rows of 5 (its
+    currents on all) wrote a legal file, which the drive diagnosis (axes with a position on more than half
+    the rows) refused. Those rows are an unevenly sampled log of the drives. Unchanged otherwise.
+    """
+    names = [f"{a}_mm" for a in "xyz" if f"{a}_mm" in recording]
+    if not names:
+        return recording
+    measured = [np.isfinite(np.asarray(recording[c], float)) for c in names]
+    if any(m.mean() > 0.5 for m in measured):
+        return recording
+    keep = np.logical_or.reduce(measured)
+    if keep.sum() < MIN_SAMPLES:
+        return recording
+    return recording.take(keep)
 
 
 def _cnc_rows(recording: Recording) -> Recording:

@@ -20,7 +20,9 @@ if TYPE_CHECKING:
 def merge_cutting(d: "Diagnosis", cres: CuttingResult, case: Case) -> None:
     """Add the cutting effects, residuals, RMS, alignment and model to ``d`` (in place)."""
     d.cutting = cres
-    d.effects = d.effects + cres.effects
+    # diagnosis.md: "Effects are listed most certain first" across both halves (each half is ordered on its own:
+    # the drives by BIC, the cutting process with chatter first); stable, so equal confidences keep that order
+    d.effects = sorted(d.effects + cres.effects, key=lambda e: -float(e["confidence"]))
     d.unexplained = d.unexplained + cres.unexplained
     d.rms_before.update(cres.rms_before)
     d.rms_after.update(cres.rms_after)

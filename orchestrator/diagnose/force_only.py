@@ -65,6 +65,15 @@ def needs_force_clock(recording: Recording) -> bool:
     return not any(_moves(recording, f"{a}{s}") for a in "xyz" for s in ("_mm", "_ref_mm"))
 
 
+def measures_positions(recording: Recording) -> bool:
+    """True when an axis's actual position (``x_mm``, ``y_mm`` or ``z_mm``) is mostly measured and moves.
+
+    Without one the feed drives cannot be diagnosed (the following error is commanded minus actual position),
+    and a recording with forces is aligned by its cutting load like a dynamometer's, even when it has ``line``.
+    """
+    return any(_moves(recording, f"{a}_mm") for a in "xyz")
+
+
 def twin_loads_for_clock(twin: Recording, case: Case) -> dict[str, np.ndarray]:
     """The twin's cutting loads offered to the clock alignment [N]; the better fit of the recording is taken.
 

@@ -20,7 +20,7 @@ from .align import (
     consensus_bracket, fill_gaps, offset_bracket_from_lines, refine_offset, refine_offset_by_axes,
     time_offset_from_lines, time_offset_from_signal,
 )
-from ..identify.start_state import AxisStart, estimate_start, start_window
+from ..identify.start_state import LOG_POSITION_NOISE_M, AxisStart, estimate_start, start_window
 from .errors import DiagnosisError
 from .thrust_gate import thrust_bound
 
@@ -441,6 +441,11 @@ def prepare(case: Case, recording: Recording, machine: Machine, axes: list[str] 
         validate_recording(recording, case.program, nc_parameters=nck_parameters(machine))
     except RecordingError as exc:
         raise DiagnosisError(str(exc)) from None
+    wanted = axes or [a for a in "xyz" if _finite_fraction(recording, f"{a}_mm") > 0.5]
+    if not wanted:
+        raise DiagnosisError(f"{src}: no axis has its actual position ('x_mm', 'y_mm' or 'z_mm') in more than half "
+                             "of the rows; the feed-drive diagnosis compares the following error (commanded minus "
+                             f"actual position); the recording has {recording.channels}")
     nc = nc if nc is not None else twin_commands(case, machine)
     t = np.asarray(recording.t, dtype=float)
     # --- time offset: block transitions first (pure timing), else velocities
@@ -505,7 +510,6 @@ def prepare(case: Case, recording: Recording, machine: Machine, axes: list[str] 
                                {a: np.asarray(nc[f"{a}_ref_mm"], float) for a in with_ref}, offset)
         method += "; refined on the recorded commands"
     t_prog = t - offset
-    wanted = axes or [a for a in "xyz" if _finite_fraction(recording, f"{a}_mm") > 0.5]
     commands, recorded, fe, cur = {}, {}, {}, {}
     nc_diff, ref_off = {}, {}
     for a in wanted:
@@ -592,12 +596,15 @@ def starts(recording: Recording, axes: list[str], machine: Machine) -> dict[str,
     a log cut into a 500 mm/min move starts with the table on the command, 140 µm ahead of where the loop
     holds it, and catches up over several time constants.
     """
+    # at least a production log's finest position step as quantisation noise: the twin's own run logged from its
+    # start unevenly (1 ms pairs every 5 ms) fitted Z, at rest 1 ms before its rapid, with 0.17 um/s; started
+    # sliding, the replay named a Z pitch error and feed-forward
     t = np.asarray(recording.t, dtype=float)
     out = {}
     for a in axes:
         current = np.asarray(recording[f"{a}_tcmd_A"], dtype=float) if f"{a}_tcmd_A" in recording else None
         out[a] = estimate_start(t, np.asarray(recording[f"{a}_mm"], dtype=float) * 1e-3, current,
-                                start_window(machine, a))
+                                start_window(machine, a), min_noise=LOG_POSITION_NOISE_M)
     return out
 
 

@@ -64,7 +64,7 @@ from .errors import IdentificationError
 from .ga import paper_objective, run_ga_lockstep
 from .journal import Journal
 from .segments import SegmentSettings, find_segments
-from .start_state import AxisStart, estimate_start, start_window
+from .start_state import LOG_POSITION_NOISE_M, AxisStart, estimate_start, start_window
 
 _log = logging.getLogger(__name__)
 
@@ -109,12 +109,15 @@ def _starts(d: CaseData, axes: Sequence[str], machine: Machine) -> dict[str, Axi
 
     A log that starts while an axis moves is replayed from that state, not from rest: started at rest on the
     first sample of a log cut into a 500 mm/min plateau, the replay's catching up gave Svp 0.94 and Svi 0.68
-    for 0.8 and 1.0 (residual 3.5 µm, 0.20 A against 0.29 µm, 0.020 A for the whole log).
+    for 0.8 and 1.0 (residual 3.5 µm, 0.20 A against 0.29 µm, 0.020 A for the whole log). The fit takes a
+    production log's position noise at least (:data:`.start_state.LOG_POSITION_NOISE_M`): the twin's own run
+    logged in 1 ms pairs every 5 ms gave Z Svp 0.86 and Svi 4.7 from a start velocity of 0.17 um/s.
     """
     rec = d.recording
     t = np.asarray(rec.t, dtype=float)
     return {a: estimate_start(t, np.asarray(rec[f"{a}_mm"], dtype=float) * 1e-3,
-                              np.asarray(rec[f"{a}_tcmd_A"], dtype=float), start_window(machine, a))
+                              np.asarray(rec[f"{a}_tcmd_A"], dtype=float), start_window(machine, a),
+                              min_noise=LOG_POSITION_NOISE_M)
             for a in axes}
 
 

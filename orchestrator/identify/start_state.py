@@ -35,6 +35,10 @@ from ..machine import Machine
 SIGNIFICANCE = 3.0
 #: Least number of samples of the start fit (a quadratic needs 3; 2 more give its standard errors).
 MIN_SAMPLES = 5
+#: Least position noise of a start fit [m]: the quantisation noise q / sqrt(12) of the finest position step of a
+#: production log, q = 0.1 um (FANUC detection unit IS-C; the diagnosis's ``columns.POSITION_QUANTUM_UM``).
+#: Without it a noise-free file (the twin's own run, 12 digits) made nm of curvature a significant velocity.
+LOG_POSITION_NOISE_M = 0.1e-6 / math.sqrt(12.0)
 
 
 @dataclass(frozen=True)
@@ -116,7 +120,8 @@ def _quadratic(dt: np.ndarray, y: np.ndarray, sigma: float) -> tuple[np.ndarray,
     return coef * scale, err, fits
 
 
-def estimate_start(t: np.ndarray, actual: np.ndarray, current: np.ndarray | None, window: float) -> AxisStart:
+def estimate_start(t: np.ndarray, actual: np.ndarray, current: np.ndarray | None, window: float,
+                   min_noise: float = 0.0) -> AxisStart:
     """The motion of an axis at the first sample of a recording, from its first samples.
 
     Parameters
@@ -132,6 +137,9 @@ def estimate_start(t: np.ndarray, actual: np.ndarray, current: np.ndarray | None
         Longest fitted interval from the first sample, s (:func:`start_window`). It is halved, down to
         :data:`MIN_SAMPLES` samples, while a quadratic does not fit the positions or the current within their
         noise (estimated from the whole recording): a window that holds a break-away is not one motion.
+    min_noise : float
+        Least position noise [m] taken for the fit (default 0): a file without noise (the twin's own run, 12
+        digits) otherwise makes a nanometre of curvature at the start of a move a significant velocity.
 
     Returns
     -------
@@ -147,7 +155,7 @@ def estimate_start(t: np.ndarray, actual: np.ndarray, current: np.ndarray | None
     if tt.size < MIN_SAMPLES:
         return AxisStart(float(t[0]), float(xx[0]) if xx.size else float("nan"), 0.0, 0.0)
     t_ref = float(tt[0])
-    sx, sc = _noise(xx), _noise(cc)
+    sx, sc = max(_noise(xx), float(min_noise)), _noise(cc)
     n = max(int(np.searchsorted(tt, t_ref + window, side="right")), MIN_SAMPLES)
     while True:
         dt = tt[:n] - t_ref
