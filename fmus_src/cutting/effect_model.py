@@ -194,6 +194,43 @@ PACKED_ROWS = ("eccentricity", "phase", "tan_helix", "kte", "kre", "stiffness", 
 E_ECC, E_PHASE, E_TANH, E_KTE, E_KRE, E_STIFF, E_WEAR, E_DROOP, E_WN, E_ZETA, E_KC = range(11)
 
 
+def runout_reach(toff: np.ndarray, passes: np.ndarray) -> np.ndarray:
+    """How far beyond the nominal radius each tooth is tested for material, m, shape (B, nmax).
+
+    ``max(0, max_(i < passes) toff[m, j, i])``: for two flutes ``max(r_j - r_(j-1), 0)``, with
+    ``r_(j-1)`` the tooth that passed one pitch earlier (``toff[m, j, 0]``; the surface a
+    revolution back gives ``r_j - r_j = 0``).
+
+    Why this radius and not ``R + r_j``: the stock (Z-map, recent sweep; the path mode's table) stores
+    every sweep as the nominal disc of radius ``R``, while the surface tooth ``j`` meets was left by
+    tooth ``j - i - 1`` at ``R + r_(j-i-1)``. Against a nominal sweep the tip ``R + r_j`` stands
+    ``r_j - r_(j-i-1)`` further out than against that real surface, so the point to test in the
+    nominal stock is ``R + r_j - r_(j-i-1)``. Its largest value over the surfaces the chip looks at
+    (``passes``, one revolution with runout) makes every Kline-DeVor chip
+    ``min_i (c_i . u + r_j - r_(j-i-1)) > 0`` pass the material test (first order: a point
+    ``delta`` beyond the rim is outside the nominal sweep of a centre displaced by ``c`` when
+    ``c . u + delta > 0``); the chip minimum then decides the thickness. ``R + r_j`` (``e`` for two
+    flutes at phase 0, against ``2 e``) still drops the chips with ``-2 e < c_0 . u < -e``. A tooth
+    standing out by no more than any tooth of the last revolution (the shortest one, every tooth without
+    runout) keeps the nominal test (0: bit for bit the test without runout): it cuts nothing the
+    longer teeth did not leave. Walls older than a revolution are still tested at ``R + reach``
+    (see README, Corners of the path).
+
+    Parameters
+    ----------
+    toff : ndarray, shape (B, nmax, >= max(passes))
+        Runout chip offsets (:meth:`EffectParameters.runout_offsets`), m.
+    passes : ndarray of int, shape (B,)
+        Surfaces a tooth may cut (:meth:`EffectParameters.passes`).
+
+    Returns
+    -------
+    ndarray, shape (B, nmax)
+    """
+    used = np.arange(toff.shape[2])[None, None, :] < np.asarray(passes)[:, None, None]
+    return np.maximum(np.where(used, toff, 0.0).max(axis=2), 0.0)
+
+
 @njit
 def helix_bands(tan_helix: float, radius: float, pitch: float, steps: float, height: float) -> tuple[int, float]:
     """Axial bands of a helical flute: ``(count, band height [m])``.

@@ -295,6 +295,7 @@ def tooth_depth(
     phi: np.ndarray,
     radius: np.ndarray,
     active: np.ndarray | None = None,
+    reach: np.ndarray | None = None,
 ) -> np.ndarray:
     """Axial depth of cut of teeth, m (0 when the tooth is in air).
 
@@ -315,13 +316,17 @@ def tooth_depth(
     active : ndarray of bool, shape (M,), optional
         Only these queries are evaluated (the others get 0), e.g. teeth with a
         positive chip thickness; saves the near-field test where it cannot matter.
+    reach : ndarray, shape (M,), optional
+        Distance of the tested point from the tool axis, m; default ``radius``. A tooth that stands out
+        by runout is tested at its own reach (:func:`.kernel_effects.runout_reach`), while the recent
+        sweep it is tested against is the nominal disc of ``radius`` (as the Z-map stores it).
 
     Returns
     -------
     ndarray, shape (M,)
-        ``max(top - max(z_tip, z_min), 0)`` at the periphery point.
+        ``max(top - max(z_tip, z_min), 0)`` at the periphery point ``C + reach (sin phi, cos phi)``.
     """
-    px, py = periphery_points(centre[:, 0], centre[:, 1], radius, phi)
+    px, py = periphery_points(centre[:, 0], centre[:, 1], radius if reach is None else reach, phi)
     top = stock.sample(member, px, py)
     bottom = np.maximum(centre[:, 2], stock.lower[member, 2])
     todo = top > bottom

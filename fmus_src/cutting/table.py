@@ -53,6 +53,10 @@ from .axial import AX_MRR, AX_THRUST, axial_cut
 from .stock import ZMapStock, sweep_cover_z
 from .zmap_numba import ZMapArrays, commit
 
+#: How far beyond the tool radius a path-mode table's runout ring tests the material, m
+#: (:meth:`EngagementTable.runout_ring`): a tooth standing out by up to this much (2-flute runout up to
+#: 12.5 um) meets every chip of the surfaces it cuts in the ring's material.
+RUNOUT_RING = 25e-6
 #: Tops closer than this are one interval, m.
 TOP_TOL = 1e-7
 #: Bisection halvings of the sample spacing when locating an interval boundary.
@@ -76,17 +80,17 @@ def zmap_top(heights: np.ndarray, x0: float, y0: float, dx: float, dy: float, px
 @njit
 def material_top(
     heights: np.ndarray, grid: np.ndarray, seg_a: np.ndarray, seg_b: np.ndarray, nseg: int,
-    tail: np.ndarray, cx: float, cy: float, cz: float, radius: float, bottom: float, phi: float,
+    tail: np.ndarray, cx: float, cy: float, cz: float, radius: float, bottom: float, phi: float, reach: float,
 ) -> float:
-    """Top of material at the periphery point of angle ``phi``, m (as :func:`.engagement.tooth_depth`).
+    """Top of material at the point ``reach`` from the axis at angle ``phi``, m (as :func:`.engagement.tooth_depth`).
 
     ``grid = (x0, y0, dx, dy)``; the near field is ``nseg`` segments
-    ``seg_a -> seg_b`` plus the open segment ``tail -> C``. Returns the Z-map
-    height where it is not above ``bottom`` (no material), otherwise the
-    minimum of the Z-map height and the near-field sweep.
+    ``seg_a -> seg_b`` plus the open segment ``tail -> C``, swept by the disc of ``radius``. Returns the
+    Z-map height where it is not above ``bottom`` (no material), otherwise the minimum of the Z-map height
+    and the near-field sweep. ``reach = radius``: the periphery point.
     """
-    px = cx + radius * math.sin(phi)
-    py = cy + radius * math.cos(phi)
+    px = cx + reach * math.sin(phi)
+    py = cy + reach * math.cos(phi)
     top = zmap_top(heights, grid[0], grid[1], grid[2], grid[3], px, py)
     if not top > bottom:
         return top
@@ -113,17 +117,18 @@ def _same(top_a: float, top_b: float, bottom: float) -> bool:
 def station_intervals(
     heights: np.ndarray, grid: np.ndarray, seg_a: np.ndarray, seg_b: np.ndarray, nseg: int, tail: np.ndarray,
     cx: float, cy: float, cz: float, radius: float, bottom: float, samples: int,
-    out_alpha: np.ndarray, out_beta: np.ndarray, out_top: np.ndarray,
+    out_alpha: np.ndarray, out_beta: np.ndarray, out_top: np.ndarray, reach: float,
 ) -> int:
     """Engagement intervals of one station (unsorted, unmerged); returns how many were written.
 
-    ``out_*`` must hold at least ``samples`` entries.
+    ``out_*`` must hold at least ``samples`` entries; the points tested lie ``reach`` from the axis
+    (:func:`material_top`).
     """
     step = TWO_PI / samples
     tops = np.empty(samples)
     any_in = False
     for m in range(samples):
-        tops[m] = material_top(heights, grid, seg_a, seg_b, nseg, tail, cx, cy, cz, radius, bottom, m * step)
+        tops[m] = material_top(heights, grid, seg_a, seg_b, nseg, tail, cx, cy, cz, radius, bottom, m * step, reach)
         if tops[m] > bottom:
             any_in = True
     if not any_in:
@@ -159,7 +164,7 @@ def station_intervals(
         ref = tops[prev]
         for _ in range(BISECTION_STEPS):
             mid = 0.5 * (lo + hi)
-            t_mid = material_top(heights, grid, seg_a, seg_b, nseg, tail, cx, cy, cz, radius, bottom, mid)
+            t_mid = material_top(heights, grid, seg_a, seg_b, nseg, tail, cx, cy, cz, radius, bottom, mid, reach)
             if _same(ref, t_mid, bottom):
                 lo = mid
             else:
@@ -225,6 +230,9 @@ class EngagementTable:
         Stock block, m.
     stock_cell : float
         Z-map cell edge of the reference pass, m.
+    ring : float
+        The intervals are those of the points ``radius + ring`` from the axis, m: 0 (the periphery), or a
+        runout ring (:meth:`runout_ring`).
     axial_area, axial_span : ndarray, shape (S,), optional
         The end edges' engagement per unit of descent (:mod:`.path_axial`): ``sum d dA / dz`` [m2] and
         ``sum d dA / r / dz`` [m] of the move from the previous station (0 where the path does not move
@@ -245,11 +253,35 @@ class EngagementTable:
     stock_cell: float
     axial_area: np.ndarray | None = None
     axial_span: np.ndarray | None = None
+    ring: float = 0.0
 
     def __post_init__(self) -> None:
         for name in ("axial_area", "axial_span"):
             if getattr(self, name) is None:
                 object.__setattr__(self, name, np.zeros(self.count.shape[0]))
+
+    def runout_ring(self) -> "EngagementTable":
+        """The engagement of the points :data:`RUNOUT_RING` beyond the radius at the same stations (built once).
+
+        A tooth that stands out by runout (:func:`.effect_model.runout_reach` > 0) is tested for material
+        there in the path mode (:func:`.path_effects.path_step_effects`): one more reference pass over the
+        same path, sweeps and stations, kept with this table (not saved by :meth:`save`).
+
+        Raises
+        ------
+        CuttingError
+            If the rebuilt stations do not match this table's.
+        """
+        built = self.__dict__.get("_runout_ring")
+        if built is None:
+            built = build_engagement_table(self.vertices, 2.0 * self.radius, self.stock_lower, self.stock_upper,
+                                           self.stock_cell, self.spacing, max_intervals=self.alpha.shape[1],
+                                           ring=RUNOUT_RING)
+            if built.count.shape != self.count.shape:
+                raise CuttingError(f"engagement table: the runout ring has {built.stations} stations against "
+                                   f"{self.stations}; expected the same stations")
+            object.__setattr__(self, "_runout_ring", built)
+        return built
 
     @property
     def length(self) -> float:
@@ -356,7 +388,7 @@ def _points_at(vertices: np.ndarray, vertex_s: np.ndarray, s: np.ndarray) -> np.
 
 def build_engagement_table(
     path: np.ndarray, tool_diameter: float, stock_lower: np.ndarray, stock_upper: np.ndarray, stock_cell: float,
-    spacing: float = 2e-5, angle_samples: int = 360, max_intervals: int = 8,
+    spacing: float = 2e-5, angle_samples: int = 360, max_intervals: int = 8, ring: float = 0.0,
 ) -> EngagementTable:
     """Reference pass: engagement intervals along ``path`` (see module docstring).
 
@@ -379,6 +411,10 @@ def build_engagement_table(
         Samples of the immersion angle per revolution before bisection.
     max_intervals : int
         Intervals kept per station.
+    ring : float
+        The intervals are those of the points ``radius + ring`` from the axis (the sweeps stay those of
+        ``radius``), m; ``> 0``: a runout ring (:meth:`EngagementTable.runout_ring`), without the end
+        edges' engagement (zeros).
 
     Returns
     -------
@@ -414,7 +450,7 @@ def build_engagement_table(
     grid = np.array([stock.lower[0, 0], stock.lower[0, 1], stock.dx[0], stock.dy[0]])
     solid = bool(stock.nx[0] > 0 and stock.ny[0] > 0)
     z_floor = float(lower[0, 2])
-    reach = radius + float(stock.rho[0])
+    reach = radius + ring + float(stock.rho[0])
 
     count = np.zeros(n_st + 1, dtype=np.int64)
     axial_area = np.zeros(n_st + 1)
@@ -438,13 +474,13 @@ def build_engagement_table(
             nf = swept.near_field()
             nseg = int(nf.valid[0].sum())
             k = station_intervals(heights, grid, nf.start[0], nf.end[0], nseg, nf.tail[0], c[0], c[1], c[2], radius,
-                                  max(c[2], z_floor), angle_samples, buf[0], buf[1], buf[2])
+                                  max(c[2], z_floor), angle_samples, buf[0], buf[1], buf[2], radius + ring)
             if k:
                 a, b, t = _merge(buf[0][:k], buf[1][:k], buf[2][:k], max_intervals)
                 count[i] = a.size
                 alpha[i, :a.size], beta[i, :a.size], top[i, :a.size] = a, b, t
             dz = centres[i - 1, 2] - c[2] if i > 0 else 0.0
-            if dz > 0.0:  # the end edges on the move from the previous station (unit Kt, ka, omega, h)
+            if dz > 0.0 and ring == 0.0:  # the end edges on the move from the previous station (unit Kt, ka, omega, h)
                 p = centres[i - 1]
                 axial_cut(stock.heights, zgrid, zcells, swept.points, swept.head, swept.count, 0, p[0], p[1], p[2],
                           c[0], c[1], c[2], radius, 1.0, 1.0, 1.0, 1.0, ax)
@@ -462,7 +498,7 @@ def build_engagement_table(
     return EngagementTable(
         vertices=vertices, vertex_s=vertex_s, spacing=ds, count=count, alpha=alpha, beta=beta, top=top,
         radius=radius, z_floor=z_floor, stock_lower=lower[0].copy(), stock_upper=upper[0].copy(),
-        stock_cell=float(stock_cell), axial_area=axial_area, axial_span=axial_span,
+        stock_cell=float(stock_cell), axial_area=axial_area, axial_span=axial_span, ring=float(ring),
     )
 
 
