@@ -171,7 +171,7 @@ class PathCuttingLoad(CuttingLoad):
         self._runout = self._eff.runout_offsets(flutes, int(flutes.max()))
         self._passes = self._eff.passes(flutes)
         # a tooth standing out by runout is tested for material in the table's runout ring (built once)
-        self._reach = runout_reach(self._runout, self._passes)
+        self._reach, _ = runout_reach(self._runout, self._passes, self._eff.radius_offsets(flutes, int(flutes.max())))
         self._ring = table.runout_ring() if np.any(self._reach > 0.0) else table
         self._epar = self._eff.packed()
         self._gap = 2.0 * math.pi / flutes / HISTORY_PER_PITCH

@@ -523,13 +523,13 @@ max_substeps
                                     if helix:
                                         fx, fy, _, _, _ = _force_helix_exact(
                                             edge - j * pitch + lag[b], flutes, pitch, tanh, radius, ia, ib, it, cm,
-                                            ra, rb, rt, cr, treach[m], bottom, ztip, back, dq, nf, toff[m], kt, ke, kte, kre, stiff,
-                                            cuts_forms, hlo, hhi, pint, htmp, hcuts, False)
+                                            ra, rb, rt, cr, treach[m], bottom, ztip, back, dq, nf, toff[m], kt, ke,
+                                            kte, kre, stiff, cuts_forms, hlo, hhi, pint, htmp, hcuts, False)
                                     else:
                                         fx, fy, _, _, _ = force_at_effects(
                                             edge - j * pitch + lag[b], flutes, pitch, nb, lag, z_lo, z_hi, ia, ib,
-                                            it, cm, ra, rb, rt, cr, treach[m], bottom, ztip, back, dq, nf, toff[m], kt, ke, kte, kre,
-                                            stiff, dsum, cuts_forms)
+                                            it, cm, ra, rb, rt, cr, treach[m], bottom, ztip, back, dq, nf, toff[m],
+                                            kt, ke, kte, kre, stiff, dsum, cuts_forms)
                                     peak = max(peak, math.sqrt(fx * fx + fy * fy))
                 for edge, hit in ((phi_k, at_start), (phi_k + span, at_end)):
                     if hit:
@@ -555,8 +555,8 @@ max_substeps
                 zt1 = z0 + f1 * ddz
                 if helix:
                     fx, fy, dm, hm, ne = _force_helix_exact(
-                        theta0 + om * h * f1, flutes, pitch, tanh, radius, ja, jb, jt, cj, rja, rjb, rjt, rcj, treach[m],
-                        max(zt1, z_floor), zt1,
+                        theta0 + om * h * f1, flutes, pitch, tanh, radius, ja, jb, jt, cj, rja, rjb, rjt, rcj,
+                        treach[m], max(zt1, z_floor), zt1,
                         back, dq, nf, toff[m], kt, ke, kte, kre, stiff, cuts_forms, hlo, hhi, pint, htmp, hcuts,
                         True)
                 else:

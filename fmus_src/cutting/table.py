@@ -53,9 +53,10 @@ from .axial import AX_MRR, AX_THRUST, axial_cut
 from .stock import ZMapStock, sweep_cover_z
 from .zmap_numba import ZMapArrays, commit
 
-#: How far beyond the tool radius a path-mode table's runout ring tests the material, m
-#: (:meth:`EngagementTable.runout_ring`): a tooth standing out by up to this much (2-flute runout up to
-#: 12.5 um) meets every chip of the surfaces it cuts in the ring's material.
+#: How far beyond the tool radius a path-mode table's runout ring tests the material against the tool's
+#: sweeps, m (:meth:`EngagementTable.runout_ring`; against the Z-map: half of it, the long tooth of a
+#: 2-flute cutter). A tooth standing out against the surfaces it cuts by up to this much (2-flute runout up to
+#: 12.5 um) meets all its chips in the ring's material.
 RUNOUT_RING = 25e-6
 #: Tops closer than this are one interval, m.
 TOP_TOL = 1e-7
@@ -81,19 +82,23 @@ def zmap_top(heights: np.ndarray, x0: float, y0: float, dx: float, dy: float, px
 def material_top(
     heights: np.ndarray, grid: np.ndarray, seg_a: np.ndarray, seg_b: np.ndarray, nseg: int,
     tail: np.ndarray, cx: float, cy: float, cz: float, radius: float, bottom: float, phi: float, reach: float,
+    reach_stock: float,
 ) -> float:
-    """Top of material at the point ``reach`` from the axis at angle ``phi``, m (as :func:`.engagement.tooth_depth`).
+    """Top of material at angle ``phi``, m (as :func:`.engagement.tooth_depth`).
 
     ``grid = (x0, y0, dx, dy)``; the near field is ``nseg`` segments
     ``seg_a -> seg_b`` plus the open segment ``tail -> C``, swept by the disc of ``radius``. Returns the
-    Z-map height where it is not above ``bottom`` (no material), otherwise the minimum of the Z-map height
-    and the near-field sweep. ``reach = radius``: the periphery point.
+    Z-map height at the point ``reach_stock`` from the axis where it is not above ``bottom`` (no
+    material), otherwise the minimum of that and the near-field sweep over the point ``reach`` from the
+    axis (both ``radius``: the periphery point).
     """
-    px = cx + reach * math.sin(phi)
-    py = cy + reach * math.cos(phi)
+    px = cx + reach_stock * math.sin(phi)
+    py = cy + reach_stock * math.cos(phi)
     top = zmap_top(heights, grid[0], grid[1], grid[2], grid[3], px, py)
     if not top > bottom:
         return top
+    px = cx + reach * math.sin(phi)
+    py = cy + reach * math.cos(phi)
     for k in range(nseg):
         z = sweep_cover_z(px, py, seg_a[k, 0], seg_a[k, 1], seg_a[k, 2], seg_b[k, 0], seg_b[k, 1], seg_b[k, 2],
                           radius, RIM_TOL)
@@ -117,18 +122,19 @@ def _same(top_a: float, top_b: float, bottom: float) -> bool:
 def station_intervals(
     heights: np.ndarray, grid: np.ndarray, seg_a: np.ndarray, seg_b: np.ndarray, nseg: int, tail: np.ndarray,
     cx: float, cy: float, cz: float, radius: float, bottom: float, samples: int,
-    out_alpha: np.ndarray, out_beta: np.ndarray, out_top: np.ndarray, reach: float,
+    out_alpha: np.ndarray, out_beta: np.ndarray, out_top: np.ndarray, reach: float, reach_stock: float,
 ) -> int:
     """Engagement intervals of one station (unsorted, unmerged); returns how many were written.
 
-    ``out_*`` must hold at least ``samples`` entries; the points tested lie ``reach`` from the axis
-    (:func:`material_top`).
+    ``out_*`` must hold at least ``samples`` entries; the points tested lie ``reach`` (the near field)
+    and ``reach_stock`` (the Z-map) from the axis (:func:`material_top`).
     """
     step = TWO_PI / samples
     tops = np.empty(samples)
     any_in = False
     for m in range(samples):
-        tops[m] = material_top(heights, grid, seg_a, seg_b, nseg, tail, cx, cy, cz, radius, bottom, m * step, reach)
+        tops[m] = material_top(heights, grid, seg_a, seg_b, nseg, tail, cx, cy, cz, radius, bottom, m * step, reach,
+                               reach_stock)
         if tops[m] > bottom:
             any_in = True
     if not any_in:
@@ -164,7 +170,8 @@ def station_intervals(
         ref = tops[prev]
         for _ in range(BISECTION_STEPS):
             mid = 0.5 * (lo + hi)
-            t_mid = material_top(heights, grid, seg_a, seg_b, nseg, tail, cx, cy, cz, radius, bottom, mid, reach)
+            t_mid = material_top(heights, grid, seg_a, seg_b, nseg, tail, cx, cy, cz, radius, bottom, mid, reach,
+                                 reach_stock)
             if _same(ref, t_mid, bottom):
                 lo = mid
             else:
@@ -231,8 +238,8 @@ class EngagementTable:
     stock_cell : float
         Z-map cell edge of the reference pass, m.
     ring : float
-        The intervals are those of the points ``radius + ring`` from the axis, m: 0 (the periphery), or a
-        runout ring (:meth:`runout_ring`).
+        The intervals are those of the points ``radius + ring`` from the axis against the near field's sweeps,
+        m: 0 (the periphery), or a runout ring (:meth:`runout_ring`; against the Z-map ``ring / 2``).
     axial_area, axial_span : ndarray, shape (S,), optional
         The end edges' engagement per unit of descent (:mod:`.path_axial`): ``sum d dA / dz`` [m2] and
         ``sum d dA / r / dz`` [m] of the move from the previous station (0 where the path does not move
@@ -276,7 +283,7 @@ class EngagementTable:
         if built is None:
             built = build_engagement_table(self.vertices, 2.0 * self.radius, self.stock_lower, self.stock_upper,
                                            self.stock_cell, self.spacing, max_intervals=self.alpha.shape[1],
-                                           ring=RUNOUT_RING)
+                                           ring=RUNOUT_RING, ring_stock=0.5 * RUNOUT_RING)
             if built.count.shape != self.count.shape:
                 raise CuttingError(f"engagement table: the runout ring has {built.stations} stations against "
                                    f"{self.stations}; expected the same stations")
@@ -389,6 +396,7 @@ def _points_at(vertices: np.ndarray, vertex_s: np.ndarray, s: np.ndarray) -> np.
 def build_engagement_table(
     path: np.ndarray, tool_diameter: float, stock_lower: np.ndarray, stock_upper: np.ndarray, stock_cell: float,
     spacing: float = 2e-5, angle_samples: int = 360, max_intervals: int = 8, ring: float = 0.0,
+    ring_stock: float = 0.0,
 ) -> EngagementTable:
     """Reference pass: engagement intervals along ``path`` (see module docstring).
 
@@ -411,10 +419,10 @@ def build_engagement_table(
         Samples of the immersion angle per revolution before bisection.
     max_intervals : int
         Intervals kept per station.
-    ring : float
-        The intervals are those of the points ``radius + ring`` from the axis (the sweeps stay those of
-        ``radius``), m; ``> 0``: a runout ring (:meth:`EngagementTable.runout_ring`), without the end
-        edges' engagement (zeros).
+    ring, ring_stock : float
+        The intervals are those of the points ``radius + ring`` from the axis against the near field's
+        sweeps (of ``radius``) and ``radius + ring_stock`` against the Z-map, m; ``ring > 0``: a runout ring
+        (:meth:`EngagementTable.runout_ring`), without the end edges' engagement (zeros).
 
     Returns
     -------
@@ -474,13 +482,14 @@ def build_engagement_table(
             nf = swept.near_field()
             nseg = int(nf.valid[0].sum())
             k = station_intervals(heights, grid, nf.start[0], nf.end[0], nseg, nf.tail[0], c[0], c[1], c[2], radius,
-                                  max(c[2], z_floor), angle_samples, buf[0], buf[1], buf[2], radius + ring)
+                                  max(c[2], z_floor), angle_samples, buf[0], buf[1], buf[2], radius + ring,
+                                  radius + ring_stock)
             if k:
                 a, b, t = _merge(buf[0][:k], buf[1][:k], buf[2][:k], max_intervals)
                 count[i] = a.size
                 alpha[i, :a.size], beta[i, :a.size], top[i, :a.size] = a, b, t
             dz = centres[i - 1, 2] - c[2] if i > 0 else 0.0
-            if dz > 0.0 and ring == 0.0:  # the end edges on the move from the previous station (unit Kt, ka, omega, h)
+            if dz > 0.0 and ring == 0.0:  # the end edges on the move from the previous station (unit Kt, ka, h, ...)
                 p = centres[i - 1]
                 axial_cut(stock.heights, zgrid, zcells, swept.points, swept.head, swept.count, 0, p[0], p[1], p[2],
                           c[0], c[1], c[2], radius, 1.0, 1.0, 1.0, 1.0, ax)
