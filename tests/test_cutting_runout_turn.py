@@ -15,7 +15,8 @@ force of a straight tooth is ``Kt a h sqrt(1 + Ke^2)`` (tangential and radial co
   modes; the material test at ``R + 2 e`` passes it). The README's force-only case showed the same:
   misfits of 13-25 N at single samples of the step-over corner.
 
-The path mode's runout ring (``RUNOUT_RING`` = 25 um beyond the radius) gives the same numbers here.
+The path mode tests the long tooth in its table's runout ring (25 um beyond the radius against the sweeps,
+12.5 um against the block; the Z-map mode at exactly 2 e and e): the same numbers here, away from the block's faces.
 """
 from __future__ import annotations
 
@@ -59,7 +60,7 @@ def _schedule() -> tuple[np.ndarray, np.ndarray, float, float, float]:
     t_turn = t_corner + TAU
     phi = _turn_angle()
     theta0 = phi - OMEGA * t_turn
-    # tooth 0 at 90 deg (mod 2 pi) two revolutions before the corner's... on the straight leg
+    # tooth 0 at 90 deg (mod 2 pi) on the straight leg, four revolutions before the turn sample
     t_straight = t_turn - (phi - 0.5 * math.pi) / OMEGA - 4 * 2 * TZ
     grid = np.arange(0.0, t_turn + 0.5 * H, H)
     t = np.unique(np.concatenate([grid, [t_straight, t_turn]]))
