@@ -169,6 +169,14 @@ class EffectParameters:
                 out[m, :n, i] = r - np.roll(r, -(i + 1))
         return out
 
+    def radius_offsets(self, flutes: np.ndarray, nmax: int) -> np.ndarray:
+        """Radius change ``r_j`` of each tooth from runout [m], shape (B, nmax) (0 beyond ``flutes``)."""
+        out = np.zeros((flutes.shape[0], nmax))
+        for m in np.flatnonzero(self.eccentricity != 0):
+            n = int(flutes[m])
+            out[m, :n] = runout_radius_offsets(n, float(self.eccentricity[m]), float(self.phase[m]))
+        return out
+
     def passes(self, flutes: np.ndarray) -> np.ndarray:
         """Surfaces each tooth may cut, shape (B,): 1 (the previous tooth's) unless runout or chatter.
 
@@ -192,6 +200,53 @@ class EffectParameters:
 PACKED_ROWS = ("eccentricity", "phase", "tan_helix", "kte", "kre", "stiffness", "wear_rate", "droop",
                "chatter_wn", "chatter_zeta", "chatter_k")
 E_ECC, E_PHASE, E_TANH, E_KTE, E_KRE, E_STIFF, E_WEAR, E_DROOP, E_WN, E_ZETA, E_KC = range(11)
+
+
+def runout_reach(toff: np.ndarray, passes: np.ndarray, radius_offsets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """How far beyond the nominal radius each tooth is tested for material, m, each shape (B, nmax).
+
+    Returns ``(sweep, stock)``: the point tested against the tool's own sweeps (the recent path; in the
+    Z-map mode the near field) lies ``R + sweep`` from the axis, the point tested against the stock (the
+    Z-map: the block's faces and the walls committed to it) ``R + stock``.
+
+    ``sweep = max(0, max_(i < passes) toff[m, j, i])``: for two flutes ``max(r_j - r_(j-1), 0)``, with
+    ``r_(j-1)`` the tooth that passed one pitch earlier (``toff[m, j, 0]``; the surface a revolution back
+    gives ``r_j - r_j = 0``). Why: the stock stores every sweep as the nominal disc of radius ``R``, while
+    the surface tooth ``j`` meets was left by tooth ``j - i - 1`` at ``R + r_(j-i-1)``. Against a nominal
+    sweep the tip ``R + r_j`` stands ``r_j - r_(j-i-1)`` further out than against that real surface, so the
+    point to test in the nominal sweep is ``R + r_j - r_(j-i-1)``. Its largest value over the surfaces the
+    chip looks at (``passes``: one revolution with runout) lets every Kline-DeVor chip
+    ``min_i (c_i . u + r_j - r_(j-i-1)) > 0`` pass the test (to first order a point ``delta`` beyond the rim
+    is outside the nominal sweep of a centre displaced by ``c`` when ``c . u + delta > 0``); the chip
+    minimum then decides the thickness. The tooth's own offset ``R + r_j`` would still drop the chips with
+    ``-2 e < c_0 . u < -e`` (two flutes, phase 0).
+
+    ``stock = max(r_j, 0)`` where ``sweep > 0``: the block's faces are not cut by any tooth, the tip
+    ``R + r_j`` meets them where it is (a cutter with runout enters the part ``e`` early).
+
+    A tooth standing out by no more than every tooth of the last revolution (the shortest one; every tooth
+    without runout) keeps the nominal test (0 and 0: bit for bit the test without runout): it cuts nothing
+    the longer teeth did not leave. Not modelled: a wall the tool left more than a revolution ago but still
+    in the recent path (a reversal, a tight corner) was cut by the long tooth at ``R + max r``, so the long
+    tooth meets it up to ``sweep`` early (walls committed to the Z-map: below its cell error).
+
+    Parameters
+    ----------
+    toff : ndarray, shape (B, nmax, >= max(passes))
+        Runout chip offsets (:meth:`EffectParameters.runout_offsets`), m.
+    passes : ndarray of int, shape (B,)
+        Surfaces a tooth may cut (:meth:`EffectParameters.passes`).
+    radius_offsets : ndarray, shape (B, nmax)
+        Each tooth's radius change ``r_j`` (:meth:`EffectParameters.radius_offsets`), m.
+
+    Returns
+    -------
+    sweep, stock : ndarray, shape (B, nmax)
+    """
+    used = np.arange(toff.shape[2])[None, None, :] < np.asarray(passes)[:, None, None]
+    sweep = np.maximum(np.where(used, toff, 0.0).max(axis=2), 0.0)
+    stock = np.where(sweep > 0.0, np.maximum(radius_offsets, 0.0), 0.0)
+    return sweep, stock
 
 
 @njit

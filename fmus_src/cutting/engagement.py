@@ -295,6 +295,8 @@ def tooth_depth(
     phi: np.ndarray,
     radius: np.ndarray,
     active: np.ndarray | None = None,
+    reach: np.ndarray | None = None,
+    reach_stock: np.ndarray | None = None,
 ) -> np.ndarray:
     """Axial depth of cut of teeth, m (0 when the tooth is in air).
 
@@ -315,14 +317,24 @@ def tooth_depth(
     active : ndarray of bool, shape (M,), optional
         Only these queries are evaluated (the others get 0), e.g. teeth with a
         positive chip thickness; saves the near-field test where it cannot matter.
+    reach, reach_stock : ndarray, shape (M,), optional
+        Distance from the tool axis of the point tested against the recent sweep (the nominal disc of
+        ``radius`` swept along the near field) and of the point tested against the Z-map, m; default
+        ``radius`` (the periphery point). A tooth that stands out by runout is tested beyond the radius
+        (:func:`.effect_model.runout_reach`).
 
     Returns
     -------
     ndarray, shape (M,)
-        ``max(top - max(z_tip, z_min), 0)`` at the periphery point.
+        ``max(top - max(z_tip, z_min), 0)``: ``top`` the Z-map at ``C + reach_stock (sin phi, cos phi)``,
+        lowered to the recent sweep's bottom over ``C + reach (sin phi, cos phi)``.
     """
-    px, py = periphery_points(centre[:, 0], centre[:, 1], radius, phi)
-    top = stock.sample(member, px, py)
+    px, py = periphery_points(centre[:, 0], centre[:, 1], radius if reach is None else reach, phi)
+    if reach_stock is None:
+        top = stock.sample(member, px, py)
+    else:
+        qx, qy = periphery_points(centre[:, 0], centre[:, 1], reach_stock, phi)
+        top = stock.sample(member, qx, qy)
     bottom = np.maximum(centre[:, 2], stock.lower[member, 2])
     todo = top > bottom
     if active is not None:

@@ -23,6 +23,11 @@ discretisation as :mod:`.kernel`; the differences:
   ``i + 1`` pitches of spindle angle ago, held at its substep-middle value
   over a substep) and ``alpha_j, beta_j`` the static deflection of tooth ``j``
   (:func:`.chip.deflection_factors`, with the tooth's engaged depth ``D_j``).
+* **Material** — a tooth that stands out by runout is tested for material
+  beyond ``R`` (:func:`.effect_model.runout_reach`: against the nominal
+  sweeps by the largest runout offset of the chip's surfaces, against the
+  Z-map by its own offset), the others at ``R``; the chip minimum then
+  decides (at a turn of the path the nominal test dropped chips of the long tooth).
 * **Means** — each piece of a substep is integrated exactly
   (:func:`.chip.add_piece`, zero crossings of the generalised chip located in
   closed form); the removal rate uses the geometric chip ``c . u`` (material
@@ -46,7 +51,7 @@ from ..jit_cache import guard_cache
 from . import chip, effect_model
 from .chip import add_piece, add_piece_point, build_forms, chip_now, deflection_factors, edge_force_on_tool, \
     effect_workspace, history_push, mode_advance, regenerative_displacements
-from .effect_model import HISTORY_PER_PITCH, MAX_PASSES, EffectParameters, EffectState, helix_bands
+from .effect_model import HISTORY_PER_PITCH, MAX_PASSES, EffectParameters, EffectState, helix_bands, runout_reach
 from .engagement import NearField, tooth_depth
 from .kernel import SECTION_ROUNDS, SECTIONS, StepResult, step_kinematics, substep_counts
 from .stock import ZMapStock
@@ -91,9 +96,14 @@ def band_layout(eff: EffectParameters, radius: np.ndarray, pitch: np.ndarray, st
 
 
 def _band_depth(stock: ZMapStock, near: NearField, member: np.ndarray, centre: np.ndarray, phi: np.ndarray,
-                radius: np.ndarray, z_lo: np.ndarray, z_hi: np.ndarray, active: np.ndarray) -> np.ndarray:
-    """Axial depth of material within the band ``[z_lo, z_hi)`` above the tool tip at each periphery point, m."""
-    raw = tooth_depth(stock, near, member, centre, phi, radius, active)
+                radius: np.ndarray, z_lo: np.ndarray, z_hi: np.ndarray, active: np.ndarray,
+                reach: np.ndarray, reach_stock: np.ndarray) -> np.ndarray:
+    """Axial depth of material within the band ``[z_lo, z_hi)`` above the tool tip at each periphery point, m.
+
+    The points are tested ``reach`` (the recent sweeps of ``radius``) and ``reach_stock`` (the Z-map) from
+    the axis (:func:`.effect_model.runout_reach` added to the radius).
+    """
+    raw = tooth_depth(stock, near, member, centre, phi, radius, active, reach, reach_stock)
     ztip = centre[:, 2]
     bottom = np.maximum(ztip, stock.lower[member, 2])
     d = np.minimum(raw + bottom - ztip, z_hi) - np.maximum(bottom - ztip, z_lo)
@@ -166,6 +176,10 @@ def cut_step_effects(
     ok = (et[None, :] < flutes[:, None]) & np.isfinite(z_lo[:, eb])  # (B, E)
     toff = eff.runout_offsets(flutes, nmax)  # (B, nmax, passes)
     off1 = np.maximum(toff[:, et, 0], 0.0)  # (B, E)
+    # a tooth that stands out by runout is tested for material at its own reach (runout_reach)
+    sweep, face = runout_reach(toff, eff.passes(flutes), eff.radius_offsets(flutes, nmax))
+    reach = np.where(sweep[:, et] > 0.0, R[:, None] + sweep[:, et], R[:, None])  # (B, E)
+    reach_stock = np.where(sweep[:, et] > 0.0, R[:, None] + face[:, et], R[:, None])
     chatter = eff.chatter_wn > 0
     # only points that can have a chip are looked at (any point with a tool mode)
     g = feed[:, 0, None, None] * np.sin(phi) + feed[:, 1, None, None] * np.cos(phi)
@@ -176,7 +190,10 @@ def cut_step_effects(
     lo_f = np.broadcast_to(z_lo[:, eb][:, None, :], shape).ravel()
     hi_f = np.broadcast_to(z_hi[:, eb][:, None, :], shape).ravel()
     active = (np.broadcast_to(ok[:, None, :], shape) & may_cut & inst_ok[:, :, None]).ravel()
-    depth = _band_depth(stock, near, rows[member], c_flat, phi.ravel(), R[member], lo_f, hi_f, active).reshape(shape)
+    reach_f = np.broadcast_to(reach[:, None, :], shape).ravel()
+    reach_sf = np.broadcast_to(reach_stock[:, None, :], shape).ravel()
+    depth = _band_depth(stock, near, rows[member], c_flat, phi.ravel(), R[member], lo_f, hi_f, active,
+                        reach_f, reach_sf).reshape(shape)
 
     inside = depth > 0.0
     change = (inside[:, :-1] ^ inside[:, 1:]) & sub_ok
@@ -198,7 +215,8 @@ def cut_step_effects(
             e_try = _band_depth(stock, near, rows[m_try], c_try.reshape(-1, 3), phi_try.ravel(), R[m_try],
                                 np.broadcast_to(z_lo[bb, eb[ee]][:, None], f.shape).ravel(),
                                 np.broadcast_to(z_hi[bb, eb[ee]][:, None], f.shape).ravel(),
-                                act).reshape(f.shape) > 0.0
+                                act, np.broadcast_to(reach[bb, ee][:, None], f.shape).ravel(),
+                                np.broadcast_to(reach_stock[bb, ee][:, None], f.shape).ravel()).reshape(f.shape) > 0.0
             flipped = e_try != e_lo[:, None]
             first = np.where(flipped.any(axis=1), flipped.argmax(axis=1), SECTIONS - 1)
             lo = lo + width * first / SECTIONS

@@ -40,7 +40,7 @@ import numpy as np
 from ..component import Variable
 from . import path_kernel as pk
 from .component import MAX_SUBSTEPS, CuttingError, CuttingLoad
-from .effect_model import HISTORY_PER_PITCH
+from .effect_model import HISTORY_PER_PITCH, runout_reach
 from .path_axial import path_axial
 from .path_effects import path_step_effects
 from .table import EngagementTable
@@ -199,6 +199,9 @@ class PathCuttingLoad(CuttingLoad):
         flutes = np.asarray(v["flutes"], dtype=np.int64)
         self._runout = self._eff.runout_offsets(flutes, int(flutes.max()))
         self._passes = self._eff.passes(flutes)
+        # a tooth standing out by runout is tested for material in the table's runout ring (built once)
+        self._reach, _ = runout_reach(self._runout, self._passes, self._eff.radius_offsets(flutes, int(flutes.max())))
+        self._ring = table.runout_ring() if np.any(self._reach > 0.0) else table
         self._epar = self._eff.packed()
         self._gap = 2.0 * math.pi / flutes / HISTORY_PER_PITCH
 
@@ -228,7 +231,8 @@ class PathCuttingLoad(CuttingLoad):
                 h, inp, par, self._st, self._out, self.values["engaged_teeth"], tb.vertices, tb.vertex_s,
                 tb.spacing, tb.count, tb.alpha, tb.beta, tb.top, tb.z_floor, float(tb.stock_upper[2]), self._margin,
                 self._tolerance, MAX_SUBSTEPS, coef, self._epar, self._runout, self._passes, es.mode, es.ht, es.hx,
-                es.hy, es.meta, es.angle, self._gap, self._status,
+                es.hy, es.meta, es.angle, self._gap, self._status, self._ring.count, self._ring.alpha,
+                self._ring.beta, self._ring.top, self._reach,
             )
         else:
             code = pk.path_step(

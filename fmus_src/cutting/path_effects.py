@@ -163,13 +163,15 @@ def _piece_force(kt: float, ke: float, kte: float, kre: float, scale: float, tmp
 @njit
 def _force_helix_exact(
     phi0: float, flutes: int, pitch: float, tanh: float, radius: float, ia: np.ndarray, ib: np.ndarray,
-    it: np.ndarray, cnt: int, bottom: float, ztip: float, back: np.ndarray, dq: np.ndarray, nf: int,
+    it: np.ndarray, cnt: int, ra: np.ndarray, rb: np.ndarray, rt: np.ndarray, rcnt: int, treach: np.ndarray,
+    bottom: float, ztip: float, back: np.ndarray, dq: np.ndarray, nf: int,
     toff: np.ndarray, kt: float, ke: float, kte: float, kre: float, stiff: float, forms: np.ndarray,
     lo: np.ndarray, hi: np.ndarray, pint: np.ndarray, tmp: np.ndarray, cuts: np.ndarray, detail: bool,
 ) -> tuple[float, float, float, float, int]:
     """Force on the tool at one instant (tooth 0 at ``phi0``) of helical flutes, exact over the axial depth.
 
-    Returns as :func:`force_at_effects`.
+    Returns as :func:`force_at_effects`; a flute ``j`` with ``treach[j] > 0`` is cut over the runout
+    ring's intervals ``ra, rb, rt, rcnt`` (see there).
 
     With ``phi(z) = phi_j - z tan(helix) / R`` (Altintas, *Manufacturing Automation*, ch. 2) the
     force of flute ``j`` is ``int dF(phi(z)) dz = R / |tan(helix)| int dF(phi) dphi`` over the
@@ -184,7 +186,7 @@ def _force_helix_exact(
     chip is the cut chip) and twice with a static deflection. With ``detail`` False only ``fx``, ``fy``
     are wanted (the peak search): the largest chip is not searched and returned as 0.
     """
-    if cnt == 0:
+    if cnt == 0 and rcnt == 0:
         return 0.0, 0.0, 0.0, 0.0, 0
     scale = radius / abs(tanh)
     rigid = not stiff > 0.0
@@ -194,7 +196,10 @@ def _force_helix_exact(
     dmax = 0.0
     n_in = 0
     for j in range(flutes):
-        np_ = _helix_pieces(_wrap(phi0 + j * pitch), tanh, radius, ia, ib, it, cnt, bottom, ztip, lo, hi)
+        if treach[j] > 0.0:
+            np_ = _helix_pieces(_wrap(phi0 + j * pitch), tanh, radius, ra, rb, rt, rcnt, bottom, ztip, lo, hi)
+        else:
+            np_ = _helix_pieces(_wrap(phi0 + j * pitch), tanh, radius, ia, ib, it, cnt, bottom, ztip, lo, hi)
         if np_ == 0:
             continue
         build_forms(forms, nf, back, dq, toff[j])
@@ -234,12 +239,16 @@ def _force_helix_exact(
 @njit
 def force_at_effects(
     phi0: float, flutes: int, pitch: float, nb: int, lag: np.ndarray, z_lo: np.ndarray, z_hi: np.ndarray,
-    ia: np.ndarray, ib: np.ndarray, it: np.ndarray, cnt: int, bottom: float, ztip: float, back: np.ndarray,
+    ia: np.ndarray, ib: np.ndarray, it: np.ndarray, cnt: int, ra: np.ndarray, rb: np.ndarray, rt: np.ndarray,
+    rcnt: int, treach: np.ndarray, bottom: float, ztip: float, back: np.ndarray,
     dq: np.ndarray, nf: int, toff: np.ndarray, kt: float, ke: float, kte: float, kre: float, stiff: float,
     dsum: np.ndarray, forms: np.ndarray,
 ) -> tuple[float, float, float, float, int]:
     """Force on the tool at one instant (tooth 0 at ``phi0``) with the effect terms, teeth cut in bands.
 
+    ``ia, ib, it, cnt`` are the engagement intervals at the radius, ``ra, rb, rt, rcnt`` those of the
+    runout ring (:meth:`.table.EngagementTable.runout_ring`): tooth ``j`` is tested for material in the
+    ring where ``treach[j] > 0`` (:func:`.effect_model.runout_reach`), and the chip minimum decides.
     ``back`` holds the tool-centre displacements over the last tooth periods
     (:func:`.chip.build_forms`), ``dq`` the regenerative displacements at that instant, ``toff`` the
     runout offsets (nmax, passes) of the member, ``forms`` is work space. Used
@@ -257,14 +266,17 @@ def force_at_effects(
     engaged : int
         Teeth with a band in material with a positive chip.
     """
-    if cnt == 0:
+    if cnt == 0 and rcnt == 0:
         return 0.0, 0.0, 0.0, 0.0, 0
     for j in range(flutes):
         dsum[j] = 0.0
         build_forms(forms, nf, back, dq, toff[j])
         for b in range(nb):
             phi = _wrap(phi0 + j * pitch - lag[b])
-            d = _band_depth(_top_at(phi, ia, ib, it, cnt), bottom, ztip, z_lo[b], z_hi[b])
+            if treach[j] > 0.0:
+                d = _band_depth(_top_at(phi, ra, rb, rt, rcnt), bottom, ztip, z_lo[b], z_hi[b])
+            else:
+                d = _band_depth(_top_at(phi, ia, ib, it, cnt), bottom, ztip, z_lo[b], z_hi[b])
             if d > 0.0 and chip_now(forms, nf, 1.0, 0.0, phi) > 0.0:
                 dsum[j] += d
     fx = 0.0
@@ -280,7 +292,10 @@ def force_at_effects(
         dj = 0.0
         for b in range(nb):
             phi = _wrap(phi0 + j * pitch - lag[b])
-            d = _band_depth(_top_at(phi, ia, ib, it, cnt), bottom, ztip, z_lo[b], z_hi[b])
+            if treach[j] > 0.0:
+                d = _band_depth(_top_at(phi, ra, rb, rt, rcnt), bottom, ztip, z_lo[b], z_hi[b])
+            else:
+                d = _band_depth(_top_at(phi, ia, ib, it, cnt), bottom, ztip, z_lo[b], z_hi[b])
             if not d > 0.0:
                 continue
             hc = chip_now(forms, nf, alpha, beta, phi)
@@ -304,6 +319,7 @@ def path_step_effects(
     top: np.ndarray, z_floor: float, stock_top: float, reach_margin: float, tolerance: float, max_substeps: int,
     coef: np.ndarray, epar: np.ndarray, toff: np.ndarray, passes: np.ndarray, mode: np.ndarray, ht: np.ndarray,
     hx: np.ndarray, hy: np.ndarray, meta: np.ndarray, angle: np.ndarray, gap: np.ndarray, status: np.ndarray,
+    rcount: np.ndarray, ralpha: np.ndarray, rbeta: np.ndarray, rtop: np.ndarray, treach: np.ndarray,
 ) -> int:
     """Advance every member by one step ``h`` with the effect terms; write outputs and state in place.
 
@@ -332,6 +348,12 @@ max_substeps
         History spacing, rad.
     status : ndarray of int64, shape (B,)
         Error kind of each member that fails in this step, as in :func:`.path_kernel.path_step`.
+    rcount, ralpha, rbeta, rtop
+        The runout ring's table arrays (:meth:`.table.EngagementTable.runout_ring`, the same stations), read
+        only for the teeth with ``treach > 0`` (any table of the same stations when there is none).
+    treach : ndarray, shape (B, nmax)
+        How far beyond the radius each tooth stands out (:func:`.effect_model.runout_reach`), m: a tooth
+        with ``treach > 0`` is tested for material in the runout ring, the others at the radius.
 
     Returns
     -------
@@ -340,6 +362,7 @@ max_substeps
     """
     batch = inp.shape[1]
     ia, ib, it, ja, jb, jt = interval_buffers(alpha.shape[1])
+    ra, rb, rt, rja, rjb, rjt = interval_buffers(ralpha.shape[1])
     acc, sub, tmp, cuts, forms, dq, dtooth, dsum = effect_workspace(toff.shape[1])
     cuts_forms = np.zeros((MAX_PASSES, 3))
     back = np.zeros((MAX_PASSES, 2))
@@ -401,6 +424,10 @@ max_substeps
         d_end = 0.0
         h_end = 0.0
         n_end = 0
+        ringed = False  # a tooth of this member is tested in the runout ring
+        for j in range(flutes):
+            if treach[m, j] > 0.0:
+                ringed = True
         any_material = False
         for k in range(n):
             f_mid = (k + 0.5) / n
@@ -408,13 +435,14 @@ max_substeps
             ztip = z0 + f_mid * ddz
             bottom = max(ztip, z_floor)
             cm = table_at(s_mid, ds, count, alpha, beta, top, ia, ib, it)
+            cr = table_at(s_mid, ds, rcount, ralpha, rbeta, rtop, ra, rb, rt) if ringed else 0
             if chat:
                 regenerative_displacements(dq, nf, ht, hx, hy, meta, m, angle[m] + span * (k + 0.5),
                                            qx + 0.5 * dt * vx, qy + 0.5 * dt * vy, pitch)
             sub[:] = 0.0
             at_start = False  # a helix band's piece starts at the substep's first instant
             at_end = False  # ... ends at its last instant
-            if cm > 0:
+            if cm > 0 or cr > 0:
                 any_material = True
                 phi_k = theta0 + om * h * k / n
                 # engaged depth per tooth (static deflection): deepest piece with a chip per band
@@ -422,24 +450,28 @@ max_substeps
                     dtooth[j] = 0.0
                     if not stiff > 0.0:
                         continue
+                    if treach[m, j] > 0.0:  # a tooth standing out by runout: tested in the runout ring
+                        xa, xb, xt, xc = ra, rb, rt, cr
+                    else:
+                        xa, xb, xt, xc = ia, ib, it, cm
                     build_forms(forms, nf, back, dq, toff[m, j])
                     for b in range(nb):
                         pa = _wrap(phi_k + j * pitch - lag[b])
                         if span < SHORT_SPAN:
                             pm = pa + 0.5 * span
-                            d = _band_depth(_top_at(pm, ia, ib, it, cm), bottom, ztip, z_lo[b], z_hi[b])
+                            d = _band_depth(_top_at(pm, xa, xb, xt, xc), bottom, ztip, z_lo[b], z_hi[b])
                             if d > 0.0 and chip_now(forms, nf, 1.0, 0.0, pm) > 0.0:
                                 dtooth[j] += d
                             continue
                         pb = pa + span
                         deepest = 0.0
-                        for q in range(cm):
-                            d = _band_depth(it[q], bottom, ztip, z_lo[b], z_hi[b])
+                        for q in range(xc):
+                            d = _band_depth(xt[q], bottom, ztip, z_lo[b], z_hi[b])
                             if not d > deepest:
                                 continue
                             for shift in (-TWO_PI, 0.0, TWO_PI):
-                                lo = max(pa, ia[q] + shift)
-                                hi = min(pb, ib[q] + shift)
+                                lo = max(pa, xa[q] + shift)
+                                hi = min(pb, xb[q] + shift)
                                 if not hi > lo:
                                     continue
                                 if chip_now(forms, nf, 1.0, 0.0, 0.5 * (lo + hi)) > 0.0:
@@ -448,11 +480,15 @@ max_substeps
                         dtooth[j] += deepest
                 for j in range(flutes):
                     al, be = deflection_factors(kt, ke, kre, dtooth[j], stiff)
+                    if treach[m, j] > 0.0:
+                        xa, xb, xt, xc = ra, rb, rt, cr
+                    else:
+                        xa, xb, xt, xc = ia, ib, it, cm
                     build_forms(forms, nf, back, dq, toff[m, j])
                     for b in range(nb):
                         if span < SHORT_SPAN:
                             pm = _wrap(phi_k + 0.5 * span + j * pitch - lag[b])
-                            d = _band_depth(_top_at(pm, ia, ib, it, cm), bottom, ztip, z_lo[b], z_hi[b])
+                            d = _band_depth(_top_at(pm, xa, xb, xt, xc), bottom, ztip, z_lo[b], z_hi[b])
                             if d > 0.0:
                                 sn = math.sin(pm)
                                 cs = math.cos(pm)
@@ -461,13 +497,13 @@ max_substeps
                             continue
                         pa = _wrap(phi_k + j * pitch - lag[b])
                         pb = pa + span
-                        for q in range(cm):
-                            d = _band_depth(it[q], bottom, ztip, z_lo[b], z_hi[b])
+                        for q in range(xc):
+                            d = _band_depth(xt[q], bottom, ztip, z_lo[b], z_hi[b])
                             if not d > 0.0:
                                 continue
                             for shift in (-TWO_PI, 0.0, TWO_PI):
-                                lo = max(pa, ia[q] + shift)
-                                hi = min(pb, ib[q] + shift)
+                                lo = max(pa, xa[q] + shift)
+                                hi = min(pb, xb[q] + shift)
                                 if not hi > lo:
                                     continue
                                 add_piece(kt, ke, kte, kre, d, forms, nf, al, be, fxt, fyt, lo, hi, radius, om,
@@ -487,18 +523,19 @@ max_substeps
                                     if helix:
                                         fx, fy, _, _, _ = _force_helix_exact(
                                             edge - j * pitch + lag[b], flutes, pitch, tanh, radius, ia, ib, it, cm,
-                                            bottom, ztip, back, dq, nf, toff[m], kt, ke, kte, kre, stiff,
-                                            cuts_forms, hlo, hhi, pint, htmp, hcuts, False)
+                                            ra, rb, rt, cr, treach[m], bottom, ztip, back, dq, nf, toff[m], kt, ke,
+                                            kte, kre, stiff, cuts_forms, hlo, hhi, pint, htmp, hcuts, False)
                                     else:
                                         fx, fy, _, _, _ = force_at_effects(
                                             edge - j * pitch + lag[b], flutes, pitch, nb, lag, z_lo, z_hi, ia, ib,
-                                            it, cm, bottom, ztip, back, dq, nf, toff[m], kt, ke, kte, kre,
-                                            stiff, dsum, cuts_forms)
+                                            it, cm, ra, rb, rt, cr, treach[m], bottom, ztip, back, dq, nf, toff[m],
+                                            kt, ke, kte, kre, stiff, dsum, cuts_forms)
                                     peak = max(peak, math.sqrt(fx * fx + fy * fy))
                 for edge, hit in ((phi_k, at_start), (phi_k + span, at_end)):
                     if hit:
                         fx, fy, _, _, _ = _force_helix_exact(
-                            edge, flutes, pitch, tanh, radius, ia, ib, it, cm, bottom, ztip, back, dq, nf, toff[m],
+                            edge, flutes, pitch, tanh, radius, ia, ib, it, cm, ra, rb, rt, cr, treach[m], bottom,
+                            ztip, back, dq, nf, toff[m],
                             kt, ke, kte, kre, stiff, cuts_forms, hlo, hhi, pint, htmp, hcuts, False)
                         peak = max(peak, math.sqrt(fx * fx + fy * fy))
             for i in range(4):
@@ -512,17 +549,20 @@ max_substeps
             # the instant t + (k + 1) h / n
             f1 = (k + 1.0) / n
             cj = table_at(s0 + f1 * (s1 - s0), ds, count, alpha, beta, top, ja, jb, jt)
-            if cj > 0:
+            rcj = table_at(s0 + f1 * (s1 - s0), ds, rcount, ralpha, rbeta, rtop, rja, rjb, rjt) if ringed else 0
+            if cj > 0 or rcj > 0:
                 any_material = True
                 zt1 = z0 + f1 * ddz
                 if helix:
                     fx, fy, dm, hm, ne = _force_helix_exact(
-                        theta0 + om * h * f1, flutes, pitch, tanh, radius, ja, jb, jt, cj, max(zt1, z_floor), zt1,
+                        theta0 + om * h * f1, flutes, pitch, tanh, radius, ja, jb, jt, cj, rja, rjb, rjt, rcj,
+                        treach[m], max(zt1, z_floor), zt1,
                         back, dq, nf, toff[m], kt, ke, kte, kre, stiff, cuts_forms, hlo, hhi, pint, htmp, hcuts,
                         True)
                 else:
                     fx, fy, dm, hm, ne = force_at_effects(
-                        theta0 + om * h * f1, flutes, pitch, nb, lag, z_lo, z_hi, ja, jb, jt, cj, max(zt1, z_floor),
+                        theta0 + om * h * f1, flutes, pitch, nb, lag, z_lo, z_hi, ja, jb, jt, cj, rja, rjb, rjt, rcj,
+                        treach[m], max(zt1, z_floor),
                         zt1, back, dq, nf, toff[m], kt, ke, kte, kre, stiff, dsum, cuts_forms)
             else:
                 fx, fy, dm, hm, ne = 0.0, 0.0, 0.0, 0.0, 0

@@ -97,20 +97,22 @@ def compiled_path_steps(
         (effects, 1), (comp._par, 1), (comp._st, 1), (comp._out, 1), (engaged, 0), (comp._epar, 1),
         (comp._runout, 0), (comp._passes, 0), (es.mode, 0), (es.ht, 0), (es.hx, 0), (es.hy, 0), (es.meta, 0),
         (es.angle, 0), (comp._gap, 0), (es.cutting_time, 0), (es.torque, 0),
-        (np.zeros(batch, dtype=np.int64), 0), (comp._ka, 0),
+        (np.zeros(batch, dtype=np.int64), 0), (comp._ka, 0), (comp._reach, 0),
     )
     shared = (tb.vertices, tb.vertex_s, tb.spacing, tb.count, tb.alpha, tb.beta, tb.top, tb.z_floor,
               float(tb.stock_upper[2]), comp._margin, comp._tolerance, MAX_SUBSTEPS)
     axial = np.ascontiguousarray(np.stack([tb.axial_area, tb.axial_span]), dtype=np.float64)
+    ring = comp._ring  # the runout ring's table (the table itself when no tooth stands out)
 
     def block(b0: int, b1: int) -> int:
         """Members ``b0 .. b1 - 1`` on copies of their columns, writing their columns of ``record``."""
         cols = [np.array(a[(slice(None),) * axis + (slice(b0, b1),)], order="C") for a, axis in members]
         (eff_b, par_b, st_b, out_b, eng_b, epar_b, toff_b, passes_b, mode_b, ht_b, hx_b, hy_b, meta_b, angle_b,
-         gap_b, ct_b, tq_b, status_b, ka_b) = cols
+         gap_b, ct_b, tq_b, status_b, ka_b, reach_b) = cols
         status, _ = replay_path(t, positions, step_omega, switches, eff_b, par_b, st_b, out_b, eng_b, *shared,
                                 epar_b, toff_b, passes_b, mode_b, ht_b, hx_b, hy_b, meta_b, angle_b, gap_b, ct_b,
-                                tq_b, status_b, record, b0, ka_b, axial)
+                                tq_b, status_b, record, b0, ka_b, axial, ring.count, ring.alpha, ring.beta,
+                                ring.top, reach_b)
         return int(status)
 
     ranges = member_blocks(batch)

@@ -60,6 +60,7 @@ def replay_path(
     epar: np.ndarray, toff: np.ndarray, passes: np.ndarray, mode: np.ndarray, ht: np.ndarray, hx: np.ndarray,
     hy: np.ndarray, meta: np.ndarray, angle: np.ndarray, gap: np.ndarray, cutting_time: np.ndarray,
     torque: np.ndarray, status: np.ndarray, record: np.ndarray, m0: int, ka: np.ndarray, axial: np.ndarray,
+    rcount: np.ndarray, ralpha: np.ndarray, rbeta: np.ndarray, rtop: np.ndarray, treach: np.ndarray,
 ) -> tuple[int, int]:
     """Steps ``t[k] -> t[k + 1]``, ``k = 0 .. n - 2``, of every member (see the module docstring).
 
@@ -100,6 +101,8 @@ def replay_path(
         End-edge thrust / tangential force ratio, 1.
     axial : ndarray, shape (2, S)
         The table's ``axial_area`` [m2] and ``axial_span`` [m] (:func:`.path_axial.path_axial`, after each step).
+    rcount, ralpha, rbeta, rtop, treach
+        The runout ring and each tooth's reach beyond the radius (:func:`.path_effects.path_step_effects`).
 
     Returns
     -------
@@ -144,7 +147,7 @@ def replay_path(
             code = path_step_effects(
                 h, inp, kpar, st, out, engaged, verts, vs, ds, count, alpha, beta, top, z_floor, stock_top,
                 reach_margin, tolerance, max_substeps, coef, epar, toff, passes, mode, ht, hx, hy, meta, angle, gap,
-                status)
+                status, rcount, ralpha, rbeta, rtop, treach)
         else:
             code = path_step(h, inp, kpar, st, out, engaged, verts, vs, ds, count, alpha, beta, top, z_floor,
                              reach_margin, tolerance, max_substeps, status)

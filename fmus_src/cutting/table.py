@@ -63,6 +63,11 @@ from .axial import AX_MRR, AX_THRUST, axial_cut
 from .stock import ZMapStock, sweep_cover_z
 from .zmap_numba import ZMapArrays, commit, flush
 
+#: How far beyond the tool radius a path-mode table's runout ring tests the material against the tool's
+#: sweeps, m (:meth:`EngagementTable.runout_ring`; against the Z-map: half of it, the long tooth of a
+#: 2-flute cutter). A tooth standing out against the surfaces it cuts by up to this much (2-flute runout up to
+#: 12.5 um) meets all its chips in the ring's material.
+RUNOUT_RING = 25e-6
 #: Tops closer than this are one interval, m.
 TOP_TOL = 1e-7
 #: Bisection halvings of the sample spacing when locating an interval boundary.
@@ -86,20 +91,24 @@ def zmap_top(heights: np.ndarray, x0: float, y0: float, dx: float, dy: float, px
 @njit
 def material_top(
     heights: np.ndarray, grid: np.ndarray, seg_a: np.ndarray, seg_b: np.ndarray, nseg: int,
-    tail: np.ndarray, cx: float, cy: float, cz: float, radius: float, bottom: float, phi: float,
+    tail: np.ndarray, cx: float, cy: float, cz: float, radius: float, bottom: float, phi: float, reach: float,
+    reach_stock: float,
 ) -> float:
-    """Top of material at the periphery point of angle ``phi``, m (as :func:`.engagement.tooth_depth`).
+    """Top of material at angle ``phi``, m (as :func:`.engagement.tooth_depth`).
 
     ``grid = (x0, y0, dx, dy)``; the near field is ``nseg`` segments
-    ``seg_a -> seg_b`` plus the open segment ``tail -> C``. Returns the Z-map
-    height where it is not above ``bottom`` (no material), otherwise the
-    minimum of the Z-map height and the near-field sweep.
+    ``seg_a -> seg_b`` plus the open segment ``tail -> C``, swept by the disc of ``radius``. Returns the
+    Z-map height at the point ``reach_stock`` from the axis where it is not above ``bottom`` (no
+    material), otherwise the minimum of that and the near-field sweep over the point ``reach`` from the
+    axis (both ``radius``: the periphery point).
     """
-    px = cx + radius * math.sin(phi)
-    py = cy + radius * math.cos(phi)
+    px = cx + reach_stock * math.sin(phi)
+    py = cy + reach_stock * math.cos(phi)
     top = zmap_top(heights, grid[0], grid[1], grid[2], grid[3], px, py)
     if not top > bottom:
         return top
+    px = cx + reach * math.sin(phi)
+    py = cy + reach * math.cos(phi)
     for k in range(nseg):
         z = sweep_cover_z(px, py, seg_a[k, 0], seg_a[k, 1], seg_a[k, 2], seg_b[k, 0], seg_b[k, 1], seg_b[k, 2],
                           radius, RIM_TOL)
@@ -123,17 +132,19 @@ def _same(top_a: float, top_b: float, bottom: float) -> bool:
 def station_intervals(
     heights: np.ndarray, grid: np.ndarray, seg_a: np.ndarray, seg_b: np.ndarray, nseg: int, tail: np.ndarray,
     cx: float, cy: float, cz: float, radius: float, bottom: float, samples: int,
-    out_alpha: np.ndarray, out_beta: np.ndarray, out_top: np.ndarray,
+    out_alpha: np.ndarray, out_beta: np.ndarray, out_top: np.ndarray, reach: float, reach_stock: float,
 ) -> int:
     """Engagement intervals of one station (unsorted, unmerged); returns how many were written.
 
-    ``out_*`` must hold at least ``samples`` entries.
+    ``out_*`` must hold at least ``samples`` entries; the points tested lie ``reach`` (the near field)
+    and ``reach_stock`` (the Z-map) from the axis (:func:`material_top`).
     """
     step = TWO_PI / samples
     tops = np.empty(samples)
     any_in = False
     for m in range(samples):
-        tops[m] = material_top(heights, grid, seg_a, seg_b, nseg, tail, cx, cy, cz, radius, bottom, m * step)
+        tops[m] = material_top(heights, grid, seg_a, seg_b, nseg, tail, cx, cy, cz, radius, bottom, m * step, reach,
+                               reach_stock)
         if tops[m] > bottom:
             any_in = True
     if not any_in:
@@ -169,7 +180,8 @@ def station_intervals(
         ref = tops[prev]
         for _ in range(BISECTION_STEPS):
             mid = 0.5 * (lo + hi)
-            t_mid = material_top(heights, grid, seg_a, seg_b, nseg, tail, cx, cy, cz, radius, bottom, mid)
+            t_mid = material_top(heights, grid, seg_a, seg_b, nseg, tail, cx, cy, cz, radius, bottom, mid, reach,
+                                 reach_stock)
             if _same(ref, t_mid, bottom):
                 lo = mid
             else:
@@ -236,6 +248,9 @@ class EngagementTable:
         Stock block, m.
     stock_cell : float
         Z-map cell edge of the reference pass, m.
+    ring : float
+        The intervals are those of the points ``radius + ring`` from the axis against the near field's sweeps,
+        m: 0 (the periphery), or a runout ring (:meth:`runout_ring`; against the Z-map ``ring / 2``).
     axial_area, axial_span : ndarray, shape (S,), optional
         The end edges' engagement per unit of descent (:mod:`.path_axial`): ``sum d dA / dz`` [m2] and
         ``sum d dA / r / dz`` [m] of the move from the previous station (0 where the path does not move
@@ -263,6 +278,7 @@ class EngagementTable:
     axial_span: np.ndarray | None = None
     cutter_radius: np.ndarray | None = None
     cutter_flutes: np.ndarray | None = None
+    ring: float = 0.0
 
     def __post_init__(self) -> None:
         for name in ("axial_area", "axial_span"):
@@ -289,6 +305,32 @@ class EngagementTable:
         for r, z in zip(self.cutter_radius.tolist(), self.cutter_flutes.tolist()):
             seen.setdefault((r, z), None)
         return list(seen)
+
+    def runout_ring(self) -> "EngagementTable":
+        """The engagement of the points :data:`RUNOUT_RING` beyond the radius at the same stations (built once).
+
+        A tooth that stands out by runout (:func:`.effect_model.runout_reach` > 0) is tested for material
+        there in the path mode (:func:`.path_effects.path_step_effects`): one more reference pass over the
+        same path, sweeps and stations, kept with this table (not saved by :meth:`save`).
+
+        Raises
+        ------
+        CuttingError
+            If the table has several cutters, or the rebuilt stations do not match this table's.
+        """
+        built = self.__dict__.get("_runout_ring")
+        if built is None:
+            if self.several_cutters:  # PathCuttingLoad refuses runout with several cutters before this
+                raise CuttingError("engagement table: a runout ring is built for one cutter; this table's stations "
+                                   f"have {len(self.cutters())} cutters")
+            built = build_engagement_table(self.vertices, 2.0 * self.radius, self.stock_lower, self.stock_upper,
+                                           self.stock_cell, self.spacing, max_intervals=self.alpha.shape[1],
+                                           ring=RUNOUT_RING, ring_stock=0.5 * RUNOUT_RING)
+            if built.count.shape != self.count.shape:
+                raise CuttingError(f"engagement table: the runout ring has {built.stations} stations against "
+                                   f"{self.stations}; expected the same stations")
+            object.__setattr__(self, "_runout_ring", built)
+        return built
 
     @property
     def length(self) -> float:
@@ -400,7 +442,8 @@ def _points_at(vertices: np.ndarray, vertex_s: np.ndarray, s: np.ndarray) -> np.
 
 def build_engagement_table(
     path: np.ndarray, tool_diameter: float, stock_lower: np.ndarray, stock_upper: np.ndarray, stock_cell: float,
-    spacing: float = 2e-5, angle_samples: int = 360, max_intervals: int = 8,
+    spacing: float = 2e-5, angle_samples: int = 360, max_intervals: int = 8, ring: float = 0.0,
+    ring_stock: float = 0.0,
     cutters: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> EngagementTable:
     """Reference pass: engagement intervals along ``path`` (see module docstring).
@@ -429,6 +472,10 @@ def build_engagement_table(
         table): a station is swept with the cutter of the path point that ends its segment, and the table
         keeps each station's radius and teeth. None (the default): ``tool_diameter`` everywhere and no
         per-station cutters.
+    ring, ring_stock : float
+        The intervals are those of the points ``radius + ring`` from the axis against the near field's
+        sweeps (of ``radius``) and ``radius + ring_stock`` against the Z-map, m; ``ring > 0``: a runout ring
+        (:meth:`EngagementTable.runout_ring`), without the end edges' engagement (zeros).
 
     Returns
     -------
@@ -472,7 +519,7 @@ def build_engagement_table(
     grid = np.array([stock.lower[0, 0], stock.lower[0, 1], stock.dx[0], stock.dy[0]])
     solid = bool(stock.nx[0] > 0 and stock.ny[0] > 0)
     z_floor = float(lower[0, 2])
-    reach = radius + float(stock.rho[0])
+    reach = radius + ring + float(stock.rho[0])
 
     count = np.zeros(n_st + 1, dtype=np.int64)
     axial_area = np.zeros(n_st + 1)
@@ -496,7 +543,7 @@ def build_engagement_table(
             radius = float(r_arr[0])
             swept.spacing = PATH_SPACING * r_arr
             swept.lag = r_arr + cell
-            reach = radius + float(stock.rho[0])
+            reach = radius + ring + float(stock.rho[0])
         near_block = solid and (
             lower[0, 0] - reach <= c[0] <= upper[0, 0] + reach and lower[0, 1] - reach <= c[1] <= upper[0, 1] + reach
             and c[2] < upper[0, 2]
@@ -505,13 +552,14 @@ def build_engagement_table(
             nf = swept.near_field()
             nseg = int(nf.valid[0].sum())
             k = station_intervals(heights, grid, nf.start[0], nf.end[0], nseg, nf.tail[0], c[0], c[1], c[2], radius,
-                                  max(c[2], z_floor), angle_samples, buf[0], buf[1], buf[2])
+                                  max(c[2], z_floor), angle_samples, buf[0], buf[1], buf[2], radius + ring,
+                                  radius + ring_stock)
             if k:
                 a, b, t = _merge(buf[0][:k], buf[1][:k], buf[2][:k], max_intervals)
                 count[i] = a.size
                 alpha[i, :a.size], beta[i, :a.size], top[i, :a.size] = a, b, t
             dz = centres[i - 1, 2] - c[2] if i > 0 else 0.0
-            if dz > 0.0:  # the end edges on the move from the previous station (unit Kt, ka, omega, h)
+            if dz > 0.0 and ring == 0.0:  # the end edges on the move from the previous station (unit Kt, ka, h, ...)
                 p = centres[i - 1]
                 axial_cut(stock.heights, zgrid, zcells, swept.points, swept.head, swept.count, 0, p[0], p[1], p[2],
                           c[0], c[1], c[2], radius, 1.0, 1.0, 1.0, 1.0, ax)
@@ -530,7 +578,7 @@ def build_engagement_table(
         vertices=vertices, vertex_s=vertex_s, spacing=ds, count=count, alpha=alpha, beta=beta, top=top,
         radius=table_radius, z_floor=z_floor, stock_lower=lower[0].copy(), stock_upper=upper[0].copy(),
         stock_cell=float(stock_cell), axial_area=axial_area, axial_span=axial_span, cutter_radius=cutter_radius,
-        cutter_flutes=cutter_flutes,
+        cutter_flutes=cutter_flutes, ring=float(ring),
     )
 
 
