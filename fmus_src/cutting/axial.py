@@ -58,15 +58,85 @@ AX_THRUST, AX_TORQUE, AX_MRR = range(3)
 _G_X, _G_Y, _G_Z, _G_DX, _G_DY = range(5)
 
 
-@njit
-def _top_before(heights: np.ndarray, grid: np.ndarray, cells: np.ndarray, points: np.ndarray, head: np.ndarray,
-                count: np.ndarray, m: int, px: float, py: float, tx: float, ty: float, tz: float, radius: float,
-                bottom: float) -> float:
-    """Top of material at ``(px, py)`` before the step, m (``bottom`` or below: no material there).
+#: Sector mid-angle ``(j + 1/2) 2 pi / SECTORS`` of the quadrature, rad, and its sine and cosine (the values
+#: ``math.sin`` / ``math.cos`` give, as the point loop computed them per point before; a table, not 2 x 256 calls).
+_DTH = 2.0 * math.pi / SECTORS
+_SIN = np.array([math.sin((j + 0.5) * _DTH) for j in range(SECTORS)])
+_COS = np.array([math.cos((j + 0.5) * _DTH) for j in range(SECTORS)])
+#: Columns of :func:`_near_segments`' rows: start and end of a path segment (x, y, z), then the box, in x and
+#: y, outside which its swept disc covers no point (:data:`_S_XLO` .. :data:`_S_YHI`), m.
+_S_AX, _S_AY, _S_AZ, _S_BX, _S_BY, _S_BZ, _S_XLO, _S_XHI, _S_YLO, _S_YHI = range(10)
+#: Relative margin of that box on the tool radius, 1: far above the rounding of :func:`.stock.sweep_cover_z`
+#: (about 1e-16 relative), so a point outside the box is provably not covered (the sweep would give ``inf``).
+_REACH_MARGIN = 1e-6
 
-    The Z-map height of stock row ``m``, lowered by the near field (the stored path segments of the ring
-    buffer, then the open segment from the last stored point to the tool at the step's start ``t``), as
-    :meth:`.engagement.NearField.height`.
+
+@njit
+def _add_segment(seg: np.ndarray, n: int, ax: float, ay: float, az: float, bx: float, by: float, bz: float,
+                 reach: float, xlo: float, xhi: float, ylo: float, yhi: float) -> int:
+    """Append segment A-B to ``seg`` (row ``n``) if its swept disc can reach the box ``xlo..xhi, ylo..yhi``, m.
+
+    ``reach`` is the tool radius with :data:`_REACH_MARGIN` (m). Returns the new row count.
+    """
+    sxlo = min(ax, bx) - reach
+    sxhi = max(ax, bx) + reach
+    sylo = min(ay, by) - reach
+    syhi = max(ay, by) + reach
+    if sxhi < xlo or sxlo > xhi or syhi < ylo or sylo > yhi:
+        return n
+    seg[n, _S_AX] = ax
+    seg[n, _S_AY] = ay
+    seg[n, _S_AZ] = az
+    seg[n, _S_BX] = bx
+    seg[n, _S_BY] = by
+    seg[n, _S_BZ] = bz
+    seg[n, _S_XLO] = sxlo
+    seg[n, _S_XHI] = sxhi
+    seg[n, _S_YLO] = sylo
+    seg[n, _S_YHI] = syhi
+    return n + 1
+
+
+@njit
+def _near_segments(points: np.ndarray, head: np.ndarray, count: np.ndarray, m: int, tx: float, ty: float,
+                   tz: float, radius: float, xlo: float, xhi: float, ylo: float, yhi: float,
+                   seg: np.ndarray) -> int:
+    """The near-field segments (:meth:`.engagement.NearField.height`) whose sweep can cover a point of the box.
+
+    The open segment from the last stored point to the tool at the step's start ``t`` first, then the stored
+    segments of the ring buffer in order (the order of a minimum does not change it). A segment is left out
+    when the box ``xlo..xhi, ylo..yhi`` (m) lies outside its XY bounding box grown by the tool radius (and
+    :data:`_REACH_MARGIN`): :func:`.stock.sweep_cover_z` gives ``inf`` (not covered) at every such point.
+
+    Returns
+    -------
+    int
+        Rows of ``seg`` filled (columns :data:`_S_AX` .. :data:`_S_YHI`).
+    """
+    reach = radius * (1.0 + _REACH_MARGIN)
+    cap = points.shape[1]
+    last = (head[m] + count[m] - 1) % cap
+    n = _add_segment(seg, 0, points[m, last, 0], points[m, last, 1], points[m, last, 2], tx, ty, tz, reach,
+                     xlo, xhi, ylo, yhi)
+    for i in range(count[m] - 1):
+        a = (head[m] + i) % cap
+        e = (head[m] + i + 1) % cap
+        n = _add_segment(seg, n, points[m, a, 0], points[m, a, 1], points[m, a, 2], points[m, e, 0],
+                         points[m, e, 1], points[m, e, 2], reach, xlo, xhi, ylo, yhi)
+    return n
+
+
+@njit
+def _top_before(heights: np.ndarray, grid: np.ndarray, cells: np.ndarray, seg: np.ndarray, n_seg: int, m: int,
+                px: float, py: float, radius: float, bottom: float) -> float:
+    """Top of material at ``(px, py)`` before the step, m, where it is above ``bottom``; else some value <= it.
+
+    The Z-map height of stock row ``m``, lowered by the near field (``seg[:n_seg]`` of :func:`_near_segments`:
+    the open segment to the tool at the step's start and the stored path segments), as
+    :meth:`.engagement.NearField.height`. The walk stops once the top is at or below ``bottom`` (the point
+    then removes nothing whatever the remaining segments give) and skips the segments whose box excludes the
+    point (they cover it nowhere): above ``bottom`` the value is the minimum over all of them, bit for bit.
+    ``-inf`` off the grid.
     """
     fx = math.floor((px - grid[m, _G_X]) / grid[m, _G_DX])
     fy = math.floor((py - grid[m, _G_Y]) / grid[m, _G_DY])
@@ -75,18 +145,28 @@ def _top_before(heights: np.ndarray, grid: np.ndarray, cells: np.ndarray, points
     top = np.float64(heights[m, int(fx), int(fy)])
     if not top > bottom:
         return top
-    cap = points.shape[1]
-    for i in range(count[m] - 1):
-        a = (head[m] + i) % cap
-        e = (head[m] + i + 1) % cap
-        z = sweep_cover_z(px, py, points[m, a, 0], points[m, a, 1], points[m, a, 2],
-                          points[m, e, 0], points[m, e, 1], points[m, e, 2], radius, RIM_TOL)
+    for k in range(n_seg):
+        if px < seg[k, _S_XLO] or px > seg[k, _S_XHI] or py < seg[k, _S_YLO] or py > seg[k, _S_YHI]:
+            continue
+        z = sweep_cover_z(px, py, seg[k, _S_AX], seg[k, _S_AY], seg[k, _S_AZ], seg[k, _S_BX], seg[k, _S_BY],
+                          seg[k, _S_BZ], radius, RIM_TOL)
         if z < top:
             top = z
-    last = (head[m] + count[m] - 1) % cap
-    z = sweep_cover_z(px, py, points[m, last, 0], points[m, last, 1], points[m, last, 2], tx, ty, tz, radius,
-                      RIM_TOL)
-    return min(top, z)
+            if not top > bottom:
+                return top
+    return top
+
+
+@njit
+def _disc_off_grid(grid: np.ndarray, cells: np.ndarray, m: int, x: float, y: float, radius: float) -> bool:
+    """The disc of ``radius`` around ``(x, y)`` (m) lies more than a cell outside stock row ``m``'s grid.
+
+    Then no quadrature point of :func:`axial_cut` falls on a cell (each is within ``radius`` of the centre).
+    """
+    gx, gy = grid[m, _G_X], grid[m, _G_Y]
+    dx, dy = grid[m, _G_DX], grid[m, _G_DY]
+    return (x + radius < gx - dx or y + radius < gy - dy or x - radius > gx + (cells[m, 0] + 1) * dx
+            or y - radius > gy + (cells[m, 1] + 1) * dy)
 
 
 @njit
@@ -125,6 +205,13 @@ def axial_cut(heights: np.ndarray, grid: np.ndarray, cells: np.ndarray, points: 
         ``AX_THRUST``: thrust on the tool along +z (the force on the workpiece is its negative), N;
         ``AX_TORQUE``: torque on the spindle, N.m; ``AX_MRR``: removal rate, m3/s. All 0 when the tool does
         not move down or its end disc meets no material.
+
+    Notes
+    -----
+    Exits that cannot change a sum (each point's ``d`` would be ``<= 0``): the tool not above the floor of
+    the stock (``z0 <= bottom``), the end disc more than a cell off the grid; per point, the near-field walk
+    stops once the top is at or below ``bottom`` and skips segments that cannot cover the point
+    (:func:`_top_before`). The results are those of the full quadrature bit for bit.
     """
     out[AX_THRUST] = 0.0
     out[AX_TORQUE] = 0.0
@@ -132,8 +219,15 @@ def axial_cut(heights: np.ndarray, grid: np.ndarray, cells: np.ndarray, points: 
     if not z1 < z0:
         return
     bottom = max(z1, grid[m, _G_Z])
+    if not z0 > bottom:  # d = min(top, z0) - bottom <= 0 at every point
+        return
+    if _disc_off_grid(grid, cells, m, x1, y1, radius):  # every point off the grid: top = -inf
+        return
+    seg = np.empty((points.shape[1], 10))  # count - 1 stored segments and the open one
+    n_seg = _near_segments(points, head, count, m, x0, y0, z0, radius, x1 - radius, x1 + radius, y1 - radius,
+                           y1 + radius, seg)
     dr = radius / RINGS
-    dth = 2.0 * math.pi / SECTORS
+    dth = _DTH
     r_old2 = radius * radius
     vol = 0.0  # sum d r dr dth, m3
     per_r = 0.0  # sum d dr dth, m2
@@ -141,14 +235,13 @@ def axial_cut(heights: np.ndarray, grid: np.ndarray, cells: np.ndarray, points: 
         r = (i + 0.5) * dr
         ring_per_r = 0.0  # sum of d over the ring's sectors, m
         for j in range(SECTORS):
-            a = (j + 0.5) * dth
-            px = x1 + r * math.sin(a)
-            py = y1 + r * math.cos(a)
+            px = x1 + r * _SIN[j]
+            py = y1 + r * _COS[j]
             ox = px - x0
             oy = py - y0
             if not ox * ox + oy * oy < r_old2:  # entered the disc sideways: the periphery's chip
                 continue
-            top = _top_before(heights, grid, cells, points, head, count, m, px, py, x0, y0, z0, radius, bottom)
+            top = _top_before(heights, grid, cells, seg, n_seg, m, px, py, radius, bottom)
             d = min(top, z0) - bottom
             if d > 0.0:
                 ring_per_r += d
@@ -195,5 +288,6 @@ def axial_cuts(heights: np.ndarray, grid: np.ndarray, cells: np.ndarray, points:
 
 
 # the cached kernels call stock.sweep_cover_z and hold constants of engagement and kernel: recompile on change
-for _kernel in (_top_before, axial_cut, stalled_plunge, axial_cuts):
+for _kernel in (_add_segment, _near_segments, _top_before, _disc_off_grid, axial_cut, stalled_plunge,
+                axial_cuts):
     guard_cache(_kernel, stock, engagement, kernel)
