@@ -412,7 +412,7 @@ class EngagementTable:
         lower = [get(f"stock_{a}_min") for a in "xyz"]
         upper = [get(f"stock_{a}_max") for a in "xyz"]
         return build_engagement_table(path, get("tool_diameter"), lower, upper, get("stock_cell"), spacing,
-                                      angle_samples, max_intervals, cutters)
+                                      angle_samples, max_intervals, cutters=cutters)
 
 
 def _clean_path(path: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -442,9 +442,8 @@ def _points_at(vertices: np.ndarray, vertex_s: np.ndarray, s: np.ndarray) -> np.
 
 def build_engagement_table(
     path: np.ndarray, tool_diameter: float, stock_lower: np.ndarray, stock_upper: np.ndarray, stock_cell: float,
-    spacing: float = 2e-5, angle_samples: int = 360, max_intervals: int = 8, ring: float = 0.0,
-    ring_stock: float = 0.0,
-    cutters: tuple[np.ndarray, np.ndarray] | None = None,
+    spacing: float = 2e-5, angle_samples: int = 360, max_intervals: int = 8, *, ring: float = 0.0,
+    ring_stock: float = 0.0, cutters: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> EngagementTable:
     """Reference pass: engagement intervals along ``path`` (see module docstring).
 
