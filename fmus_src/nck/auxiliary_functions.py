@@ -54,7 +54,8 @@ def auxiliary_blocks(st: ModalState, ms: MWords, vals: ValueWords, line: int, er
     """Append the :class:`ToolChange`, spindle and :class:`Coolant` blocks of ``line`` to ``out``.
 
     M6 on a machine with ``tool_change_spindle = "stop"`` appends a :class:`SpindleStop` first when the spindle
-    turns and a :class:`ToolChange` that waits for it at rest (see the module docstring). Raises the error of ``err`` for M6 with no tool selected.
+    turns and a :class:`ToolChange` that waits for it at rest (see the module docstring). Raises the error of
+    ``err`` for M6 with no tool selected.
     """
     if "tool change" in ms:
         if st.tool_selected is None:

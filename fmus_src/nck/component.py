@@ -130,9 +130,9 @@ def _variables() -> tuple[Variable, ...]:
                       "M6 first moves Z at rapid to the 1st (G28) or 2nd (G30) reference position Z; off: M6 is "
                       "tool_change_time alone", "String"))
     v.append(Variable("tool_change_spindle", p, "1", "stop",
-                      "M6 and the spindle: stop (M6 orients and stops a turning spindle first, the retract and "
-                      "tool_change_time follow it at rest, and it stays stopped until M3/M4) or keep (it turns on "
-                      "through the change)", "String"))
+                      "M6 and the spindle: stop (M6 stops a turning spindle with the retract, tool_change_time "
+                      "starts with it at rest, and it stays stopped until M3/M4) or keep (it turns on through the "
+                      "change)", "String"))
     v.append(Variable("block_delete", p, "1", False, "block delete switch: skip blocks starting with /", "Boolean"))
     for a in "xyz":
         v.append(Variable(f"{a}_stroke_check", p, "1", False,

@@ -23,8 +23,8 @@ kernel plans everything at setup, sampled at the interpolation period Ts:
    before the next block), spindle speed arrival before the next chain
    of feed blocks, ``tool_change_time`` for M6 (after the spindle has come
    to rest when the change waits for it, :attr:`ToolChange.at_rest`: the
-   first sample at which the sampled speed is exactly 0); a rapid after cutting feed
-   (also after a dwell or spindle command that follows it, as in G82 and
+   first sample at which the sampled speed is exactly 0); a rapid after
+   cutting feed (also after a dwell or spindle command that follows it, as in G82 and
    G86) waits until the servo following the feed's filtered reference is
    within ``in_position_width`` on every axis (:mod:`.servo_settle`,
    ``in_position_before_rapid``), so a drilling cycle reaches its hole

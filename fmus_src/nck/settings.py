@@ -48,7 +48,8 @@ DEFAULT_REFERENCE: Vec3 = (0.380, 0.225, 0.300)
 #: (G30 P2) reference position Z.
 TOOL_CHANGE_RETRACTS = ("off", "G28", "G30")
 #: Settings of the spindle at M6 (:func:`.auxiliary_functions.auxiliary_blocks`): "stop" (the tool-change macro
-#: orients and stops it, M19, and it stays stopped until M3/M4) or "keep" (it turns on through the change).
+#: stops it, M19, the change waits for it at rest, and it stays stopped until M3/M4) or "keep" (it turns on
+#: through the change).
 TOOL_CHANGE_SPINDLES = ("stop", "keep")
 #: Key of the external workpiece zero point offset in :attr:`InterpreterSettings.work_offsets` (FANUC "EXT",
 #: ``G10 L2 P0``): added to every work coordinate system.
@@ -132,9 +133,9 @@ class InterpreterSettings:
         M6 first moves Z at rapid to the 1st ("G28") or 2nd ("G30") reference position Z, as a VMC's tool-change
         macro does; "off" (default): M6 is the tool change time alone (:func:`.machine_moves.tool_change_retract`).
     tool_change_spindle : {"stop", "keep"}
-        "stop" (default): M6 first orients and stops a turning spindle as M19 does (the Z retract and the tool
-        change wait until it is at rest) and the spindle stays stopped until M3/M4; "keep": the spindle turns on
-        at its speed through the tool change (a macro that restarts it).
+        "stop" (default): M6 stops a turning spindle as M19 does, with the Z retract; the tool change starts when
+        the axes are in position and the spindle is at rest, and the spindle stays stopped until M3/M4; "keep":
+        the spindle turns on at its speed through the tool change (a macro that restarts it).
     machine_zero : Vec3
         Where machine zero sits in the axis frame (m): machine coordinates = axis frame - machine_zero. Default
         (0, 0, 0): machine coordinates are the axis frame. The default machine has its machine zero at the G28
