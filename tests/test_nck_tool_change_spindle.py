@@ -78,7 +78,7 @@ def test_default_machine_and_interpreter_stop_the_spindle():
     assert NCKernel(program_text="M30\n").values["tool_change_spindle"] == "stop"
 
 
-def test_m6_orients_first_then_changes_and_the_spindle_stays_stopped_until_m3(kernels):
+def test_m6_stops_first_then_changes_and_the_spindle_stays_stopped_until_m3(kernels):
     blocks = kernels["stop"].program_.blocks
     change = [i for i, b in enumerate(blocks) if isinstance(b, ToolChange)]
     # line 2: the spindle stands before the first M6, nothing to stop; line 8: stop, then the change at rest
@@ -134,7 +134,7 @@ def test_tool_wear_during_the_change_is_zero_and_t1_wears_the_hand_value_less(ke
                                                        rel=1e-3)
 
 
-def test_compiled_planner_equals_the_numpy_reference_bit_for_bit(kernels):
+def test_compiled_planner_equals_the_numpy_reference_bit_for_bit():
     from test_nck_plan_speed import assert_same
 
     rng = np.random.default_rng(11)
