@@ -29,7 +29,7 @@ from fmus_src.nck.cycles import BORING_SHIFTS
 from fmus_src.nck.decimal_input import DECIMAL_INPUTS
 from fmus_src.nck.m_aliases import ALIAS_TARGETS, alias_problem
 from fmus_src.nck.params import FILTER_KINDS, MIN_POSITION_GAIN
-from fmus_src.nck.settings import TOOL_CHANGE_RETRACTS
+from fmus_src.nck.settings import TOOL_CHANGE_RETRACTS, TOOL_CHANGE_SPINDLES
 from fmus_src.units import UnitError, split_unit_suffix, to_si
 
 from .errors import CncTwinError
@@ -77,7 +77,8 @@ SCHEMA: dict[str, set[str]] = {
         "reference_x_mm", "reference_y_mm", "reference_z_mm", "g73_retract_mm", "g83_clearance_mm",
         *(f"reference{n}_{a}_mm" for n in (2, 3, 4) for a in AXES),
         "rigid_tapping_time_constant_ms", "rigid_tapping_mode", "boring_shift", "decimal_point_input",
-        "tool_change_retract", *(f"machine_zero_{a}_mm" for a in AXES), "in_position_before_rapid",
+        "tool_change_retract", "tool_change_spindle", *(f"machine_zero_{a}_mm" for a in AXES),
+        "in_position_before_rapid",
     },
     "spindle": {"max_speed_rpm", "ramp_rpm_per_s", "speed_arrival_tolerance_percent", "power_kW"},
     "servo": {"position_loop_period_ms", "velocity_loop_period_ms"},
@@ -104,7 +105,8 @@ OPTIONAL_KEYS: dict[str, set[str]] = {
     "nck": {"reference_x_mm", "reference_y_mm", "reference_z_mm", "g73_retract_mm", "g83_clearance_mm",
             *(f"reference{n}_{a}_mm" for n in (2, 3, 4) for a in AXES),
             "rigid_tapping_time_constant_ms", "rigid_tapping_mode", "boring_shift", "decimal_point_input",
-            "tool_change_retract", *(f"machine_zero_{a}_mm" for a in AXES), "in_position_before_rapid"},
+            "tool_change_retract", "tool_change_spindle", *(f"machine_zero_{a}_mm" for a in AXES),
+            "in_position_before_rapid"},
     **{f"axis.{a}": set(STROKE_KEYS) for a in AXES},
 }
 #: Where machine zero sits in the twin's axis frame (mm), optional, all three or none: the axis frame is the work
@@ -140,6 +142,7 @@ TEXT_VALUES: dict[tuple[str, str], tuple[str, ...] | None] = {
     ("nck", "boring_shift"): tuple(sorted(BORING_SHIFTS)),
     ("nck", "decimal_point_input"): DECIMAL_INPUTS,
     ("nck", "tool_change_retract"): TOOL_CHANGE_RETRACTS,
+    ("nck", "tool_change_spindle"): TOOL_CHANGE_SPINDLES,
     ("nck", "in_position_before_rapid"): ("on", "off"),
 }
 #: Range of the numeric values (file units) that the components accept (any other key: any finite number),

@@ -91,7 +91,7 @@ def test_full_circle_with_ijk_and_planes():
 def test_spindle_tool_coolant_dwell_blocks():
     prog = "T3 M6\nS1200 M3\nM8\nG4 P1500\nG4 X0.5\nG4 P1.5\nS2000\nM4\nM5\nM9\nM2\n"
     b = interpret(prog).blocks
-    assert b[0] == ToolChange(1, 3)
+    assert b[0] == ToolChange(1, 3, at_rest=True)
     assert b[1] == SpindleSpeed(2, pytest.approx(1200 * 2 * math.pi / 60), 1, 2)
     assert b[2] == Coolant(3, True)
     assert [x.seconds for x in b[3:6]] == [pytest.approx(1.5), pytest.approx(0.5), pytest.approx(1.5)]

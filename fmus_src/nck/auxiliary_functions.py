@@ -9,6 +9,14 @@ Conventions
   orientation speed, well under the ramp-down time) is not modelled.
 * T selects a tool (0..:data:`.input_ranges.MAX_TOOL`), M6 changes to the selected one, after the Z retract to
   the tool-change position when the machine has one (:func:`.machine_moves.tool_change_retract`).
+* M6 and the spindle (:attr:`.settings.InterpreterSettings.tool_change_spindle`): with "stop" (the default) the
+  tool-change macro stops a turning spindle at the start of the M6 block (a :class:`SpindleStop`, M19 without
+  the orientation's fraction of a revolution), while Z goes to the tool-change position when the machine has a
+  retract (as ``G91 G28 Z0 M19``); the change itself (``tool_change_time``) starts when the axes are in position
+  and the spindle is at rest (:attr:`ToolChange.at_rest`: a drawbar cannot release a turning tool), also after an
+  M5 written before M6 whose ramp down is still running. The spindle stays stopped after M6 until M3/M4 (the S
+  word stays in effect), as RS274/NGC's "when the tool change is complete, the spindle will be stopped". With
+  "keep" the spindle turns on at its speed through the change (a macro that restarts it).
 * M7/M8 switch the coolant on, M9 off.
 * Order within a block: tool change, spindle, coolant (then the modes and the motion of the block).
 """
@@ -45,13 +53,19 @@ def auxiliary_blocks(st: ModalState, ms: MWords, vals: ValueWords, line: int, er
                      out: list[Block]) -> None:
     """Append the :class:`ToolChange`, spindle and :class:`Coolant` blocks of ``line`` to ``out``.
 
-    Raises the error of ``err`` for M6 with no tool selected.
+    M6 on a machine with ``tool_change_spindle = "stop"`` appends a :class:`SpindleStop` first when the spindle
+    turns and a :class:`ToolChange` that waits for it at rest (see the module docstring). Raises the error of
+    ``err`` for M6 with no tool selected.
     """
     if "tool change" in ms:
         if st.tool_selected is None:
             raise err("M6", "M6 with no tool selected", "a T word on this or an earlier block")
-        tool_change_retract(st, line, err, out)  # Z to the tool-change position first (machine setting)
-        out.append(ToolChange(line, st.tool_selected))
+        stop = st.settings.tool_change_spindle == "stop"
+        if stop and st.direction != 0:
+            st.direction = 0  # stopped with the retract (M19); stays stopped until M3/M4
+            out.append(SpindleStop(line))
+        tool_change_retract(st, line, err, out)  # Z to the tool-change position (machine setting)
+        out.append(ToolChange(line, st.tool_selected, at_rest=stop))
     if "spindle" in ms:
         code = ms["spindle"][0]
         if code in (5, 19):

@@ -184,10 +184,12 @@ class SpindleStop:
 
 @dataclass(frozen=True, slots=True)
 class ToolChange:
-    """M6 tool change to ``tool`` (the last T word)."""
+    """M6 tool change to ``tool`` (the last T word); ``at_rest``: the change starts when the spindle is at rest
+    (``tool_change_spindle = "stop"``, :mod:`.auxiliary_functions`)."""
 
     line: int
     tool: int
+    at_rest: bool = False
 
 
 @dataclass(frozen=True, slots=True)

@@ -36,7 +36,9 @@ from .overrides import apply_overrides
 from .params import NCParams
 from .planner import BatchPlan, Schedule, build_schedule, plan_batch
 from .sampling import read_plan
-from .settings import DEFAULT_REFERENCE, TOOL_CHANGE_RETRACTS, TWIN_OFFSET_REGISTERS, InterpreterSettings
+from .settings import (
+    DEFAULT_REFERENCE, TOOL_CHANGE_RETRACTS, TOOL_CHANGE_SPINDLES, TWIN_OFFSET_REGISTERS, InterpreterSettings,
+)
 from .source import read_program
 from .stroke import StrokeLimits, check_stroke
 
@@ -127,6 +129,10 @@ def _variables() -> tuple[Variable, ...]:
     v.append(Variable("tool_change_retract", p, "1", "off",
                       "M6 first moves Z at rapid to the 1st (G28) or 2nd (G30) reference position Z; off: M6 is "
                       "tool_change_time alone", "String"))
+    v.append(Variable("tool_change_spindle", p, "1", "stop",
+                      "M6 and the spindle: stop (M6 stops a turning spindle with the retract, tool_change_time "
+                      "starts with it at rest, and it stays stopped until M3/M4) or keep (it turns on through the "
+                      "change)", "String"))
     v.append(Variable("block_delete", p, "1", False, "block delete switch: skip blocks starting with /", "Boolean"))
     for a in "xyz":
         v.append(Variable(f"{a}_stroke_check", p, "1", False,
@@ -172,6 +178,14 @@ def _tool_change_retract(mode: str, name: str) -> str:
     """``tool_change_retract`` checked: "off", "G28" or "G30" (:func:`.machine_moves.tool_change_retract`)."""
     if mode not in TOOL_CHANGE_RETRACTS:
         raise NCParameterError(f"{name}.tool_change_retract must be one of {list(TOOL_CHANGE_RETRACTS)}, "
+                               f"got {mode!r}")
+    return mode
+
+
+def _tool_change_spindle(mode: str, name: str) -> str:
+    """``tool_change_spindle`` checked: "stop" or "keep" (:func:`.auxiliary_functions.auxiliary_blocks`)."""
+    if mode not in TOOL_CHANGE_SPINDLES:
+        raise NCParameterError(f"{name}.tool_change_spindle must be one of {list(TOOL_CHANGE_SPINDLES)}, "
                                f"got {mode!r}")
     return mode
 
@@ -324,6 +338,7 @@ class NCKernel(Component):
             m_codes=parse_m_codes(str(self.values["m_codes"]), f"{self.name}.m_codes"),
             decimal_input=_decimal_input(str(self.values["decimal_point_input"]), self.name),
             tool_change_retract=_tool_change_retract(str(self.values["tool_change_retract"]), self.name),
+            tool_change_spindle=_tool_change_spindle(str(self.values["tool_change_spindle"]), self.name),
             machine_zero=self._machine_zero(),
         )
         for n in (1, 2, 3, 4):

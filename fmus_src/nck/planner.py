@@ -21,8 +21,10 @@ kernel plans everything at setup, sampled at the interpolation period Ts:
    tool change, M0 and program end and after a chain that ends in an exact
    stop (FANUC G61/G9: deceleration to rest, then the in-position check
    before the next block), spindle speed arrival before the next chain
-   of feed blocks, ``tool_change_time`` for M6; a rapid after cutting feed
-   (also after a dwell or spindle command that follows it, as in G82 and
+   of feed blocks, ``tool_change_time`` for M6 (after the spindle has come
+   to rest when the change waits for it, :attr:`ToolChange.at_rest`: the
+   first sample at which the sampled speed is exactly 0); a rapid after
+   cutting feed (also after a dwell or spindle command that follows it, as in G82 and
    G86) waits until the servo following the feed's filtered reference is
    within ``in_position_width`` on every axis (:mod:`.servo_settle`,
    ``in_position_before_rapid``), so a drilling cycle reaches its hole
@@ -463,6 +465,16 @@ def plan_member(schedule: Schedule, params: NCParams, feeds: np.ndarray, speeds:
         k_e, w_e, cmd = sp_last
         return float(speed_after(w_e, cmd, params.spindle_ramp, (k_now - k_e) * ts))
 
+    def spindle_at_rest() -> int:
+        """First sample at which a spindle commanded to stop samples exactly 0 (the last sample otherwise)."""
+        k_e, w_e, cmd = sp_last
+        if cmd != 0.0 or w_e == 0.0:
+            return k_e
+        n = _ceil_periods(abs(w_e) / params.spindle_ramp, ts)
+        while params.spindle_ramp * (n * ts) < abs(w_e):  # as sample_spindle rounds: w + (-w) = 0 exactly
+            n += 1
+        return k_e + n
+
     for item in schedule.items:
         b = blocks[item.blocks[0]]
         _check_length(schedule, item, max(k, ready), params, feeds)
@@ -505,6 +517,8 @@ def plan_member(schedule: Schedule, params: NCParams, feeds: np.ndarray, speeds:
         elif item.kind == "tool":
             k = settled(k)
             line_cp.append((k, b.line))
+            if b.at_rest:  # type: ignore[union-attr]
+                k = max(k, spindle_at_rest())
             k += _ceil_periods(params.tool_change_time, ts)
             tool_cp.append((k, b.tool))  # type: ignore[union-attr]
         elif item.kind in ("spindle", "stop"):

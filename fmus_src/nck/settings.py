@@ -47,6 +47,10 @@ DEFAULT_REFERENCE: Vec3 = (0.380, 0.225, 0.300)
 #: Settings of the M6 Z retract (:func:`.machine_moves.tool_change_retract`): none, to the 1st (G28) or the 2nd
 #: (G30 P2) reference position Z.
 TOOL_CHANGE_RETRACTS = ("off", "G28", "G30")
+#: Settings of the spindle at M6 (:func:`.auxiliary_functions.auxiliary_blocks`): "stop" (the tool-change macro
+#: stops it, M19, the change waits for it at rest, and it stays stopped until M3/M4) or "keep" (it turns on
+#: through the change).
+TOOL_CHANGE_SPINDLES = ("stop", "keep")
 #: Key of the external workpiece zero point offset in :attr:`InterpreterSettings.work_offsets` (FANUC "EXT",
 #: ``G10 L2 P0``): added to every work coordinate system.
 EXTERNAL_OFFSET = 0
@@ -128,6 +132,10 @@ class InterpreterSettings:
     tool_change_retract : {"off", "G28", "G30"}
         M6 first moves Z at rapid to the 1st ("G28") or 2nd ("G30") reference position Z, as a VMC's tool-change
         macro does; "off" (default): M6 is the tool change time alone (:func:`.machine_moves.tool_change_retract`).
+    tool_change_spindle : {"stop", "keep"}
+        "stop" (default): M6 stops a turning spindle as M19 does, with the Z retract; the tool change starts when
+        the axes are in position and the spindle is at rest, and the spindle stays stopped until M3/M4; "keep":
+        the spindle turns on at its speed through the tool change (a macro that restarts it).
     machine_zero : Vec3
         Where machine zero sits in the axis frame (m): machine coordinates = axis frame - machine_zero. Default
         (0, 0, 0): machine coordinates are the axis frame. The default machine has its machine zero at the G28
@@ -147,6 +155,7 @@ class InterpreterSettings:
     m_codes: Mapping[int, tuple[int, ...]] = field(default_factory=dict)
     decimal_input: str = "calculator"
     tool_change_retract: str = "off"
+    tool_change_spindle: str = "stop"
     machine_zero: Vec3 = (0.0, 0.0, 0.0)
 
     def __post_init__(self) -> None:
@@ -157,6 +166,9 @@ class InterpreterSettings:
         if self.tool_change_retract not in TOOL_CHANGE_RETRACTS:
             raise NCParameterError(f"InterpreterSettings.tool_change_retract must be one of "
                                    f"{list(TOOL_CHANGE_RETRACTS)}, got {self.tool_change_retract!r}")
+        if self.tool_change_spindle not in TOOL_CHANGE_SPINDLES:
+            raise NCParameterError(f"InterpreterSettings.tool_change_spindle must be one of "
+                                   f"{list(TOOL_CHANGE_SPINDLES)}, got {self.tool_change_spindle!r}")
         if len(self.machine_zero) != 3 or not all(math.isfinite(v) for v in self.machine_zero):
             raise NCParameterError(f"InterpreterSettings.machine_zero must be 3 finite numbers (m), "
                                    f"got {self.machine_zero!r}")
