@@ -15,7 +15,9 @@ without calls or branches, which LLVM turns into SIMD:
 The three ``exp`` of a sliding member (start, end, friction output) are libm
 calls, each in a loop of its own over the members (numba vectorises ``exp`` only
 through Intel's SVML, which this llvmlite lacks); the arithmetic between them is
-vectorised. Every other member (break-away, reversal, large correction, failed
+vectorised. The friction output's ``exp`` is kept per member (``memo``) and is
+the next step's first one when its argument is the same (a member still
+sliding), so a sliding member costs two ``exp`` calls per step, not three. Every other member (break-away, reversal, large correction, failed
 member, ``|J h| > 0.2``, a step longer than one substep) is stepped afterwards
 by ``exponential_member`` itself, from its unchanged state.
 """
@@ -44,9 +46,17 @@ def _exp_row(a: np.ndarray, e: np.ndarray, n: int) -> None:
 
 
 @njit_rows
+def _exp_row_memo(a: np.ndarray, e: np.ndarray, n: int, memo: np.ndarray) -> None:
+    """``e[:n] = exp(a[:n])``, taking ``memo[1, b]`` where ``a[b] == memo[0, b]`` (``memo[1] = exp(memo[0])``)."""
+    for b in range(n):
+        x = a[b]
+        e[b] = memo[1, b] if x == memo[0, b] else math.exp(x)
+
+
+@njit_rows
 def exponential_rows(V: np.ndarray, base: int, params: np.ndarray, position: np.ndarray, velocity: np.ndarray,
                      direction: np.ndarray, h: float, max_step: np.ndarray, status: np.ndarray,
-                     work: np.ndarray) -> int:
+                     work: np.ndarray, memo: np.ndarray) -> int:
     """One drive step of every member on the compiled loop's value rows; ``exponential_member``'s results.
 
     Parameters
@@ -69,6 +79,10 @@ def exponential_rows(V: np.ndarray, base: int, params: np.ndarray, position: np.
         Written: each member's status (``OK`` = 0).
     work : ndarray, shape (>= ROWS_WORK, >= B)
         Work space.
+    memo : ndarray, shape (2, >= B)
+        Per member, an argument of ``exp`` and its value (NaN, NaN before the first call), kept from call to
+        call: the friction output's ``exp`` of a sliding member is the next step's first ``exp`` (same
+        velocity, direction and branch), so it is taken from here when the argument is the same.
 
     Returns
     -------
@@ -99,7 +113,7 @@ def exponential_rows(V: np.ndarray, base: int, params: np.ndarray, position: np.
             ivn = params[9, b]
             inv_vs = ivp if d > 0.0 else ivn
             arg[b] = -(d * velocity[b]) * inv_vs
-        _exp_row(arg, ex, B)
+        _exp_row_memo(arg, ex, B, memo)
         for b in range(B):  # the substep up to the end velocity
             force = cur[b] * params[0, b] - dist[b]
             inv_mass = params[1, b]
@@ -190,6 +204,8 @@ def exponential_rows(V: np.ndarray, base: int, params: np.ndarray, position: np.
                 mu_n = params[10, b]
                 mu = mu_p if pos_branch else mu_n
                 slide = mu * v + d * (fc + delta * ex[b])
+                memo[0, b] = arg[b]
+                memo[1, b] = ex[b]
                 stuck = min(max(force, -params[11, b]), params[6, b])
                 ff_out[b] = stuck if kind == 2.0 else slide
                 u_out[b] = cur[b] * params[0, b]
@@ -219,5 +235,5 @@ def exponential_rows(V: np.ndarray, base: int, params: np.ndarray, position: np.
     return first
 
 
-for _fn in (_exp_row, exponential_rows):
+for _fn in (_exp_row, _exp_row_memo, exponential_rows):
     guard_cache(_fn, exponential_numba, stick_slip, stick_slip_numba)

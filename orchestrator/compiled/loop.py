@@ -214,6 +214,7 @@ def run_chunk(
     intervals, acc, rot, rot_key = path_work(c_alpha.shape[1], max_flutes(c_par))
     cursor = np.zeros(V.shape[1], dtype=np.int64)
     d_work = np.empty((ROWS_WORK, V.shape[1]))
+    d_memo = np.full((drives[0].shape[0], 2, V.shape[1]), np.nan)
     comp_h = np.empty(comp_rate.shape[0])
     for c in range(comp_rate.shape[0]):
         comp_h[c] = h / comp_rate[c]
@@ -221,7 +222,7 @@ def run_chunk(
                       comp_kind, comp_index, comp_rate, comp_base, wire_ptr, wire_src, wire_dst, wire_factor,
                       check_rows, check_lo, check_hi, stop_rows, stopped_at, failed, probe_rows, probe_factor,
                       rec_t, rec, n_rec, real_ptr, real_rows, comp_failed, comp_has_failed, nck, mcu, drives, cut,
-                      zmap, stop_record, all_done_at, cursor, intervals, acc, rot, rot_key, comp_h, d_work)
+                      zmap, stop_record, all_done_at, cursor, intervals, acc, rot, rot_key, comp_h, d_work, d_memo)
 
 
 @njit_borrowed
@@ -237,7 +238,7 @@ def _run_chunk(
     real_ptr: np.ndarray, real_rows: np.ndarray, comp_failed: np.ndarray, comp_has_failed: np.ndarray,
     nck: tuple, mcu: tuple, drives: tuple, cut: tuple, zmap: tuple, stop_record: bool, all_done_at: np.ndarray,
     nck_cursor: np.ndarray, c_intervals: np.ndarray, c_acc: np.ndarray, c_rot: np.ndarray, c_rot_key: np.ndarray,
-    comp_h: np.ndarray, d_work: np.ndarray,
+    comp_h: np.ndarray, d_work: np.ndarray, d_memo: np.ndarray,
 ) -> tuple[int, int, int, int, int, int, int]:
     """:func:`run_chunk`'s loop, on the work space it allocates (compiled without reference counting).
 
@@ -253,6 +254,8 @@ def _run_chunk(
         Each component's step ``h / comp_rate[c]``, s.
     d_work : ndarray, shape (ROWS_WORK, B)
         Work space of :func:`fmus_src.servo.exponential_rows.exponential_rows`.
+    d_memo : ndarray, shape (n_drives, 2, B)
+        Its ``memo`` of each drive (NaN at the start of the chunk).
 
     Returns
     -------
@@ -351,7 +354,7 @@ def _run_chunk(
                     i = comp_index[c]
                     if d_integ[i] == INTEGRATOR_EXPONENTIAL and B >= ROWS_MIN_BATCH:  # members innermost
                         status = exponential_rows(V, base, d_params[i], d_pos[i], d_vel[i], d_dir[i], h_i, d_step[i],
-                                                  d_status[i], d_work)
+                                                  d_status[i], d_work, d_memo[i])
                     elif d_integ[i] == INTEGRATOR_EXPONENTIAL:  # exponential_kernel, member by member
                         status = OK
                         for b in range(B):
