@@ -1,8 +1,8 @@
 """``locate``'s bounding-box pruning returns what the full scan returns, bit for bit.
 
 The reference below is ``locate`` as it was before the pruning (every segment in the window projected), compiled
-by numba the same way (plain Python's ``** 2`` rounds differently in the last bit). Seeded random polylines (dense, sparse, with
-reversals and repeated vertices in Z) and points near and far from them, windows of every length.
+by numba the same way (the same loop in plain Python differs in the last bit of a distance). Seeded random polylines (dense,
+sparse, with reversals) and points near and far from them, windows of every length.
 """
 from __future__ import annotations
 

@@ -17,9 +17,12 @@ calls, each in a loop of its own over the members (numba vectorises ``exp`` only
 through Intel's SVML, which this llvmlite lacks); the arithmetic between them is
 vectorised. The friction output's ``exp`` is kept per member (``memo``) and is
 the next step's first one when its argument is the same (a member still
-sliding), so a sliding member costs two ``exp`` calls per step, not three. Every other member (break-away, reversal, large correction, failed
-member, ``|J h| > 0.2``, a step longer than one substep) is stepped afterwards
-by ``exponential_member`` itself, from its unchanged state.
+sliding), so a sliding member costs two ``exp`` calls per step, not three; a
+member at rest (argument 0: ``exp(+-0) = 1`` exactly, C99 Annex F) calls none.
+
+Every other member (break-away, reversal, large correction, failed member,
+``|J h| > 0.2``, a step longer than one substep) is stepped afterwards by
+``exponential_member`` itself, from its unchanged state.
 """
 from __future__ import annotations
 
@@ -40,9 +43,10 @@ ROWS_WORK = 7
 
 @njit_rows
 def _exp_row(a: np.ndarray, e: np.ndarray, n: int) -> None:
-    """``e[:n] = exp(a[:n])`` by libm's ``exp``, as the scalar kernels call it."""
+    """``e[:n] = exp(a[:n])`` by libm's ``exp``, as the scalar kernels call it (``exp(+-0) = 1``: not called)."""
     for b in range(n):
-        e[b] = math.exp(a[b])
+        x = a[b]
+        e[b] = 1.0 if x == 0.0 else math.exp(x)
 
 
 @njit_rows
@@ -50,7 +54,10 @@ def _exp_row_memo(a: np.ndarray, e: np.ndarray, n: int, memo: np.ndarray) -> Non
     """``e[:n] = exp(a[:n])``, taking ``memo[1, b]`` where ``a[b] == memo[0, b]`` (``memo[1] = exp(memo[0])``)."""
     for b in range(n):
         x = a[b]
-        e[b] = memo[1, b] if x == memo[0, b] else math.exp(x)
+        if x == memo[0, b]:
+            e[b] = memo[1, b]
+        else:
+            e[b] = 1.0 if x == 0.0 else math.exp(x)
 
 
 @njit_rows
