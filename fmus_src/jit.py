@@ -86,3 +86,14 @@ def njit_nogil(fn: F) -> F:
     functions it calls run without the GIL too.
     """
     return _compile(fn, nogil=True, _nrt=True)
+
+
+def njit_rows(fn: F) -> F:
+    """:func:`njit_borrowed` with ``error_model="numpy"``: for loops over batch members that LLVM should vectorise.
+
+    Under numba's default ``error_model="python"`` every float division checks its divisor and
+    raises ``ZeroDivisionError``; that branch keeps a member loop scalar. With the numpy error model a
+    division by zero gives ``inf`` or ``NaN`` instead. Use it only where no divisor can be zero (the
+    floating-point operations are otherwise unchanged: same IEEE results, member by member).
+    """
+    return _compile(fn, _nrt=False, error_model="numpy")

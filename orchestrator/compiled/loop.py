@@ -43,7 +43,10 @@ from fmus_src.jit_cache import guard_cache
 from fmus_src.nck import sampling
 from fmus_src.nck.sampling import find_run_from, read_run, sample_position
 from fmus_src.servo import control_numba, exponential_numba, stick_slip, stick_slip_numba
+from fmus_src.servo import control_rows, exponential_rows as exponential_rows_module
 from fmus_src.servo.control_numba import axis_alarm, axis_member
+from fmus_src.servo.control_rows import mcu_rows
+from fmus_src.servo.exponential_rows import ROWS_WORK, exponential_rows
 from fmus_src.servo.exponential_numba import exponential_member
 from fmus_src.servo.stick_slip_numba import OK, advance_kernel
 from fmus_src.cutting.path_axial import path_axial
@@ -57,6 +60,10 @@ INTEGRATOR_RK4, INTEGRATOR_EXPONENTIAL = 0, 1
 #: Events returned by :func:`run_chunk`: chunk end, stop condition, time limit, divergence check needed,
 #: component error (the whole batch), member failures reported by a kernel (after its call).
 EV_CHUNK, EV_STOP, EV_TIME, EV_CHECK, EV_FAIL = 0, 1, 2, 3, 5
+#: Smallest batch whose MCU and exponential drive steps run with the members innermost
+#: (:func:`fmus_src.servo.control_rows.mcu_rows`, :func:`fmus_src.servo.exponential_rows.exponential_rows`;
+#: same results, member by member, as the scalar per-member calls used below it).
+ROWS_MIN_BATCH = 2
 #: :func:`run_chunk`'s ``all_done_at`` when it returns at the stop condition itself (not written).
 NO_STOP_FLAGS = np.zeros(1, dtype=np.bool_)
 
@@ -209,6 +216,8 @@ def run_chunk(
     intervals, acc, rot, rot_key = path_work(c_alpha.shape[1], max(max_flutes(c_par),
                                                                    c_cflu.max() if c_cflu.shape[0] else 1))
     cursor = np.zeros(V.shape[1], dtype=np.int64)
+    d_work = np.empty((ROWS_WORK, V.shape[1]))
+    d_memo = np.full((drives[0].shape[0], 2, V.shape[1]), np.nan)
     comp_h = np.empty(comp_rate.shape[0])
     for c in range(comp_rate.shape[0]):
         comp_h[c] = h / comp_rate[c]
@@ -216,7 +225,7 @@ def run_chunk(
                       comp_kind, comp_index, comp_rate, comp_base, wire_ptr, wire_src, wire_dst, wire_factor,
                       check_rows, check_lo, check_hi, stop_rows, stopped_at, failed, probe_rows, probe_factor,
                       rec_t, rec, n_rec, real_ptr, real_rows, comp_failed, comp_has_failed, nck, mcu, drives, cut,
-                      zmap, stop_record, all_done_at, cursor, intervals, acc, rot, rot_key, comp_h)
+                      zmap, stop_record, all_done_at, cursor, intervals, acc, rot, rot_key, comp_h, d_work, d_memo)
 
 
 @njit_borrowed
@@ -232,7 +241,7 @@ def _run_chunk(
     real_ptr: np.ndarray, real_rows: np.ndarray, comp_failed: np.ndarray, comp_has_failed: np.ndarray,
     nck: tuple, mcu: tuple, drives: tuple, cut: tuple, zmap: tuple, stop_record: bool, all_done_at: np.ndarray,
     nck_cursor: np.ndarray, c_intervals: np.ndarray, c_acc: np.ndarray, c_rot: np.ndarray, c_rot_key: np.ndarray,
-    comp_h: np.ndarray,
+    comp_h: np.ndarray, d_work: np.ndarray, d_memo: np.ndarray,
 ) -> tuple[int, int, int, int, int, int, int]:
     """:func:`run_chunk`'s loop, on the work space it allocates (compiled without reference counting).
 
@@ -246,6 +255,10 @@ def _run_chunk(
         Work space of the path-mode cutting kernel (:func:`fmus_src.cutting.path_kernel.path_work`).
     comp_h : ndarray, shape (n_comp,)
         Each component's step ``h / comp_rate[c]``, s.
+    d_work : ndarray, shape (ROWS_WORK, B)
+        Work space of :func:`fmus_src.servo.exponential_rows.exponential_rows`.
+    d_memo : ndarray, shape (n_drives, 2, B)
+        Its ``memo`` of each drive (NaN at the start of the chunk).
 
     Returns
     -------
@@ -306,7 +319,14 @@ def _run_chunk(
                 kind = comp_kind[c]
                 base = comp_base[c]
                 h_i = comp_h[c]
-                if kind == KIND_MCU:  # mcu_kernel, member by member on scalars (same operations)
+                if kind == KIND_MCU and B >= ROWS_MIN_BATCH:  # mcu_kernel, members innermost (same operations)
+                    k0 = m_next[0]
+                    n_alarm = mcu_rows(k0, m_ticks, m_ratio, m_tp, m_tv, m_tp2, m_gains, m_state, V, base, m_width,
+                                       m_limits, m_alarm)
+                    m_next[0] = k0 + m_ticks
+                    if n_alarm > 0:
+                        return k, n_rec, EV_FAIL, c, n_alarm, j, item
+                elif kind == KIND_MCU:  # mcu_kernel, member by member on scalars (same operations)
                     k0 = m_next[0]
                     n_alarm = 0
                     for b in range(B):
@@ -335,7 +355,10 @@ def _run_chunk(
                         return k, n_rec, EV_FAIL, c, n_alarm, j, item
                 elif kind == KIND_DRIVE:
                     i = comp_index[c]
-                    if d_integ[i] == INTEGRATOR_EXPONENTIAL:  # exponential_kernel, member by member
+                    if d_integ[i] == INTEGRATOR_EXPONENTIAL and B >= ROWS_MIN_BATCH:  # members innermost
+                        status = exponential_rows(V, base, d_params[i], d_pos[i], d_vel[i], d_dir[i], h_i, d_step[i],
+                                                  d_status[i], d_work, d_memo[i])
+                    elif d_integ[i] == INTEGRATOR_EXPONENTIAL:  # exponential_kernel, member by member
                         status = OK
                         for b in range(B):
                             u, x, v, dd, ff, code = exponential_member(
@@ -440,6 +463,7 @@ def sample(t: float, V: np.ndarray, probe_rows: np.ndarray, probe_factor: np.nda
 
 # the cached loop links the kernels' code: recompile it when any of their modules changes
 for _fn in (run_chunk, _run_chunk):
-    guard_cache(_fn, control_numba, stick_slip, stick_slip_numba, exponential_numba, path_kernel, cutting_kernel,
+    guard_cache(_fn, control_numba, control_rows, exponential_rows_module, stick_slip, stick_slip_numba,
+                exponential_numba, path_kernel, cutting_kernel,
                 sampling, zmap_numba, cutting_stock, cutting_engagement, cutting_axial, cutting_path_axial)
 guard_cache(_nck_step, sampling)
