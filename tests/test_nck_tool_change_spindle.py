@@ -23,23 +23,10 @@ from fmus_src.nck.errors import NCParameterError
 from orchestrator.cost import CostModel, production_cost
 from orchestrator.machine import MachineFileError, load_machine
 from orchestrator.twin import nck_parameters
+from tests.test_cutting_tool_table import PROGRAM as TWO_TOOL_PROGRAM
 
 RPM = 2.0 * math.pi / 60.0
-PROGRAM = """G21 G90 G17
-T1 M6
-S6000 M3
-G0 X-5. Y10. Z2.
-G1 Z-1. F300
-X17. F300
-G0 Z5.
-T2 M6
-S4000 M3
-G0 X-6. Y28. Z2.
-G1 Z-1. F300
-X18. F600
-G0 Z5.
-M30
-"""
+PROGRAM = TWO_TOOL_PROGRAM  # T1 slots at S6000, T2 M6, T2 slots at S4000
 RAMP_DOWN_S = 6000.0 / 4000.0
 CHANGE_S = 3.0
 ARRIVAL_STOP_S = 0.95 * 4000.0 / 4000.0  # 0 -> 4000 rpm within 5 %

@@ -30,7 +30,7 @@ import math
 
 import numpy as np
 
-from ..jit import njit_rows
+from ..jit import njit_inline, njit_rows
 from ..jit_cache import guard_cache
 from . import exponential_numba, stick_slip, stick_slip_numba
 from .exponential_numba import (EXPONENTIAL_MAX_STEP, EXPONENTIAL_VELOCITY_TOL, PHI_SERIES_LIMIT, _horner,
@@ -58,6 +58,25 @@ def _exp_row_memo(a: np.ndarray, e: np.ndarray, n: int, memo: np.ndarray) -> Non
             e[b] = memo[1, b]
         else:
             e[b] = 1.0 if x == 0.0 else math.exp(x)
+
+
+@njit_inline
+def _branch_friction(params: np.ndarray, b: int, positive: bool) -> tuple[float, float, float, float]:
+    """Member ``b``'s friction on its sliding branch: Coulomb force (N), Stribeck excess (N), 1/vs (s/m), viscous
+    coefficient (N.s/m); the positive-velocity columns of ``params`` when ``positive``, else the negative ones.
+
+    Both columns are loaded and one is selected (no branch), so the member loops stay vectorisable; inlined.
+    """
+    fc_p = params[2, b]
+    fc_n = params[7, b]
+    delta_p = params[3, b]
+    delta_n = params[8, b]
+    inv_vs_p = params[4, b]
+    inv_vs_n = params[9, b]
+    mu_p = params[5, b]
+    mu_n = params[10, b]
+    return (fc_p if positive else fc_n, delta_p if positive else delta_n, inv_vs_p if positive else inv_vs_n,
+            mu_p if positive else mu_n)
 
 
 @njit_rows
@@ -128,18 +147,7 @@ def exponential_rows(V: np.ndarray, base: int, params: np.ndarray, position: np.
             v = velocity[b]
             d = float(direction[b])
             pos_branch = d > 0.0
-            fc_p = params[2, b]
-            fc_n = params[7, b]
-            fc = fc_p if pos_branch else fc_n
-            delta_p = params[3, b]
-            delta_n = params[8, b]
-            delta = delta_p if pos_branch else delta_n
-            inv_vs_p = params[4, b]
-            inv_vs_n = params[9, b]
-            inv_vs = inv_vs_p if pos_branch else inv_vs_n
-            mu_p = params[5, b]
-            mu_n = params[10, b]
-            mu = mu_p if pos_branch else mu_n
+            fc, delta, inv_vs, mu = _branch_friction(params, b, pos_branch)
             e0 = delta * ex[b]
             f0 = (force - (mu * v + d * (fc + e0))) * inv_mass
             jac = (e0 * inv_vs - mu) * inv_mass
@@ -166,18 +174,7 @@ def exponential_rows(V: np.ndarray, base: int, params: np.ndarray, position: np.
             v = velocity[b]
             d = float(direction[b])
             pos_branch = d > 0.0
-            fc_p = params[2, b]
-            fc_n = params[7, b]
-            fc = fc_p if pos_branch else fc_n
-            delta_p = params[3, b]
-            delta_n = params[8, b]
-            delta = delta_p if pos_branch else delta_n
-            inv_vs_p = params[4, b]
-            inv_vs_n = params[9, b]
-            inv_vs = inv_vs_p if pos_branch else inv_vs_n
-            mu_p = params[5, b]
-            mu_n = params[10, b]
-            mu = mu_p if pos_branch else mu_n
+            fc, delta, inv_vs, mu = _branch_friction(params, b, pos_branch)
             v1 = v1s[b]
             e1 = delta * ex[b]
             rem = (force - (mu * v1 + d * (fc + e1))) * inv_mass - f0s[b] - jacs[b] * (v1 - v)
@@ -201,15 +198,7 @@ def exponential_rows(V: np.ndarray, base: int, params: np.ndarray, position: np.
                 v = v1s[b]
                 d = 0.0 if kind == 2.0 else float(direction[b])
                 pos_branch = d > 0.0
-                fc_p = params[2, b]
-                fc_n = params[7, b]
-                fc = fc_p if pos_branch else fc_n
-                delta_p = params[3, b]
-                delta_n = params[8, b]
-                delta = delta_p if pos_branch else delta_n
-                mu_p = params[5, b]
-                mu_n = params[10, b]
-                mu = mu_p if pos_branch else mu_n
+                fc, delta, _, mu = _branch_friction(params, b, pos_branch)
                 slide = mu * v + d * (fc + delta * ex[b])
                 memo[0, b] = arg[b]
                 memo[1, b] = ex[b]
@@ -242,5 +231,5 @@ def exponential_rows(V: np.ndarray, base: int, params: np.ndarray, position: np.
     return first
 
 
-for _fn in (_exp_row, _exp_row_memo, exponential_rows):
+for _fn in (_exp_row, _exp_row_memo, _branch_friction, exponential_rows):
     guard_cache(_fn, exponential_numba, stick_slip, stick_slip_numba)
