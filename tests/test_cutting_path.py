@@ -17,7 +17,7 @@ import pytest
 from fmus_src.cutting import CuttingError, CuttingLoad
 from fmus_src.cutting import table as table_module
 from fmus_src.cutting.path_component import PathCuttingLoad
-from fmus_src.cutting.path_kernel import locate, table_at
+from fmus_src.cutting.path_kernel import locate, table_at, table_at_from
 from fmus_src.cutting.table import EngagementTable, build_engagement_table
 
 KT, KE = 1.23e9, 0.5
@@ -259,6 +259,38 @@ def test_engagement_where_the_periphery_is_tangent_to_the_entry_and_exit_faces(o
             assert len(arcs) == len(expected), (face, x)
             got, want = np.array(arcs).reshape(-1, 2), np.array(expected).reshape(-1, 2)
             assert got == pytest.approx(want, abs=1e-5), (face, x)
+
+
+def test_table_read_remembering_its_station_pair_equals_the_plain_read_bit_for_bit():
+    # table_at_from skips _pair_lean's structure and tangency tests for the station pair that last passed
+    # them: on the tangency table above (pairs that interpolate plainly, tangencies, structure changes), reads
+    # in path order, in random order and beyond both ends, with one remembered station throughout, must give
+    # table_at's intervals exactly, and the remembered station must be one whose pair interpolates plainly
+    a = 2e-3
+    x0 = -R - 0.3e-3
+    verts = np.array([[x0, 0.0, -a], [0.0066, 0.0, -a]])
+    table = EngagementTable.from_parameters(verts, params(stock_x_max=0.006))
+    args = (table.spacing, table.count, table.alpha, table.beta, table.top)
+    length = float(table.vertex_s[-1])
+    rng = np.random.default_rng(11)
+    along = np.linspace(-1e-4, length + 1e-4, 4001)
+    known = np.full(1, -1, dtype=np.int64)
+    o1, o2 = [np.empty(8) for _ in range(3)], [np.empty(8) for _ in range(3)]
+    used = set()
+    for s in np.concatenate([along, rng.permutation(along), rng.uniform(-1e-4, length + 1e-4, 2000)]):
+        n = table_at(float(s), *args, *o1)
+        before = int(known[0])
+        m = table_at_from(float(s), *args, *o2, known)
+        assert m == n, s
+        for p, q in zip(o1, o2):
+            assert np.array_equal(p[:n], q[:n]), s
+        if known[0] == before >= 0 and math.floor(s / table.spacing) == before:
+            used.add(before)
+    assert np.any(table.count[1:] != table.count[:-1])  # the table has structure changes to get wrong
+    assert len(used) > 100  # the shortcut was taken, on many station pairs
+    # a remembered pair interpolates plainly: same count on both stations (structure changes are not)
+    for i in used:
+        assert table.count[i] == table.count[i + 1]
 
 
 # ---------------------------------------------------------------------------- path location and errors

@@ -363,6 +363,66 @@ def table_at(
     return _station(i, count, alpha, beta, top, out_a, out_b, out_t)
 
 
+@njit_inline
+def _lean_known(
+    i: int, u: float, c: int, alpha: np.ndarray, beta: np.ndarray, top: np.ndarray, out_a: np.ndarray,
+    out_b: np.ndarray, out_t: np.ndarray,
+) -> int:
+    """:func:`_pair_lean`'s intervals between stations ``i`` and ``i + 1`` (``c`` each) at ``u`` in ``(0, 1)``,
+    for a pair already known to pass its tests: the same boundary and top arithmetic without the tests."""
+    j = i + 1
+    uc = min(max(u, 0.0), 1.0)
+    for k in range(c):
+        da = alpha[j, k] - alpha[i, k]
+        db = beta[j, k] - beta[i, k]
+        out_a[k] = alpha[i, k] + u * da
+        out_b[k] = beta[i, k] + u * db
+        out_t[k] = top[i, k] + uc * (top[j, k] - top[i, k])
+    return c
+
+
+@njit_borrowed
+def table_at_from(
+    s: float, ds: float, count: np.ndarray, alpha: np.ndarray, beta: np.ndarray, top: np.ndarray,
+    out_a: np.ndarray, out_b: np.ndarray, out_t: np.ndarray, known: np.ndarray,
+) -> int:
+    """:func:`table_at`, remembering the last station pair that interpolates plainly; the same results.
+
+    Whether stations ``i`` and ``i + 1`` have the same structure and no tangency candidate
+    (:func:`_pair_lean`'s tests) depends on the table only, not on ``s``: ``known[0]`` holds the last
+    ``i`` that passed them (-1: none), and a read between the same two stations only interpolates.
+    A step's substep reads mostly fall between the same two stations.
+
+    Parameters
+    ----------
+    s, ds, count, alpha, beta, top, out_a, out_b, out_t
+        As :func:`table_at` (``s``, ``ds`` in m).
+    known : ndarray of int64, shape (>= 1,)
+        ``known[0]``: a station whose pair with the next passed :func:`_pair_lean`'s tests **in this
+        table**, or -1; updated. Reset it to -1 before reading another table.
+    """
+    last = count.shape[0] - 1
+    x = s / ds
+    i = int(math.floor(x))
+    if i < 0:
+        i = 0
+        x = 0.0
+    if i >= last:
+        i = last
+        u = 0.0
+    else:
+        u = x - i
+    if u > 0.0:
+        if i == known[0]:
+            return _lean_known(i, u, count[i], alpha, beta, top, out_a, out_b, out_t)
+        n = _pair_lean(i, i + 1, u, count, alpha, beta, top, out_a, out_b, out_t)
+        if n >= 0:
+            known[0] = i
+            return n
+        return _table_between(i, u, count, alpha, beta, top, out_a, out_b, out_t)
+    return _station(i, count, alpha, beta, top, out_a, out_b, out_t)
+
+
 @njit_borrowed
 def locate(
     px: float, py: float, pz: float, seg0: int, s_cur: float, reach: float, verts: np.ndarray, vs: np.ndarray,
@@ -761,11 +821,12 @@ def path_work(kmax: int, flutes_max: int) -> tuple[np.ndarray, np.ndarray, np.nd
         Substep sums (Fx, Fy, torque, MRR).
     rot : ndarray, shape (2, flutes_max)
         ``cos(i pitch)`` and ``sin(i pitch)`` of the flute count ``rot_key[0]`` (:func:`tooth_rotations`).
-    rot_key : ndarray of int64, shape (1,)
-        Flute count ``rot`` holds (-1: none yet).
+    rot_key : ndarray of int64, shape (2,)
+        Flute count ``rot`` holds (-1: none yet), then the station :func:`table_at_from` knows
+        (-1: none yet; the work space serves one engagement table).
     """
     return (np.empty((6, kmax)), np.zeros(4), np.empty((2, max(flutes_max, 1))),
-            np.full(1, -1, dtype=np.int64))
+            np.full(2, -1, dtype=np.int64))
 
 
 @njit
@@ -883,9 +944,10 @@ max_substeps, status
         Interval work space, overwritten.
     acc : ndarray, shape (4,)
         Substep sums, overwritten.
-    rot, rot_key : ndarray, shapes (2, F), (1,) of int64
+    rot, rot_key : ndarray, shapes (2, F), (2,) of int64
         Tooth rotations of ``rot_key[0]`` flutes (filled here, :func:`tooth_rotations`'s values);
-        ``F >= max_flutes(par)``.
+        ``F >= max_flutes(par)``. ``rot_key[1:]``: :func:`table_at_from`'s known station, valid for this
+        engagement table only (:func:`path_work` starts it at -1).
 
     Returns
     -------
@@ -898,6 +960,7 @@ max_substeps, status
     ia, ib, it, ja, jb, jt = intervals[0], intervals[1], intervals[2], intervals[3], intervals[4], intervals[5]
     rot_c = rot[0]
     rot_s = rot[1]
+    known = rot_key[1:]
     bad = 0
     for m in range(batch):
         x1, y1, z1 = inp[0, m], inp[1, m], inp[2, m]
@@ -930,6 +993,7 @@ max_substeps, status
         span = om * h / n
         c_span = math.cos(span)
         s_span = math.sin(span)
+        inv_span = 1.0 / span if span >= 1e-9 else 0.0  # the integrals' mean over a substep (span >= 1e-9)
         acc[:] = 0.0
         peak = 0.0
         f_end_x = 0.0
@@ -946,7 +1010,7 @@ max_substeps, status
             f_mid = (k + 0.5) / n
             s_mid = s0 + f_mid * (s1 - s0)
             bottom = max(z0 + f_mid * ddz, z_floor)
-            cm = table_at(s_mid, ds, count, alpha, beta, top, ia, ib, it)
+            cm = table_at_from(s_mid, ds, count, alpha, beta, top, ia, ib, it, known)
             if cm > 0:
                 any_material = True
                 if span < 1e-9:
@@ -988,7 +1052,7 @@ max_substeps, status
                                 else:
                                     s_hi, c_hi = math.sin(hi), math.cos(hi)
                                 _add_integral(kt, ke, depth, fxt, fyt, psi, lo, hi, s_lo, c_lo, s_hi, c_hi,
-                                                   radius, om, 1.0 / span, acc)
+                                                   radius, om, inv_span, acc)
                                 # both ends of the engaged stretch (engaged side): entry/exit instants,
                                 # and boundaries that move past a substep end between two frozen tables
                                 # (not the step start t: it belongs to the previous step)
@@ -1007,7 +1071,7 @@ max_substeps, status
             phi_k = theta0 + om * h * (k + 1) / n
             s_k = math.sin(phi_k)
             c_k = math.cos(phi_k)
-            cj = table_at(s0 + f1 * (s1 - s0), ds, count, alpha, beta, top, ja, jb, jt)
+            cj = table_at_from(s0 + f1 * (s1 - s0), ds, count, alpha, beta, top, ja, jb, jt, known)
             if cj > 0:
                 any_material = True
                 fx, fy, dm, hm, ne = force_at(phi_k, s_k, c_k, 0, flutes, pitch, rot_c, rot_s, ja, jb,
