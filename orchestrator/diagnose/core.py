@@ -37,10 +37,11 @@ from ..recording_csv import near_miss_hint
 from .columns import AxisColumns, build
 from .cutting import FORCE_CHANNELS, has_forces
 from .cutting_core import CuttingResult, diagnose_cutting
+from .cutting_library import component_values
 from .cutting_load import model_loads
 from .cutting_merge import holdout_cutting, merge_cutting
 from .errors import DiagnosisError
-from .force_only import force_only_recording, measures_positions, needs_force_clock
+from .force_only import ForceOnly, force_only_recording, measures_positions, needs_force_clock, refine_with_effects
 from .library import CHANNEL_SCALE, machine_keys
 from .locate import Locator, residual_windows
 from .model import Model, Simulated, simulate
@@ -462,7 +463,7 @@ def diagnose(
     if do_cut and not has_forces(recording, case):
         raise DiagnosisError(f"{case.recording}: a cutting diagnosis needs 'fx_N' and 'fy_N' (at least 100 samples) "
                              f"and a [stock] in {case.source or case.folder}")
-    clock, notes = None, []
+    clock, notes, only = None, [], None
     if not do_cut and needs_force_clock(recording):
         missing = [c for c in FORCE_CHANNELS if c not in recording or np.isfinite(recording[c]).sum() <= 100]
         if missing:
@@ -481,6 +482,7 @@ def diagnose(
         # actual position: aligned by its cutting load, the twin's path added
         say("aligning the dynamometer's clock by the cutting load")
         alone = needs_force_clock(recording)
+        read = recording
         only = force_only_recording(case_m, recording, base_machine)
         recording, clock = only.recording, (only.offset, only.method)
         notes.append(("forces only (no line, no moving position)" if alone else
@@ -531,6 +533,15 @@ def diagnose(
                            f"diagnosed cutting model's force (refitted coefficients, effects and spindle angle), "
                            f"{how}, plus the recorded-minus-model force averaged over whole spindle revolutions")
             log.append(f"drive load chosen by the baseline replay's current residual ({cost})")
+    if do_cut and only is not None:
+        cres = _diagnose_cutting(case_m, recording, prep, say)
+        again = _force_clock_with_effects(case_m, read, base_machine, only, cres, log)
+        if again is not None:   # the diagnosis again at the clock refined with the fitted effects
+            recording = again.recording
+            prep = prepare(case, _position_rows(_cnc_rows(recording)), base_machine, axes,
+                           disturbance=recorded_forces(recording), clock=(again.offset, again.method))
+            log[0] = f"time offset: {prep.offset:.6f} s ({prep.offset_method})"
+            cres = _diagnose_cutting(case_m, recording, prep, say)
     if drives:
         d = _diagnose_drives(case, prep, base_machine, holdout, vertical, refit_scales, say, log)
     else:
@@ -554,6 +565,31 @@ def diagnose(
                 d.holdout["rms_before"].update(hold[0])
                 d.holdout["rms_after"].update(hold[1])
     return d
+
+
+def _force_clock_with_effects(case_m: Case, read: Recording, machine: Machine, only: ForceOnly,
+                              cres: CuttingResult, log: list[str]) -> ForceOnly | None:
+    """A force clock refined once more on a replay with the cutting effects ``cres`` fitted, or None.
+
+    One outer iteration (:func:`.force_only.refine_with_effects`): the clock is refined with the fitted
+    effects in the replay, and the caller refits the cutting diagnosis at that clock. None, and the first
+    clock kept, when no effect was named, or none changes the replayed forces (spindle droop and chatter
+    act elsewhere), or the replay fails (said in ``log``).
+    """
+    names = [e["effect"] for e in cres.effects]
+    effects = component_values({e: p for e, p in cres.model.items() if e in names})
+    if not effects:
+        return None
+    try:
+        again = refine_with_effects(case_m, read, machine, only, effects, " and ".join(names))
+    except DiagnosisError as exc:
+        log.append(f"the force clock was not refined again with the fitted {' and '.join(names)} ({exc}); the "
+                   f"clock of the replay without them is kept")
+        return None
+    log.append(f"the force clock refined again with the fitted {' and '.join(names)} in the twin's replay: "
+               f"{only.offset:.6f} -> {again.offset:.6f} s ({1e3 * (again.offset - only.offset):+.3g} ms); the "
+               f"cutting diagnosis refitted at that clock (one outer iteration)")
+    return again
 
 
 def _diagnose_cutting(case_m: Case, recording: Recording, prep: Prepared, say: Callable[[str], None]):

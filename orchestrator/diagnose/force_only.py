@@ -9,7 +9,8 @@ run (with cutting) at ``t - offset``: the recording is augmented with them (:fun
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -43,11 +44,17 @@ class ForceOnly:
         Recording clock minus program clock, s.
     method : str
         How the offset was found.
+    twin : Recording or None
+        The twin's run with cutting (program clock) whose path was added.
+    window_s : float
+        Envelope window of the clock fit [s] (:data:`.align.ENVELOPE_REVOLUTIONS` spindle revolutions).
     """
 
     recording: Recording
     offset: float
     method: str
+    twin: Recording | None = field(default=None, repr=False)
+    window_s: float = 0.0
 
 
 def _moves(recording: Recording, name: str) -> bool:
@@ -143,7 +150,13 @@ def force_only_recording(case: Case, recording: Recording, machine: Machine) -> 
     except DiagnosisError as exc:  # the replay cannot follow the twin's path: keep the envelope's clock
         offset = coarse
         method += f"; not refined sample by sample ({exc})"
-    t_prog = t - offset
+    return ForceOnly(_augmented(recording, twin, offset), float(offset), method, twin, window)
+
+
+def _augmented(recording: Recording, twin: Recording, offset: float) -> Recording:
+    """``recording`` without its CNC channels, plus the twin's path, spindle speed and line at ``t - offset``."""
+    t_twin = np.asarray(twin.t, float)
+    t_prog = np.asarray(recording.t, float) - offset
     channels = {c: np.asarray(recording[c], float) for c in recording.channels if c not in CNC_CHANNELS}
     for c in TWIN_CHANNELS:
         channels[c] = np.interp(t_prog, t_twin, np.asarray(twin[c], float))
@@ -156,5 +169,45 @@ def force_only_recording(case: Case, recording: Recording, machine: Machine) -> 
         channels["spindle_ref_rpm"] = np.interp(t_prog, t_twin, np.asarray(twin["spindle_rpm"], float))
     idx = np.clip(np.searchsorted(t_twin, t_prog, side="right") - 1, 0, t_twin.size - 1)
     channels["line"] = np.asarray(twin["line"], float)[idx]
-    out = Recording.from_channels(channels, source=src, file_lines=recording.file_lines)
-    return ForceOnly(out, float(offset), method)
+    return Recording.from_channels(channels, source=recording.source, file_lines=recording.file_lines)
+
+
+def refine_with_effects(case: Case, recording: Recording, machine: Machine, only: ForceOnly,
+                        effects: Mapping[str, float], names: str) -> ForceOnly:
+    """The force clock refined once more on a replay with the effects the cutting diagnosis fitted.
+
+    :func:`force_only_recording` refines the clock on a replay of the twin *without* the effects found later;
+    a runout gives a 2-flute tool's teeth chips of ``h +- 2e`` (about 4 N/um on the test part), which that
+    replay fits with a biased offset (1.85 ms on the 10 um runout of ``tests/test_diagnose_force_only.py``).
+    Here :func:`.force_phase.phase_matched_offset` runs again from ``only.offset`` with ``effects`` in every
+    replayed member, and the twin's path is added at the new clock.
+
+    Parameters
+    ----------
+    case : Case
+    recording : Recording
+        The recording as read (``t_s``, ``fx_N``, ``fy_N``, ...).
+    machine : Machine
+        Parameter set of the twin's run.
+    only : ForceOnly
+        The first clock (from :func:`force_only_recording`, with its twin's run).
+    effects : mapping
+        Cutting-component parameter values (SI, :func:`.cutting_library.component_values`).
+    names : str
+        The fitted effects, for ``method``.
+
+    Raises
+    ------
+    DiagnosisError
+        ``only`` has no twin's run, or the replay cannot follow the twin's path.
+    """
+    if only.twin is None:
+        raise DiagnosisError(f"{recording.source}: the force clock has no twin's run to refine it with the effects")
+    t = np.asarray(recording.t, float)
+    fx, fy = np.asarray(recording["fx_N"], float), np.asarray(recording["fy_N"], float)
+    ok = np.isfinite(fx) & np.isfinite(fy)
+    offset, _ = phase_matched_offset(case, machine, only.twin, t[ok], fx[ok], fy[ok], only.offset, only.window_s,
+                                     effects)
+    method = (f"{only.method}; then, with the fitted {names} in the replay, refined again the same way "
+              f"({1e3 * (offset - only.offset):+.3g} ms) and the cutting effects refitted at that clock")
+    return ForceOnly(_augmented(recording, only.twin, offset), float(offset), method, only.twin, only.window_s)

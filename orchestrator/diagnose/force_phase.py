@@ -11,7 +11,9 @@ Here the twin's cutting component is replayed along the twin's tool path at the 
 clock ``t - offset``) and compared with the recorded ``fx``, ``fy`` sample by sample, the spindle angle
 free: a clock error ``d`` moves the pulses by ``omega d``, which the angle takes up, and the tool path by
 ``v d``, which it cannot. Per cut a scale, the changes by a radial/tangential ratio and by edge forces, and
-an offset per channel are fitted (what the cutting diagnosis names later must not pull the clock).
+an offset per channel are fitted (what the cutting diagnosis names later must not pull the clock). Once
+the cutting diagnosis has fitted its effects, the clock can be refined again on a replay with them
+(``effects``: a runout gives the teeth unequal chips, which a replay without it fits with a biased offset).
 
 Cost: only the recorded cuts enter the misfit, so only they are replayed, each from two envelope windows
 (4 spindle revolutions) before it, cut into one piece per core that run side by side (each piece again with
@@ -22,6 +24,7 @@ they differ, or when wear or spindle droop make the state depend on all that cam
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import replace
 
@@ -149,15 +152,22 @@ class _Replayer:
         Sample at which the angles are given.
     history_s : float
         Replayed time before each cut, s.
+    effects : mapping, optional
+        Cutting-component parameter values (SI, :func:`.cutting_library.component_values`) of every member:
+        the effects the cutting diagnosis fitted. An edge-force shape adds its 1e4 N/m to the fitted value.
     """
 
     def __init__(self, case: Case, table: EngagementTable, twin: Recording, t_rec: np.ndarray,
-                 groups: list[np.ndarray], ref: int, history_s: float) -> None:
+                 groups: list[np.ndarray], ref: int, history_s: float,
+                 effects: Mapping[str, float] | None = None) -> None:
         self.case, self.table, self.twin, self.t_rec, self.ref = case, table, twin, t_rec, ref
         params = cutting_parameters(case)
         ke = float(params.get("ke", 0.5))
-        self.shapes = [{}, {"ke": 1.2 * ke}, {"edge_force_tangential": 1e4}, {"edge_force_radial": 1e4}]
-        stateful = any(float(params.get(k, 0.0)) != 0.0 for k in ("wear_rate", "spindle_droop"))
+        base = {k: float(v) for k, v in (effects or {}).items()}
+        shapes = [{}, {"ke": 1.2 * ke}, {"edge_force_tangential": 1e4}, {"edge_force_radial": 1e4}]
+        self.shapes = [{**base, **{k: base.get(k, 0.0) + v if k.startswith("edge_force") else v
+                                   for k, v in shape.items()}} for shape in shapes]
+        stateful = any(float({**params, **base}.get(k, 0.0)) != 0.0 for k in ("wear_rate", "spindle_droop"))
         self.pieces = [(0, 0, t_rec.size)] if stateful else _pieces(t_rec, _windows(t_rec, groups, history_s),
                                                                    history_s, usable_cores())
         self._pool: ThreadPoolExecutor | None = None
@@ -224,7 +234,8 @@ def _scan(replayer: _Replayer, fx: np.ndarray, fy: np.ndarray, groups: list[np.n
 
 
 def phase_matched_offset(case: Case, machine: Machine, twin: Recording, t_rec: np.ndarray, fx: np.ndarray,
-                         fy: np.ndarray, coarse: float, window_s: float) -> tuple[float, float]:
+                         fy: np.ndarray, coarse: float, window_s: float,
+                         effects: Mapping[str, float] | None = None) -> tuple[float, float]:
     """Refine a dynamometer's clock with the twin's forces replayed at the recorded instants.
 
     The twin's cutting component is replayed along the twin's tool path at ``t_rec - offset``; the recorded
@@ -250,6 +261,10 @@ def phase_matched_offset(case: Case, machine: Machine, twin: Recording, t_rec: n
         Offset (logger minus program clock) to start from, s.
     window_s : float
         Window [s] by which the recorded cuts (:func:`.align.cut_groups`) are widened.
+    effects : mapping, optional
+        Cutting-component parameter values (SI) of the effects fitted by the cutting diagnosis, replayed in
+        every member (:class:`_Replayer`). With a runout the teeth differ, so the first angle grid covers a
+        whole revolution instead of a tooth pitch.
 
     Returns
     -------
@@ -266,12 +281,14 @@ def phase_matched_offset(case: Case, machine: Machine, twin: Recording, t_rec: n
     longest = max(groups, key=len)
     ref = int(longest[longest.size // 2])
     pitch = 2.0 * math.pi / max(int(c.tool.flutes), 1)
+    if float((effects or {}).get("runout_eccentricity", 0.0)) > 0.0:
+        pitch = 2.0 * math.pi   # the teeth differ: the angle of tooth 0 is searched over a whole revolution
 
-    replayer = _Replayer(c, table, twin, t_rec, groups, ref, HISTORY_WINDOWS * window_s)
+    replayer = _Replayer(c, table, twin, t_rec, groups, ref, HISTORY_WINDOWS * window_s, effects)
     try:
         if replayer.pieces != [(0, 0, t_rec.size)]:   # they must give the whole replay's forces where it looks
             rows = np.concatenate(groups)
-            whole = _Replayer(c, table, twin, t_rec, groups, ref, 0.0)
+            whole = _Replayer(c, table, twin, t_rec, groups, ref, 0.0, effects)
             whole.whole()
             checks = [r.forces(coarse, np.zeros(1), len(SHAPES)) for r in (replayer, whole)]
             worst = max(float(np.max(np.abs(checks[0][i][rows] - checks[1][i][rows]))) for i in range(2))
