@@ -327,6 +327,20 @@ def _table_between(
     return _station(i, count, alpha, beta, top, out_a, out_b, out_t)
 
 
+@njit_inline
+def _station_fraction(s: float, ds: float, last: int) -> tuple[int, float]:
+    """Station ``i`` at or before arc length ``s`` [m] (stations ``ds`` apart, clamped to ``0 .. last``) and the
+    fraction ``u`` in ``[0, 1)`` of the way to station ``i + 1`` (0 before the first and at or past the last)."""
+    x = s / ds
+    i = int(math.floor(x))
+    if i < 0:
+        i = 0
+        x = 0.0
+    if i >= last:
+        return last, 0.0
+    return i, x - i
+
+
 @njit_borrowed
 def table_at(
     s: float, ds: float, count: np.ndarray, alpha: np.ndarray, beta: np.ndarray, top: np.ndarray,
@@ -344,17 +358,7 @@ def table_at(
     the nearest station is used when neither side has the same structure on
     its two stations.
     """
-    last = count.shape[0] - 1
-    x = s / ds
-    i = int(math.floor(x))
-    if i < 0:
-        i = 0
-        x = 0.0
-    if i >= last:
-        i = last
-        u = 0.0
-    else:
-        u = x - i
+    i, u = _station_fraction(s, ds, count.shape[0] - 1)
     if u > 0.0:
         n = _pair_lean(i, i + 1, u, count, alpha, beta, top, out_a, out_b, out_t)
         if n >= 0:
@@ -401,17 +405,7 @@ def table_at_from(
         ``known[0]``: a station whose pair with the next passed :func:`_pair_lean`'s tests **in this
         table**, or -1; updated. Reset it to -1 before reading another table.
     """
-    last = count.shape[0] - 1
-    x = s / ds
-    i = int(math.floor(x))
-    if i < 0:
-        i = 0
-        x = 0.0
-    if i >= last:
-        i = last
-        u = 0.0
-    else:
-        u = x - i
+    i, u = _station_fraction(s, ds, count.shape[0] - 1)
     if u > 0.0:
         if i == known[0]:
             return _lean_known(i, u, count[i], alpha, beta, top, out_a, out_b, out_t)
